@@ -58,13 +58,10 @@ impl LinearScale {
     pub const fn new(factor: f32, offset: f32, raw_min: i32, raw_max: i32) -> Self {
         assert!(raw_min <= raw_max, "LinearScale: raw_min > raw_max");
         assert!(
-            factor != 0.0 && factor == factor && factor - factor == 0.0,
+            factor != 0.0 && factor.is_finite(),
             "LinearScale: factor must be finite and non-zero"
         );
-        assert!(
-            offset == offset && offset - offset == 0.0,
-            "LinearScale: offset must be finite"
-        );
+        assert!(offset.is_finite(), "LinearScale: offset must be finite");
         Self {
             factor,
             offset,
@@ -169,9 +166,7 @@ pub fn round_half_away_from_zero(x: f32) -> i32 {
 /// Clamps `x` into `[lo, hi]`, mapping NaN to `lo`. For actuator commands, where a NaN
 /// must never reach an output stage.
 pub fn clamp_finite(x: f32, lo: f32, hi: f32) -> f32 {
-    if x.is_nan() {
-        lo
-    } else if x < lo {
+    if x.is_nan() || x < lo {
         lo
     } else if x > hi {
         hi

@@ -49,7 +49,10 @@ pub fn sending_saturates() {
         assert_eq!(scale.to_raw_saturating(hi + 1000.0), scale.raw_max());
         assert_eq!(scale.to_raw_saturating(f32::NEG_INFINITY), scale.raw_min());
         assert_eq!(scale.to_raw_saturating(f32::INFINITY), scale.raw_max());
-        assert_eq!(scale.to_raw_saturating(f32::NAN), scale.to_raw_saturating(0.0));
+        assert_eq!(
+            scale.to_raw_saturating(f32::NAN),
+            scale.to_raw_saturating(0.0)
+        );
         assert_eq!(scale.to_raw_saturating(f32::MAX), scale.raw_max());
         assert_eq!(scale.to_raw_saturating(f32::MIN), scale.raw_min());
     }

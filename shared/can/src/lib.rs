@@ -1,0 +1,38 @@
+//! The AutoPlug CAN catalogue (spec section 3), generated at build time from
+//! `autoplug.dbc`, the one place a message identifier, byte position or scale is written.
+//!
+//! `no_std` and allocation-free, so the firmware, the vehicle simulation and the host tools
+//! all use the same code. Each message is a struct of physical values:
+//!
+//! - `encode()` rounds and clamps every value into its valid range (a sender never puts an
+//!   out-of-range value on the bus);
+//! - `decode()` rejects a frame of the wrong length or with any invalid signal;
+//! - `update_from()` keeps the last good value of each invalid signal, as receivers must.
+//!
+//! Fuel level is encoded at 0.25 L per bit (litres × 4, 0..63.75 L), so the EVO VI's 48 L
+//! tank fits one byte with headroom (spec note A).
+#![no_std]
+#![deny(missing_docs)]
+
+pub mod codec;
+mod spec;
+
+pub use autoplug_scaling::LinearScale;
+pub use codec::{DecodeError, SignalError};
+pub use spec::{MessageSpec, SignalKind, SignalSpec};
+
+mod catalogue {
+    use crate::codec::{self, DecodeError, SignalError};
+    use crate::spec::{MessageSpec, SignalKind, SignalSpec};
+    use autoplug_scaling::{round_half_away_from_zero, LinearScale};
+    include!(concat!(env!("OUT_DIR"), "/catalogue.rs"));
+}
+
+pub use catalogue::*;
+
+/// Test cases shared by the host and on-target suites.
+#[cfg(any(test, feature = "test-cases"))]
+pub mod test_cases;
+
+#[cfg(test)]
+mod tests;
