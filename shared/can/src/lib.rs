@@ -9,6 +9,19 @@
 //! - `decode()` rejects a frame of the wrong length or with any invalid signal;
 //! - `update_from()` keeps the last good value of each invalid signal, as receivers must.
 //!
+//! ```
+//! use autoplug_can::{DecodeError, EngineMode, EngineMsg, Message, SteeringMsg};
+//!
+//! let frame = EngineMsg { engine_rpm: 3000.0, fuel_level: 48.0, engine_mode: EngineMode::Sport }.encode();
+//! assert_eq!(frame, [85, 192, 0]);
+//! let Ok(Message::EngineMsg(engine)) = Message::decode(EngineMsg::ID, &frame) else { panic!() };
+//! assert_eq!(engine.fuel_level, 48.0);
+//!
+//! let mut steering = SteeringMsg::default(); // straight ahead until the first frame
+//! assert!(matches!(steering.update_from(&[5]), Err(DecodeError::OutOfRange { raw: 5, .. })));
+//! assert_eq!(steering.steering_angle, 0.0); // the invalid value was not taken
+//! ```
+//!
 //! Fuel level is encoded at 0.25 L per bit (litres × 4, 0..63.75 L), so the EVO VI's 48 L
 //! tank fits one byte with headroom (spec note A).
 #![no_std]
