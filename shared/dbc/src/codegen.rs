@@ -378,59 +378,56 @@ fn emit_nodes(db: &Database, w: &mut String) -> Result<(), GenerateError> {
     line(w, "        }");
     line(w, "    }");
     line(w, "");
-    line(w, "    /// Identifiers of the messages this node sends.");
-    line(
+    node_ids_method(
+        db,
         w,
-        "    pub const fn transmitted_ids(self) -> &'static [u16] {",
+        "Identifiers of the messages this node sends.",
+        "transmitted_ids",
+        |n, m| m.transmitters.contains(&n.name),
     );
-    line(w, "        match self {");
-    for n in &db.nodes {
-        let ids: Vec<String> = db
-            .messages
-            .iter()
-            .filter(|m| m.transmitters.contains(&n.name))
-            .map(|m| format!("0x{:03X}", m.id))
-            .collect();
-        line(
-            w,
-            &format!(
-                "            Node::{} => &[{}],",
-                variant_ident(&n.name),
-                ids.join(", ")
-            ),
-        );
-    }
-    line(w, "        }");
-    line(w, "    }");
-    line(w, "");
-    line(
+    node_ids_method(
+        db,
         w,
-        "    /// Identifiers of the messages with a signal this node receives: what its",
+        "Identifiers of the messages with a signal this node receives: what its\nacceptance filters must let through.",
+        "received_ids",
+        |n, m| m.signals.iter().any(|s| s.receivers.contains(&n.name)),
     );
-    line(w, "    /// acceptance filters must let through.");
-    line(w, "    pub const fn received_ids(self) -> &'static [u16] {");
-    line(w, "        match self {");
-    for n in &db.nodes {
-        let ids: Vec<String> = db
-            .messages
-            .iter()
-            .filter(|m| m.signals.iter().any(|s| s.receivers.contains(&n.name)))
-            .map(|m| format!("0x{:03X}", m.id))
-            .collect();
-        line(
-            w,
-            &format!(
-                "            Node::{} => &[{}],",
-                variant_ident(&n.name),
-                ids.join(", ")
-            ),
-        );
-    }
-    line(w, "        }");
-    line(w, "    }");
     line(w, "}");
     line(w, "");
     Ok(())
+}
+
+/// `pub const fn NAME(self) -> &'static [u16]`: per node, the identifiers of the messages
+/// `wanted` selects for it.
+fn node_ids_method(
+    db: &Database,
+    w: &mut String,
+    docs: &str,
+    name: &str,
+    wanted: impl Fn(&Node, &Message) -> bool,
+) {
+    doc(w, "    ", docs);
+    line(
+        w,
+        &format!("    pub const fn {name}(self) -> &'static [u16] {{"),
+    );
+    line(w, "        match self {");
+    for n in &db.nodes {
+        let ids: Vec<String> = db
+            .messages
+            .iter()
+            .filter(|m| wanted(n, m))
+            .map(|m| format!("0x{:03X}", m.id))
+            .collect();
+        let node = variant_ident(&n.name);
+        line(
+            w,
+            &format!("            Node::{node} => &[{}],", ids.join(", ")),
+        );
+    }
+    line(w, "        }");
+    line(w, "    }");
+    line(w, "");
 }
 
 fn emit_enum(name: &str, entries: &[(i64, String)], w: &mut String) -> Result<(), GenerateError> {
@@ -888,6 +885,45 @@ fn emit_message_table(
     Ok(())
 }
 
+/// A method of `Message` whose body is one `match`, with an arm per message (`arm` gets the
+/// message's index, type name and fields) and an optional catch-all arm.
+fn match_method(
+    w: &mut String,
+    specs: &[(&Message, Vec<Field>)],
+    docs: &str,
+    signature: &str,
+    scrutinee: &str,
+    arm: impl Fn(usize, &str, &[Field]) -> String,
+    otherwise: Option<&str>,
+) {
+    doc(w, "    ", docs);
+    line(w, &format!("    {signature} {{"));
+    line(w, &format!("        match {scrutinee} {{"));
+    for (i, (m, fields)) in specs.iter().enumerate() {
+        line(
+            w,
+            &format!("            {}", arm(i, &variant_ident(&m.name), fields)),
+        );
+    }
+    if let Some(otherwise) = otherwise {
+        line(w, &format!("            _ => {otherwise},"));
+    }
+    line(w, "        }");
+    line(w, "    }");
+    line(w, "");
+}
+
+/// `match index { 0 => …, 1 => …, _ => fallback }` over a message's signals.
+fn per_signal(fields: &[Field], value: impl Fn(&Field) -> String, fallback: &str) -> String {
+    let mut arms: Vec<String> = fields
+        .iter()
+        .enumerate()
+        .map(|(i, f)| format!("{i} => {},", value(f)))
+        .collect();
+    arms.push(format!("_ => {fallback},"));
+    format!("match index {{ {} }}", arms.join(" "))
+}
+
 fn emit_message_enum(specs: &[(&Message, Vec<Field>)], w: &mut String) {
     line(w, "/// Any message of the catalogue.");
     line(w, "#[derive(Clone, Copy, Debug, PartialEq)]");
@@ -901,47 +937,24 @@ fn emit_message_enum(specs: &[(&Message, Vec<Field>)], w: &mut String) {
     line(w, "}");
     line(w, "");
     line(w, "impl Message {");
-    line(
+    match_method(
         w,
-        "    /// Decodes a frame by identifier; unknown identifiers, wrong lengths and invalid",
+        specs,
+        "Decodes a frame by identifier; unknown identifiers, wrong lengths and invalid\nraw values are errors.",
+        "pub fn decode(id: u16, data: &[u8]) -> Result<Self, DecodeError>",
+        "id",
+        |_, ty, _| format!("{ty}::ID => {ty}::decode(data).map(Message::{ty}),"),
+        Some("Err(DecodeError::UnknownId { id })"),
     );
-    line(w, "    /// raw values are errors.");
-    line(
+    match_method(
         w,
-        "    pub fn decode(id: u16, data: &[u8]) -> Result<Self, DecodeError> {",
+        specs,
+        "Updates from a frame of this message, keeping the last good value of each\ninvalid signal (see the typed `update_from`).",
+        "pub fn update_from(&mut self, data: &[u8]) -> Result<(), DecodeError>",
+        "self",
+        |_, ty, _| format!("Message::{ty}(msg) => msg.update_from(data),"),
+        None,
     );
-    line(w, "        match id {");
-    for (m, _) in specs {
-        let ty = variant_ident(&m.name);
-        line(
-            w,
-            &format!("            {ty}::ID => {ty}::decode(data).map(Message::{ty}),"),
-        );
-    }
-    line(w, "            _ => Err(DecodeError::UnknownId { id }),");
-    line(w, "        }");
-    line(w, "    }");
-    line(w, "");
-    line(
-        w,
-        "    /// Updates from a frame of this message, keeping the last good value of each",
-    );
-    line(w, "    /// invalid signal (see the typed `update_from`).");
-    line(
-        w,
-        "    pub fn update_from(&mut self, data: &[u8]) -> Result<(), DecodeError> {",
-    );
-    line(w, "        match self {");
-    for (m, _) in specs {
-        let ty = variant_ident(&m.name);
-        line(
-            w,
-            &format!("            Message::{ty}(msg) => msg.update_from(data),"),
-        );
-    }
-    line(w, "        }");
-    line(w, "    }");
-    line(w, "");
     line(
         w,
         "    /// Every message at its start values, in DBC order.",
@@ -950,121 +963,86 @@ fn emit_message_enum(specs: &[(&Message, Vec<Field>)], w: &mut String) {
         w,
         &format!("    pub fn all_defaults() -> [Message; {}] {{", specs.len()),
     );
-    line(w, "        [");
-    for (m, _) in specs {
-        let ty = variant_ident(&m.name);
-        line(w, &format!("            Message::{ty}({ty}::default()),"));
-    }
-    line(w, "        ]");
+    let defaults: Vec<String> = specs
+        .iter()
+        .map(|(m, _)| {
+            let ty = variant_ident(&m.name);
+            format!("Message::{ty}({ty}::default())")
+        })
+        .collect();
+    line(w, &format!("        [{}]", defaults.join(", ")));
     line(w, "    }");
     line(w, "");
-    line(w, "    /// CAN identifier.");
-    line(w, "    pub const fn id(&self) -> u16 {");
-    line(w, "        match self {");
-    for (m, _) in specs {
-        let ty = variant_ident(&m.name);
-        line(w, &format!("            Message::{ty}(_) => {ty}::ID,"));
-    }
-    line(w, "        }");
-    line(w, "    }");
-    line(w, "");
-    line(w, "    /// Index of this message in [`MESSAGES`].");
-    line(w, "    pub const fn index(&self) -> usize {");
-    line(w, "        match self {");
-    for (i, (m, _)) in specs.iter().enumerate() {
-        let ty = variant_ident(&m.name);
-        line(w, &format!("            Message::{ty}(_) => {i},"));
-    }
-    line(w, "        }");
-    line(w, "    }");
-    line(w, "");
+    match_method(
+        w,
+        specs,
+        "CAN identifier.",
+        "pub const fn id(&self) -> u16",
+        "self",
+        |_, ty, _| format!("Message::{ty}(_) => {ty}::ID,"),
+        None,
+    );
+    match_method(
+        w,
+        specs,
+        "Index of this message in [`MESSAGES`].",
+        "pub const fn index(&self) -> usize",
+        "self",
+        |i, ty, _| format!("Message::{ty}(_) => {i},"),
+        None,
+    );
     line(w, "    /// Description of this message.");
     line(w, "    pub fn spec(&self) -> &'static MessageSpec {");
     line(w, "        &MESSAGES[self.index()]");
     line(w, "    }");
     line(w, "");
-    line(w, "    /// Encodes into `buf` and returns the data length.");
-    line(
+    match_method(
         w,
-        "    pub fn encode_into(&self, buf: &mut [u8; 8]) -> usize {",
+        specs,
+        "Encodes into `buf` and returns the data length.",
+        "pub fn encode_into(&self, buf: &mut [u8; 8]) -> usize",
+        "self",
+        |_, ty, _| {
+            format!("Message::{ty}(msg) => {{ buf[..{ty}::DLC].copy_from_slice(&msg.encode()); {ty}::DLC }}")
+        },
+        None,
     );
-    line(w, "        match self {");
-    for (m, _) in specs {
-        let ty = variant_ident(&m.name);
-        line(w, &format!("            Message::{ty}(msg) => {{ buf[..{ty}::DLC].copy_from_slice(&msg.encode()); {ty}::DLC }}"));
-    }
-    line(w, "        }");
-    line(w, "    }");
-    line(w, "");
-    line(
+    match_method(
         w,
-        "    /// Signal `index` (in [`MessageSpec::signals`] order) as a number: the physical",
-    );
-    line(
-        w,
-        "    /// value of a scaled signal, 0 or 1 for a flag, the raw value of an enumeration.",
-    );
-    line(w, "    pub fn signal(&self, index: usize) -> Option<f32> {");
-    line(w, "        match self {");
-    for (m, fields) in specs {
-        let ty = variant_ident(&m.name);
-        line(
-            w,
-            &format!("            Message::{ty}(msg) => match index {{"),
-        );
-        for (i, f) in fields.iter().enumerate() {
-            let v = match &f.ty {
-                FieldType::Scaled => format!("msg.{}", f.ident),
-                FieldType::Bool => format!("if msg.{} {{ 1.0 }} else {{ 0.0 }}", f.ident),
-                FieldType::Enum(_) => format!("msg.{}.raw() as f32", f.ident),
+        specs,
+        "Signal `index` (in [`MessageSpec::signals`] order) as a number: the physical\nvalue of a scaled signal, 0 or 1 for a flag, the raw value of an enumeration.",
+        "pub fn signal(&self, index: usize) -> Option<f32>",
+        "self",
+        |_, ty, fields| {
+            let value = |f: &Field| match &f.ty {
+                FieldType::Scaled => format!("Some(msg.{})", f.ident),
+                FieldType::Bool => format!("Some(if msg.{} {{ 1.0 }} else {{ 0.0 }})", f.ident),
+                FieldType::Enum(_) => format!("Some(msg.{}.raw() as f32)", f.ident),
             };
-            line(w, &format!("                {i} => Some({v}),"));
-        }
-        line(w, "                _ => None,");
-        line(w, "            },");
-    }
-    line(w, "        }");
-    line(w, "    }");
-    line(w, "");
-    line(
-        w,
-        "    /// Sets signal `index` from a number, the inverse of [`Message::signal`]. A scaled",
+            format!("Message::{ty}(msg) => {},", per_signal(fields, value, "None"))
+        },
+        None,
     );
-    line(
+    match_method(
         w,
-        "    /// value is stored as given (encoding clamps it); a flag is set for values of 0.5",
-    );
-    line(
-        w,
-        "    /// and above; an enumeration takes the nearest raw value and refuses one the table",
-    );
-    line(w, "    /// does not define.");
-    line(
-        w,
-        "    pub fn set_signal(&mut self, index: usize, value: f32) -> Result<(), SignalError> {",
-    );
-    line(w, "        match self {");
-    for (m, fields) in specs {
-        let ty = variant_ident(&m.name);
-        line(
-            w,
-            &format!("            Message::{ty}(msg) => match index {{"),
-        );
-        for (i, f) in fields.iter().enumerate() {
-            let body = match &f.ty {
+        specs,
+        "Sets signal `index` from a number, the inverse of [`Message::signal`]. A scaled\nvalue is stored as given (encoding clamps it); a flag is set for values of 0.5\nand above; an enumeration takes the nearest raw value and refuses one the table\ndoes not define.",
+        "pub fn set_signal(&mut self, index: usize, value: f32) -> Result<(), SignalError>",
+        "self",
+        |_, ty, fields| {
+            let assign = |f: &Field| match &f.ty {
                 FieldType::Scaled => format!("{{ msg.{} = value; Ok(()) }}", f.ident),
                 FieldType::Bool => format!("{{ msg.{} = value >= 0.5; Ok(()) }}", f.ident),
-                FieldType::Enum(e) => format!("{{ let raw = i64::from(round_half_away_from_zero(value)); msg.{} = {}::from_raw(raw).ok_or(SignalError::UndefinedValue {{ raw }})?; Ok(()) }}", f.ident, variant_ident(e)),
+                FieldType::Enum(e) => format!(
+                    "{{ let raw = i64::from(round_half_away_from_zero(value)); msg.{} = {}::from_raw(raw).ok_or(SignalError::UndefinedValue {{ raw }})?; Ok(()) }}",
+                    f.ident,
+                    variant_ident(e)
+                ),
             };
-            line(w, &format!("                {i} => {body}"));
-        }
-        line(
-            w,
-            "                _ => Err(SignalError::NoSuchSignal { index }),",
-        );
-        line(w, "            },");
-    }
-    line(w, "        }");
-    line(w, "    }");
+            let fallback = "Err(SignalError::NoSuchSignal { index })";
+            format!("Message::{ty}(msg) => {},", per_signal(fields, assign, fallback))
+        },
+        None,
+    );
     line(w, "}");
 }
