@@ -28,10 +28,12 @@
 #![deny(missing_docs)]
 
 pub mod codec;
+mod frame;
 mod spec;
 
 pub use autoplug_scaling::LinearScale;
 pub use codec::{DecodeError, SignalError};
+pub use frame::{Frame, FrameError};
 pub use spec::{MessageSpec, SignalKind, SignalSpec};
 
 mod catalogue {

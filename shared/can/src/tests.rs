@@ -131,3 +131,24 @@ fn errors_read_well() {
         "TransMsg.Gear: raw value 9 is not defined in its value table"
     );
 }
+
+#[test]
+fn frames_check_identifier_and_length() {
+    let f = Frame::new(0x7FF, &[1, 2, 3]).unwrap();
+    assert_eq!((f.id(), f.len(), f.data()), (0x7FF, 3, &[1u8, 2, 3][..]));
+    assert_eq!(std::format!("{f:?}"), "7FF#010203");
+    assert_eq!(
+        Frame::new(0x800, &[]),
+        Err(FrameError::IdTooLarge { id: 0x800 })
+    );
+    assert_eq!(Frame::new(1, &[0; 9]), Err(FrameError::TooLong { len: 9 }));
+    assert!(std::format!("{}", FrameError::IdTooLarge { id: 0x1234 }).contains("0x1234"));
+    let msg = Message::EngineMsg(EngineMsg {
+        engine_rpm: 9000.0,
+        fuel_level: 1.0,
+        engine_mode: EngineMode::Sport,
+    });
+    let frame = msg.to_frame();
+    assert_eq!(std::format!("{frame:?}"), "006#FF0400");
+    assert_eq!(Message::from_frame(&frame), Ok(msg));
+}
