@@ -63,6 +63,18 @@ impl Frame {
         })
     }
 
+    /// A frame of the catalogue, whose identifier and length the generator has checked.
+    pub(crate) fn from_catalogue(id: u16, data: &[u8]) -> Self {
+        let mut bytes = [0u8; 8];
+        let len = data.len().min(8);
+        bytes[..len].copy_from_slice(&data[..len]);
+        Self {
+            id: id & Self::MAX_ID,
+            len: len as u8,
+            data: bytes,
+        }
+    }
+
     /// The 11-bit identifier.
     pub const fn id(&self) -> u16 {
         self.id
@@ -100,11 +112,7 @@ impl crate::Message {
     pub fn to_frame(&self) -> Frame {
         let mut buf = [0u8; 8];
         let len = self.encode_into(&mut buf);
-        Frame {
-            id: self.id(),
-            len: len as u8,
-            data: buf,
-        }
+        Frame::from_catalogue(self.id(), &buf[..len])
     }
 
     /// Decodes a frame of the catalogue.

@@ -34,11 +34,12 @@ mod spec;
 pub use autoplug_scaling::LinearScale;
 pub use codec::{DecodeError, SignalError};
 pub use frame::{Frame, FrameError};
-pub use spec::{MessageSpec, SignalKind, SignalSpec};
+pub use spec::{CanMessage, MessageSpec, SignalKind, SignalSpec};
 
 mod catalogue {
     use crate::codec::{self, DecodeError, SignalError};
-    use crate::spec::{MessageSpec, SignalKind, SignalSpec};
+    use crate::spec::{CanMessage, MessageSpec, SignalKind, SignalSpec};
+    use crate::Frame;
     use autoplug_scaling::{round_half_away_from_zero, LinearScale};
     include!(concat!(env!("OUT_DIR"), "/catalogue.rs"));
 }

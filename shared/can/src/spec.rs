@@ -5,6 +5,31 @@ use crate::codec::{self, DecodeError};
 use crate::Node;
 use autoplug_scaling::LinearScale;
 
+/// What every generated message struct offers, for code generic over messages (transmit
+/// schedulers, input monitors).
+pub trait CanMessage: Sized + Copy + Default {
+    /// CAN identifier.
+    const ID: u16;
+    /// Name in the DBC.
+    const NAME: &'static str;
+    /// Data length in bytes.
+    const DLC: usize;
+    /// Transmission period.
+    const CYCLE_TIME_MS: u32;
+    /// Shortest time between two transmissions.
+    const MIN_GAP_MS: u32;
+    /// Nodes that send it.
+    const SENDERS: &'static [Node];
+    /// Decodes a frame's data strictly (see the message's inherent `decode`).
+    fn decode_data(data: &[u8]) -> Result<Self, DecodeError>;
+    /// Updates valid signals, keeps the last good value of invalid ones.
+    fn update_from_data(&mut self, data: &[u8]) -> Result<(), DecodeError>;
+    /// The message as a frame.
+    fn frame(&self) -> crate::Frame;
+    /// The message in the catalogue-wide enum.
+    fn into_message(self) -> crate::Message;
+}
+
 /// How a signal's raw value is interpreted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -755,6 +755,33 @@ fn emit_message(
     line(w, "}");
     line(w, "");
 
+    line(w, &format!("impl CanMessage for {ty} {{"));
+    for konst in [
+        "ID: u16",
+        "NAME: &'static str",
+        "DLC: usize",
+        "CYCLE_TIME_MS: u32",
+        "MIN_GAP_MS: u32",
+        "SENDERS: &'static [Node]",
+    ] {
+        let name = konst.split(':').next().unwrap_or_default();
+        line(w, &format!("    const {konst} = {ty}::{name};"));
+    }
+    line(
+        w,
+        "    fn decode_data(data: &[u8]) -> Result<Self, DecodeError> { Self::decode(data) }",
+    );
+    line(w, "    fn update_from_data(&mut self, data: &[u8]) -> Result<(), DecodeError> { self.update_from(data) }");
+    line(
+        w,
+        "    fn frame(&self) -> Frame { Frame::from_catalogue(Self::ID, &self.encode()) }",
+    );
+    line(
+        w,
+        &format!("    fn into_message(self) -> Message {{ Message::{ty}(self) }}"),
+    );
+    line(w, "}");
+    line(w, "");
     line(w, &format!("impl Default for {ty} {{"));
     line(
         w,

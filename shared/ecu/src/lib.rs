@@ -1,0 +1,116 @@
+//! What every AutoPlug ECU's logic shares.
+//!
+//! Each ECU's behaviour is a `no_std` state machine (an [`EcuLogic`]): received frames,
+//! sensor readings and time go in; actuator commands and frames to send come out. The
+//! firmware wires it to Embassy peripherals, the virtual car to the vehicle model: both
+//! run this same code. The pieces here are the ones all nine need:
+//!
+//! - [`Instant`]: time passed in by the caller, never read from a clock;
+//! - [`PeriodicTx`]: the catalogue's transmit timing (period, on change, minimum gap);
+//! - [`Input`]: a consumed message with its last good value and staleness (3 periods);
+//! - [`DtcStore`]: the ECU's diagnostic trouble codes with ISO 14229-1 status bits;
+//! - [`supervise`] and [`receive`]: the input bookkeeping every ECU does the same way.
+#![no_std]
+#![deny(missing_docs)]
+
+mod dtc;
+mod input;
+mod time;
+mod tx;
+
+pub use dtc::{
+    invalid_data, lost_communication, status, Dtc, DtcRecord, DtcStore, DtcSystem,
+    FTB_MISSING_MESSAGE, FTB_SIGNAL_INVALID,
+};
+pub use input::{Freshness, Input, STALE_AFTER_PERIODS};
+pub use time::Instant;
+pub use tx::PeriodicTx;
+
+use autoplug_can::{CanMessage, Frame, Node};
+
+/// How many different DTCs an ECU stores.
+pub const DTC_CAPACITY: usize = 16;
+
+/// The DTC store every ECU has.
+pub type Dtcs = DtcStore<DTC_CAPACITY>;
+
+/// One ECU's behaviour, as the firmware and the virtual car drive it.
+pub trait EcuLogic {
+    /// Readings from the ECU's own sensors and switches.
+    type Sensors;
+    /// Commands to the ECU's own actuators.
+    type Actuators;
+
+    /// The node this logic runs on.
+    const NODE: Node;
+    /// How often [`EcuLogic::step`] runs, in microseconds.
+    const STEP_PERIOD_US: u64;
+
+    /// A frame the ECU's acceptance filter let through. Frames of other identifiers are
+    /// ignored.
+    fn on_frame(&mut self, now: Instant, frame: &Frame);
+
+    /// One control step: reads sensors and the inputs received so far, updates the
+    /// outputs and the frames to send.
+    fn step(&mut self, now: Instant, sensors: &Self::Sensors) -> Self::Actuators;
+
+    /// The next frame to send now, if any is due; call until `None`.
+    fn poll_transmit(&mut self, now: Instant) -> Option<Frame>;
+
+    /// The DTCs recorded so far.
+    fn dtcs(&self) -> &Dtcs;
+}
+
+/// Offers a frame to an input. A refused frame records "invalid data" against the
+/// message's sender. Returns whether the frame was this input's message.
+pub fn receive<M: CanMessage>(
+    input: &mut Input<M>,
+    dtcs: &mut Dtcs,
+    now: Instant,
+    frame: &Frame,
+) -> bool {
+    match input.accept(now, frame) {
+        None => false,
+        Some(Ok(())) => {
+            dtcs.report_passed(invalid_data(sender_of::<M>()));
+            true
+        }
+        Some(Err(error)) => {
+            let dtc = invalid_data(sender_of::<M>());
+            if dtcs.report_failed(dtc, now) {
+                autoplug_log::warn!("{}: invalid frame ({:?}), DTC recorded", M::NAME, error);
+            }
+            true
+        }
+    }
+}
+
+/// Re-checks an input's freshness, records or clears "lost communication" with its
+/// sender, and returns whether it is stale (the caller then applies its safe state).
+pub fn supervise<M: CanMessage>(input: &mut Input<M>, dtcs: &mut Dtcs, now: Instant) -> bool {
+    let dtc = lost_communication(sender_of::<M>());
+    match input.check(now) {
+        Some(Freshness::Stale) => {
+            dtcs.report_failed(dtc, now);
+            autoplug_log::warn!("{}: stale, safe state", M::NAME);
+        }
+        Some(Freshness::Fresh) => {
+            dtcs.report_passed(dtc);
+            autoplug_log::info!("{}: fresh again", M::NAME);
+        }
+        None => {}
+    }
+    input.is_stale()
+}
+
+/// The node a message's faults are charged to: its first sender in the catalogue.
+fn sender_of<M: CanMessage>() -> Node {
+    M::SENDERS.first().copied().unwrap_or(Node::Gateway)
+}
+
+/// Test cases shared by the host and on-target suites.
+#[cfg(any(test, feature = "test-cases"))]
+pub mod test_cases;
+
+#[cfg(test)]
+mod tests;
