@@ -79,7 +79,8 @@ pub fn nodes_match_the_spec() {
     assert_eq!(Node::ABS.received_ids(), &[0x003, 0x004]);
     assert_eq!(Node::Console.received_ids(), &[0x004]);
     assert_eq!(Node::Engine.received_ids(), &[0x018]);
-    assert_eq!(Node::Steering.received_ids(), &[] as &[u16]);
+    // Steering hears CruiseModeMsg to adopt the pedals' cancel (a decision of this project).
+    assert_eq!(Node::Steering.received_ids(), &[0x008]);
     assert_eq!(Node::Cabin.received_ids(), &[] as &[u16]);
     assert_eq!(Node::Gateway.received_ids().len(), MESSAGES.len());
 }
