@@ -1,0 +1,10 @@
+//! The AutoPlug virtual car: the vehicle model, a bit-timed CAN bus and the nine ECUs'
+//! logic (the same code the firmware runs), driven by scenario files.
+#![deny(missing_docs)]
+
+pub mod candump;
+pub mod driver;
+pub mod scenario;
+
+#[cfg(test)]
+mod tests;

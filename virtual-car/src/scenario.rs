@@ -1,0 +1,439 @@
+//! Scenario files: what to drive, on what road, with which ECU software (TOML).
+//!
+//! ```toml
+//! name = "cruise-hold"
+//! description = "Cruise engaged at 90 km/h on a level road, then a 6 % grade."
+//! duration_s = 40.0
+//! seed = 1                      # sensor noise and fault injection
+//!
+//! [road]
+//! mu_left = 1.0                 # friction, left wheels
+//! mu_right = 1.0                # friction, right wheels (split-µ when different)
+//! grade_percent = 0.0
+//! ambient_c = 25.0
+//! sun_load_w = 300.0
+//!
+//! [initial]
+//! speed_kmh = 90.0
+//! gear = "4"                    # "R", "N" or "1".."6"
+//! fuel_l = 40.0
+//! cabin_temp_f = 80.0
+//!
+//! [ecus]
+//! cruise = "correct"            # or "faulty"
+//! abs = "correct"               # or "faulty"
+//! differential = "enabled"      # or "disabled" (open differential, for comparisons)
+//!
+//! [driver]                      # the driver's controls at t = 0
+//! accelerator = 20.0            # pedal %, 0..100
+//! set_temp_f = 72.0
+//!
+//! [[at]]                        # timeline: changes at a time, in order
+//! t_s = 2.0
+//! press = ["cruise_on"]         # momentary buttons: cruise_on, cruise_off, shift_up, shift_down
+//! accelerator = 0.0
+//!
+//! [[at]]
+//! t_s = 20.0
+//! grade_percent = 6.0           # the road can change too
+//! ```
+//!
+//! Unknown keys are errors (a typo must not silently do nothing), and every value is
+//! checked against its range with an error that names the field.
+
+use serde::Deserialize;
+use std::fmt;
+use std::path::Path;
+
+/// A whole scenario.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name, used for output folders.
+    pub name: String,
+    /// What it shows.
+    #[serde(default)]
+    pub description: String,
+    /// Simulated time to run.
+    pub duration_s: f64,
+    /// Seed of every random process (sensor noise, fault injection).
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// The road.
+    #[serde(default)]
+    pub road: Road,
+    /// The car at t = 0.
+    #[serde(default)]
+    pub initial: Initial,
+    /// Which software the ECUs run.
+    #[serde(default)]
+    pub ecus: EcuVariants,
+    /// The driver's controls at t = 0.
+    #[serde(default)]
+    pub driver: DriverSettings,
+    /// Changes over time, in time order.
+    #[serde(default)]
+    pub at: Vec<Event>,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+/// Road and weather.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Road {
+    /// Tyre-road friction of the left wheels.
+    pub mu_left: f64,
+    /// Tyre-road friction of the right wheels.
+    pub mu_right: f64,
+    /// Grade in percent (positive uphill).
+    pub grade_percent: f64,
+    /// Ambient temperature, °C.
+    pub ambient_c: f64,
+    /// Solar load on the cabin, W.
+    pub sun_load_w: f64,
+}
+
+impl Default for Road {
+    fn default() -> Self {
+        Self {
+            mu_left: 1.0,
+            mu_right: 1.0,
+            grade_percent: 0.0,
+            ambient_c: 20.0,
+            sun_load_w: 0.0,
+        }
+    }
+}
+
+/// The car's state at t = 0.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Initial {
+    /// Speed, km/h.
+    pub speed_kmh: f64,
+    /// Engaged gear.
+    pub gear: GearName,
+    /// Fuel in the tank, L.
+    pub fuel_l: f64,
+    /// Cabin temperature, °F.
+    pub cabin_temp_f: f64,
+}
+
+impl Default for Initial {
+    fn default() -> Self {
+        Self {
+            speed_kmh: 0.0,
+            gear: GearName::Neutral,
+            fuel_l: 40.0,
+            cabin_temp_f: 72.0,
+        }
+    }
+}
+
+/// A gear as written in a scenario: "R", "N", "1".."6".
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GearName {
+    /// Reverse.
+    Reverse,
+    /// Neutral.
+    Neutral,
+    /// Forward gear 1..=6.
+    Forward(u8),
+}
+
+impl<'de> Deserialize<'de> for GearName {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        match text.as_str() {
+            "R" => Ok(GearName::Reverse),
+            "N" => Ok(GearName::Neutral),
+            "1" | "2" | "3" | "4" | "5" | "6" => Ok(GearName::Forward(text.as_bytes()[0] - b'0')),
+            _ => Err(serde::de::Error::custom(format!(
+                "gear \"{text}\": expected \"R\", \"N\" or \"1\" to \"6\""
+            ))),
+        }
+    }
+}
+
+/// Software variants of the ECUs that have them.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EcuVariants {
+    /// Cruise control software.
+    pub cruise: Software,
+    /// ABS software.
+    pub abs: Software,
+    /// Whether the differential ECU controls the torque split.
+    pub differential: Activation,
+}
+
+impl Default for EcuVariants {
+    fn default() -> Self {
+        Self {
+            cruise: Software::Correct,
+            abs: Software::Correct,
+            differential: Activation::Enabled,
+        }
+    }
+}
+
+/// Correct or faulty software (the report's demonstrations).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Software {
+    /// The working software.
+    Correct,
+    /// The demonstration's broken software.
+    Faulty,
+}
+
+/// Whether an ECU acts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Activation {
+    /// Working normally.
+    Enabled,
+    /// Its actuator output is held neutral (it still talks on the bus).
+    Disabled,
+}
+
+/// The driver's controls. In `[driver]` they are the values at t = 0; in an `[[at]]`
+/// event, only the ones given change.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriverSettings {
+    /// Accelerator pedal, % (0..100).
+    pub accelerator: Option<f64>,
+    /// Brake pedal, % (0..100).
+    pub brake: Option<f64>,
+    /// Steering wheel angle, degrees, positive to the left (−135..135).
+    pub steering_deg: Option<f64>,
+    /// Headlight switch.
+    pub headlights: Option<bool>,
+    /// Engine-mode switch: true for economy, false for sport.
+    pub economy_mode: Option<bool>,
+    /// Transmission-mode switch: true for manual, false for automatic.
+    pub manual_mode: Option<bool>,
+    /// Cabin set-temperature knob, °F.
+    pub set_temp_f: Option<f64>,
+}
+
+/// A momentary button on the steering wheel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Button {
+    /// Cruise on.
+    CruiseOn,
+    /// Cruise off.
+    CruiseOff,
+    /// Shift up (manual mode, or out of neutral).
+    ShiftUp,
+    /// Shift down.
+    ShiftDown,
+}
+
+/// A fault injected on the bus.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fault {
+    /// Node whose transmissions stop (`"Cruise"`, `"ABS"`, ... as in the DBC).
+    pub silence: Option<String>,
+    /// Node whose transmissions resume.
+    pub restore: Option<String>,
+}
+
+/// Changes at one point in time: any of the controls, road changes and faults.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Event {
+    /// When, in seconds from the start.
+    pub t_s: f64,
+    /// How long the pedals and the steering wheel take to move to their new values
+    /// (linear ramp), s.
+    #[serde(default)]
+    pub ramp_s: f64,
+    /// Buttons pressed at this time (held for [`BUTTON_PRESS_S`]).
+    #[serde(default)]
+    pub press: Vec<Button>,
+    /// Accelerator pedal, %.
+    pub accelerator: Option<f64>,
+    /// Brake pedal, %.
+    pub brake: Option<f64>,
+    /// Steering wheel angle, degrees.
+    pub steering_deg: Option<f64>,
+    /// Headlight switch.
+    pub headlights: Option<bool>,
+    /// Engine-mode switch (economy).
+    pub economy_mode: Option<bool>,
+    /// Transmission-mode switch (manual).
+    pub manual_mode: Option<bool>,
+    /// Cabin set temperature, °F.
+    pub set_temp_f: Option<f64>,
+    /// New grade, %.
+    pub grade_percent: Option<f64>,
+    /// New friction, left wheels.
+    pub mu_left: Option<f64>,
+    /// New friction, right wheels.
+    pub mu_right: Option<f64>,
+    /// Bus faults.
+    pub fault: Option<Fault>,
+}
+
+/// How long a scenario's button press is held.
+pub const BUTTON_PRESS_S: f64 = 0.1;
+
+/// Why a scenario was refused.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScenarioError {
+    /// The file, when read from one.
+    pub source: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.source, self.message)
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+/// Node names a fault may name.
+const NODE_NAMES: [&str; 9] = [
+    "Engine",
+    "Pedals",
+    "Steering",
+    "Transmission",
+    "Cabin",
+    "Console",
+    "Differential",
+    "Cruise",
+    "ABS",
+];
+
+impl Scenario {
+    /// Reads and checks a scenario file.
+    pub fn load(path: &Path) -> Result<Self, ScenarioError> {
+        let source = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
+            source: source.clone(),
+            message: format!("cannot read: {e}"),
+        })?;
+        Self::parse(&text, &source)
+    }
+
+    /// Parses and checks scenario text; `source` names it in errors.
+    pub fn parse(text: &str, source: &str) -> Result<Self, ScenarioError> {
+        let scenario: Scenario = toml::from_str(text).map_err(|e| ScenarioError {
+            source: source.to_string(),
+            message: e.to_string().trim_end().to_string(),
+        })?;
+        scenario.check().map_err(|message| ScenarioError {
+            source: source.to_string(),
+            message,
+        })?;
+        Ok(scenario)
+    }
+
+    fn check(&self) -> Result<(), String> {
+        fn range(what: &str, v: f64, lo: f64, hi: f64) -> Result<(), String> {
+            if v.is_finite() && (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(format!("{what} = {v} is outside {lo}..={hi}"))
+            }
+        }
+        fn controls(
+            at: &str,
+            accelerator: Option<f64>,
+            brake: Option<f64>,
+            steering: Option<f64>,
+            set_temp: Option<f64>,
+        ) -> Result<(), String> {
+            if let Some(v) = accelerator {
+                range(&format!("{at}accelerator"), v, 0.0, 100.0)?;
+            }
+            if let Some(v) = brake {
+                range(&format!("{at}brake"), v, 0.0, 100.0)?;
+            }
+            if let Some(v) = steering {
+                range(&format!("{at}steering_deg"), v, -135.0, 135.0)?;
+            }
+            if let Some(v) = set_temp {
+                range(&format!("{at}set_temp_f"), v, 50.0, 100.0)?;
+            }
+            Ok(())
+        }
+        if self.name.is_empty()
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return Err(format!(
+                "name \"{}\": use letters, digits, '-' and '_' (it names the output folder)",
+                self.name
+            ));
+        }
+        range("duration_s", self.duration_s, 0.001, 24.0 * 3600.0)?;
+        range("road.mu_left", self.road.mu_left, 0.05, 1.5)?;
+        range("road.mu_right", self.road.mu_right, 0.05, 1.5)?;
+        range("road.grade_percent", self.road.grade_percent, -30.0, 30.0)?;
+        range("road.ambient_c", self.road.ambient_c, -40.0, 50.0)?;
+        range("road.sun_load_w", self.road.sun_load_w, 0.0, 2000.0)?;
+        range("initial.speed_kmh", self.initial.speed_kmh, 0.0, 250.0)?;
+        range("initial.fuel_l", self.initial.fuel_l, 0.0, 48.0)?;
+        range(
+            "initial.cabin_temp_f",
+            self.initial.cabin_temp_f,
+            0.0,
+            127.5,
+        )?;
+        let d = &self.driver;
+        controls(
+            "driver.",
+            d.accelerator,
+            d.brake,
+            d.steering_deg,
+            d.set_temp_f,
+        )?;
+        let mut previous = 0.0;
+        for (i, event) in self.at.iter().enumerate() {
+            let at = format!("at[{i}] (t_s = {}): ", event.t_s);
+            range(&format!("at[{i}].t_s"), event.t_s, 0.0, self.duration_s)?;
+            if event.t_s < previous {
+                return Err(format!(
+                    "{at}events must be in time order (the previous one is at {previous} s)"
+                ));
+            }
+            previous = event.t_s;
+            range(&format!("{at}ramp_s"), event.ramp_s, 0.0, 3600.0)?;
+            let c = event;
+            controls(&at, c.accelerator, c.brake, c.steering_deg, c.set_temp_f)?;
+            if let Some(v) = c.grade_percent {
+                range(&format!("{at}grade_percent"), v, -30.0, 30.0)?;
+            }
+            if let Some(v) = c.mu_left {
+                range(&format!("{at}mu_left"), v, 0.05, 1.5)?;
+            }
+            if let Some(v) = c.mu_right {
+                range(&format!("{at}mu_right"), v, 0.05, 1.5)?;
+            }
+            if let Some(fault) = &c.fault {
+                for name in fault.silence.iter().chain(fault.restore.iter()) {
+                    if !NODE_NAMES.contains(&name.as_str()) {
+                        return Err(format!(
+                            "{at}fault names node \"{name}\"; the nodes are {}",
+                            NODE_NAMES.join(", ")
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
