@@ -5,6 +5,7 @@
 pub mod candump;
 pub mod driver;
 pub mod scenario;
+pub mod socketcand;
 
 #[cfg(test)]
 mod tests;

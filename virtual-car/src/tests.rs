@@ -167,3 +167,115 @@ fn broken_log_lines_are_named() {
     assert_eq!(kept.len(), 2, "records before the bad line are kept");
     assert_eq!(e.line, 4);
 }
+
+mod socketcand {
+    use crate::socketcand::{parse_command, Command, SocketcandServer};
+    use autoplug_can::Frame;
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    use std::time::{Duration, Instant};
+
+    /// Reads until `expected` has arrived in full (the server writes each message whole,
+    /// but TCP may still split or join reads).
+    fn read_until(stream: &mut TcpStream, received: &mut String, expected: &str) {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        let mut chunk = [0u8; 256];
+        while !received.contains(expected) {
+            assert!(
+                Instant::now() < deadline,
+                "timed out waiting for {expected:?}; got {received:?}"
+            );
+            if let Ok(n) = stream.read(&mut chunk) {
+                received.push_str(std::str::from_utf8(&chunk[..n]).unwrap());
+            }
+        }
+    }
+
+    fn wait_for(mut condition: impl FnMut() -> bool) {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while !condition() {
+            assert!(Instant::now() < deadline, "timed out");
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    #[test]
+    fn a_client_handshakes_receives_and_sends() {
+        let server = SocketcandServer::start("127.0.0.1:0").unwrap();
+        let mut client = TcpStream::connect(server.address()).unwrap();
+        client
+            .set_read_timeout(Some(Duration::from_millis(50)))
+            .unwrap();
+        let mut got = String::new();
+        read_until(&mut client, &mut got, "< hi >");
+        // Frames before raw mode are not sent to the client.
+        server.broadcast(1, &Frame::new(0x001, &[1]).unwrap(), None);
+        client.write_all(b"< open can0 >").unwrap();
+        read_until(&mut client, &mut got, "< hi >< ok >");
+        // A command split across two writes.
+        client.write_all(b"< raw").unwrap();
+        client.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+        client.write_all(b"mode >").unwrap();
+        read_until(&mut client, &mut got, "< hi >< ok >< ok >");
+        wait_for(|| server.raw_clients() == 1);
+        server.broadcast(12_345_678, &Frame::new(0x00C, &[0x0A, 0x14]).unwrap(), None);
+        server.broadcast(20_000_000, &Frame::new(0x7FF, &[]).unwrap(), None);
+        read_until(&mut client, &mut got, "< frame 7FF 20.000000  >");
+        assert_eq!(
+            got,
+            "< hi >< ok >< ok >< frame 00C 12.345678 0A14 >< frame 7FF 20.000000  >"
+        );
+        // Two commands in one write, one of them empty.
+        client
+            .write_all(b"< send 123 2 de ad >< send 7FF 0  >< echo >")
+            .unwrap();
+        read_until(&mut client, &mut got, "< echo >");
+        let mut frames = Vec::new();
+        wait_for(|| {
+            while let Some(f) = server.try_recv() {
+                frames.push(f);
+            }
+            frames.len() == 2
+        });
+        assert_eq!(frames[0].frame, Frame::new(0x123, &[0xDE, 0xAD]).unwrap());
+        assert_eq!(frames[1].frame, Frame::new(0x7FF, &[]).unwrap());
+        // Its own frame is not echoed back to it.
+        server.broadcast(30_000_000, &frames[0].frame, Some(frames[0].client));
+        server.broadcast(30_000_001, &Frame::new(0x002, &[]).unwrap(), None);
+        read_until(&mut client, &mut got, "< frame 002 30.000001  >");
+        assert!(!got.contains("< frame 123"), "{got}");
+        assert_eq!(server.refused_commands(), 0);
+    }
+
+    #[test]
+    fn bad_commands_are_refused_with_a_reason() {
+        let cases = [
+            ("send 12345678 1 00", "extended"),
+            ("send 12G 1 00", "not hexadecimal"),
+            ("send 123 2 00", "length 2 but 1 data bytes"),
+            ("send 800 0", "does not fit 11 bits"),
+            ("send 123 9 0 1 2 3 4 5 6 7 8", "at most 8"),
+            ("bogus", "unknown command 'bogus'"),
+        ];
+        for (message, expected) in cases {
+            let e = parse_command(message).unwrap_err();
+            assert!(e.contains(expected), "{message}: {e}");
+        }
+        assert_eq!(parse_command("open can0"), Ok(Command::Open("can0".into())));
+        let server = SocketcandServer::start("127.0.0.1:0").unwrap();
+        let mut client = TcpStream::connect(server.address()).unwrap();
+        client
+            .set_read_timeout(Some(Duration::from_millis(50)))
+            .unwrap();
+        let mut got = String::new();
+        client
+            .write_all(b"< rawmode >< open vcan9 >< send 123 0 >")
+            .unwrap();
+        read_until(&mut client, &mut got, "send needs rawmode");
+        assert!(got.contains("< error open a bus before rawmode >"), "{got}");
+        assert!(got.contains("could not open bus 'vcan9'"), "{got}");
+        assert_eq!(server.refused_commands(), 3);
+        assert!(server.try_recv().is_none());
+    }
+}
