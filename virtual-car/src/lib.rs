@@ -4,6 +4,7 @@
 
 pub mod candump;
 pub mod driver;
+pub mod plot;
 pub mod scenario;
 pub mod socketcand;
 

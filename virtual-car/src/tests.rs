@@ -279,3 +279,52 @@ mod socketcand {
         assert!(server.try_recv().is_none());
     }
 }
+
+#[test]
+fn plots_are_svg_with_every_series() {
+    use crate::plot::{Axis, Plot, Series};
+    let plot = Plot {
+        title: "Cruise <hold>".into(),
+        x_label: "Time (s)".into(),
+        left_label: "Speed (km/h)".into(),
+        right_label: "Command".into(),
+        series: vec![
+            Series {
+                name: "Speed".into(),
+                points: (0..100)
+                    .map(|i| (i as f64 * 0.1, 80.0 + i as f64 * 0.1))
+                    .collect(),
+                axis: Axis::Left,
+                steps: false,
+            },
+            Series {
+                name: "Gear".into(),
+                points: vec![(0.0, 1.0), (5.0, 2.0), (9.9, 2.0)],
+                axis: Axis::Right,
+                steps: true,
+            },
+            Series {
+                name: "Empty".into(),
+                points: vec![],
+                axis: Axis::Left,
+                steps: false,
+            },
+        ],
+    };
+    let svg = plot.to_svg();
+    assert!(svg.starts_with("<svg"));
+    assert!(svg.trim_end().ends_with("</svg>"));
+    assert!(svg.contains("Cruise &lt;hold&gt;"));
+    assert_eq!(svg.matches("<path").count(), 3);
+    assert!(svg.contains("Gear (right)"));
+    assert!(!svg.contains("NaN"));
+    // Ticks land on round numbers covering the data: 0..10 s, 80..90 km/h.
+    assert!(
+        svg.contains(">10</text>") && svg.contains(">0</text>"),
+        "x ticks"
+    );
+    assert!(
+        svg.contains(">90</text>") && svg.contains(">80</text>"),
+        "y ticks"
+    );
+}
