@@ -1,0 +1,637 @@
+//! ABS / brakes ECU (node 0x0E), spec section 2 and the report's pseudocode 5.2.1.2.
+//!
+//! Reads the four wheel speeds (FL, FR, RL, RR, linear speed ω·r in km/h) and drives the
+//! four brake actuators. The brake command comes from the pedals ECU (PedalBrake: the
+//! driver's pedal or the cruise control's deceleration), the vehicle speed reference from
+//! the cruise ECU (VehicleSpeedMsg).
+//!
+//! # Anti-lock braking
+//!
+//! While the driver brakes (command above [`BRAKING_THRESHOLD`]) above
+//! [`ABS_MIN_SPEED_KMH`], the ECU computes each wheel's slip
+//! `(v − v_wheel) / max(v, SLIP_SPEED_FLOOR_KMH)`. A wheel whose slip exceeds
+//! [`SLIP_THRESHOLD`] is slipping: its control channel engages and a PID on the slip error
+//! (`slip − SLIP_TARGET`, target just below the tyre's peak-friction slip) computes an ABS
+//! release command in 0..100. The brake applied to each wheel is the driver's command
+//! minus the release, limited to [0, 100]; it is never above the driver's command.
+//!
+//! - **Channels.** Three, as in a classic 3-channel ABS: front left and front right are
+//!   controlled individually (the fronts carry most of the braking); the rear axle is one
+//!   channel controlled on the rear wheel with the *larger* slip, and both rear wheels get
+//!   its release (**select-low**: the rear brakes never exceed what the lower-friction rear
+//!   wheel can take). On split-μ the rear axle then keeps its side grip and builds no yaw
+//!   moment, so the car keeps its heading; the cost is a little rear braking on the
+//!   high-μ side.
+//! - **Pulsing.** When a channel's release reaches the driver's command (the brake on that
+//!   wheel is saturated at 0), its PID is reset, as the report's ABS did. The reset is the
+//!   anti-windup against the real actuator limit (the driver's command, not 100): the
+//!   wheel is fully released and spins up, and the controller restarts from its P + D
+//!   response, so the brake pressure pulses. Only the saturated channel is reset: resetting
+//!   the others would dump the release they hold and lock them.
+//! - **Timeout.** The ABS has *acted* in a step when a wheel was slipping or a release of
+//!   at least [`RELEASE_ACTIVE_MIN`] was commanded. After [`ABS_TIMEOUT_US`] without
+//!   acting, every channel disengages: PIDs reset, release 0, so the next event starts
+//!   from a clean controller.
+//! - Below [`ABS_MIN_SPEED_KMH`] or without braking the ABS is off and its controllers are
+//!   reset: the wheels may lock for the last metres so that the car comes to rest.
+//!
+//! # Traction control
+//!
+//! When the driver is not braking, a wheel spins when it is faster than the vehicle by more
+//! than [`TC_MIN_EXCESS_KMH`] and by a slip `(v_wheel − v) / max(v, TC_SPEED_FLOOR_KMH)`
+//! above [`TC_SLIP_THRESHOLD`] (the EVO is four-wheel drive: all wheels are watched). A PI
+//! on the worst wheel's slip above [`TC_SLIP_TARGET`] gives the traction-control cut
+//! (TracMsg, 0..100; the pedals ECU scales the accelerator by `1 − cut/100`). It stays in
+//! control while a wheel spins or the cut is at least [`CUT_ACTIVE_MIN`], and disengages
+//! (cut 0, controller reset) after [`TC_HOLD_US`] of neither. Braking turns it off.
+//!
+//! # Safe states (inputs stale after 3 periods, 30 ms)
+//!
+//! - **VehicleSpeedMsg stale** (no speed reference): ABS and traction control are
+//!   inactive, the driver's brake passes through unmodified to all four wheels, the cut is
+//!   0; DTC "lost communication with the cruise ECU". They resume when the frames return.
+//! - **PedalBrake stale** (driver's brake unknown): the last good command is kept for
+//!   [`PEDAL_LOSS_HOLD_US`] (a short gap must not drop an emergency stop), then the ECU
+//!   brings the car to a controlled stop: the command rises at
+//!   [`CONTROLLED_STOP_RAMP_PER_S`] to `max(last good, CONTROLLED_STOP_BRAKE)` and holds
+//!   the car at rest afterwards. Why not release: the pedals ECU also drives the
+//!   accelerator and is the only way the driver brakes, so a car without it cannot be
+//!   controlled and must not keep rolling; a moderate, ramped brake is a predictable stop
+//!   for the traffic behind, and never less than what the driver last asked for. The ABS
+//!   keeps working on this command. DTC "lost communication with the pedals ECU". The
+//!   driver's command is taken again as soon as the frames return.
+//! - **Wheel speed sensor implausible**: a reading that is not a finite speed in
+//!   0..=[`WHEEL_SPEED_MAX_KMH`] disables ABS and traction control at once for that step
+//!   (pass-through). A reading that stays invalid, or more than
+//!   [`WHEEL_PLAUSIBILITY_DIFF_KMH`] away from all three others, for
+//!   [`WHEEL_PLAUSIBILITY_DEBOUNCE_US`] records the wheel's chassis DTC
+//!   ([`WHEEL_SENSOR_DTCS`]: C0035 FL, C0040 FR, C0045 RL, C0050 RR, failure type 0x64
+//!   "signal plausibility failure") and disables ABS and traction control (pass-through)
+//!   until the ECU restarts, as an ABS warning lamp does. The DTC's test-failed bit clears
+//!   when the reading is plausible again; the code stays stored.
+//! - An invalid frame records "invalid data" against its sender and keeps the last good
+//!   value (a sender of only invalid frames goes stale like a silent one).
+//!
+//! [`Variant::Faulty`] is the "faulty software" of the report's second demonstration: the
+//! ABS never releases (release always 0, applied brake = driver brake even when the wheels
+//! lock), so hard braking locks the wheels and the car loses its heading. Everything else
+//! (traction control, messages, safe states) works as in the correct build. Firmware
+//! selects it with a `faulty` feature; the virtual car picks it per scenario.
+#![no_std]
+#![deny(missing_docs)]
+
+use autoplug_can::{AbsMsg, Frame, Node, PedalBrake, TracMsg, VehicleSpeedMsg, WheelSpeedMsg};
+use autoplug_ecu::{
+    receive, supervise, Dtc, DtcSystem, Dtcs, EcuLogic, Input, Instant, PeriodicTx,
+};
+use autoplug_pid::{Pid, PidConfig};
+
+/// Which software the ECU runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Variant {
+    /// Slip-controlled ABS.
+    Correct,
+    /// The demonstration's broken software: the ABS never releases.
+    Faulty,
+}
+
+/// Control period. Wheel dynamics are fast (a wheel locks within ~100 ms at full brake), so
+/// the ABS runs at twice the message rate; messages still go out at their 10 ms periods
+/// (or on change, at most every 5 ms).
+pub const STEP_PERIOD_US: u64 = 5_000;
+
+/// Driver brake command (0..100) above which the driver is braking. Small, above the
+/// 1-unit resolution of PedalBrake, so a resting foot does not enable the ABS.
+pub const BRAKING_THRESHOLD: f32 = 2.0;
+
+/// Vehicle speed below which the ABS is off (km/h): the wheels may lock for the last metres
+/// so that the car comes to rest, and the 1 km/h speed reference is too coarse there.
+pub const ABS_MIN_SPEED_KMH: f32 = 5.0;
+
+/// Slip above which a wheel is slipping and its ABS channel engages. Just below the target
+/// so that an engaged channel keeps being seen as acting while it regulates.
+pub const SLIP_THRESHOLD: f32 = 0.10;
+
+/// Slip the ABS regulates to: just below the tyre's peak-friction slip (~0.15), on the
+/// stable side of the friction curve where the tyre still steers.
+pub const SLIP_TARGET: f32 = 0.12;
+
+/// Slip is computed relative to at least this speed (km/h). At low speed the 1 km/h
+/// resolution of VehicleSpeedMsg would make the relative slip noise; below this speed the
+/// thresholds act as an absolute speed difference (0.10 × 20 = 2 km/h).
+pub const SLIP_SPEED_FLOOR_KMH: f32 = 20.0;
+
+/// PID on the slip error (release in % of full brake per unit of slip). Mostly P + D: the
+/// derivative of slip is the early warning of a wheel running into lock (and of it
+/// spinning back up); the integral holds the release the road's friction needs.
+pub const ABS_TUNING: PidConfig = PidConfig {
+    kp: 400.0,
+    ki: 1500.0,
+    kd: 4.0,
+    derivative_filter_tau_s: 0.01,
+    output_min: 0.0,
+    output_max: 100.0,
+};
+
+/// The ABS channel controller, built at compile time: an invalid tuning fails the build.
+const ABS_PID: Pid = match Pid::new(ABS_TUNING) {
+    Ok(pid) => pid,
+    Err(_) => panic!("invalid ABS tuning"),
+};
+
+/// A release at least this large (0..100) counts as the ABS acting, for the timeout.
+pub const RELEASE_ACTIVE_MIN: f32 = 1.0;
+
+/// ABS timeout: without acting for this long, the ABS disengages and resets (µs).
+pub const ABS_TIMEOUT_US: u64 = 1_000_000;
+
+/// Traction control: a wheel faster than the vehicle by at least this much can be spinning
+/// (km/h), so that speed-sensor rounding at a standstill is not mistaken for spin.
+pub const TC_MIN_EXCESS_KMH: f32 = 3.0;
+
+/// Traction control: drive slip above which a wheel is spinning.
+pub const TC_SLIP_THRESHOLD: f32 = 0.15;
+
+/// Traction control: drive slip the cut regulates to (near the tyre's peak traction).
+pub const TC_SLIP_TARGET: f32 = 0.10;
+
+/// Traction control: drive slip is computed relative to at least this speed (km/h), so a
+/// launch from rest has a finite slip.
+pub const TC_SPEED_FLOOR_KMH: f32 = 10.0;
+
+/// A cut at least this large (0..100) counts as traction control acting.
+pub const CUT_ACTIVE_MIN: f32 = 1.0;
+
+/// Traction control disengages (cut 0, controller reset) after this long without a
+/// spinning wheel or a cut of at least [`CUT_ACTIVE_MIN`] (µs).
+pub const TC_HOLD_US: u64 = 300_000;
+
+/// PI on the drive slip error: cut in % of the accelerator per unit of slip. The integral
+/// holds the cut the road's grip needs and gives it back within a second or so once the
+/// wheels grip.
+pub const TC_TUNING: PidConfig = PidConfig {
+    kp: 300.0,
+    ki: 1000.0,
+    kd: 0.0,
+    derivative_filter_tau_s: 0.0,
+    output_min: 0.0,
+    output_max: 100.0,
+};
+
+/// The traction controller, built at compile time.
+const TC_PID: Pid = match Pid::new(TC_TUNING) {
+    Ok(pid) => pid,
+    Err(_) => panic!("invalid traction control tuning"),
+};
+
+/// PedalBrake lost: the last good command is kept this long before the controlled stop
+/// (µs), so that a short gap does not change the braking.
+pub const PEDAL_LOSS_HOLD_US: u64 = 500_000;
+
+/// PedalBrake lost: brake command (0..100) of the controlled stop, a moderate deceleration.
+pub const CONTROLLED_STOP_BRAKE: f32 = 30.0;
+
+/// PedalBrake lost: how fast the command rises to the controlled stop (per second), so the
+/// traffic behind sees a progressive stop rather than a jolt.
+pub const CONTROLLED_STOP_RAMP_PER_S: f32 = 100.0;
+
+/// Highest wheel speed a sensor can plausibly report (km/h).
+pub const WHEEL_SPEED_MAX_KMH: f32 = 400.0;
+
+/// A wheel speed this far (km/h) from all three others is implausible.
+pub const WHEEL_PLAUSIBILITY_DIFF_KMH: f32 = 50.0;
+
+/// An implausible wheel speed sets its DTC after this long (µs). Longer than any wheel
+/// lock the correct ABS allows, so braking does not trip it.
+pub const WHEEL_PLAUSIBILITY_DEBOUNCE_US: u64 = 500_000;
+
+/// Failure-type byte of J2012: "signal plausibility failure".
+pub const FTB_SIGNAL_PLAUSIBILITY: u8 = 0x64;
+
+/// Wheel speed sensor DTCs, FL, FR, RL, RR (the common SAE chassis codes C0035, C0040,
+/// C0045, C0050 "wheel speed sensor circuit"), with failure type 0x64.
+pub const WHEEL_SENSOR_DTCS: [Dtc; 4] = [
+    Dtc::new(DtcSystem::C, 0x0035, FTB_SIGNAL_PLAUSIBILITY),
+    Dtc::new(DtcSystem::C, 0x0040, FTB_SIGNAL_PLAUSIBILITY),
+    Dtc::new(DtcSystem::C, 0x0045, FTB_SIGNAL_PLAUSIBILITY),
+    Dtc::new(DtcSystem::C, 0x0050, FTB_SIGNAL_PLAUSIBILITY),
+];
+
+/// ABS control channels: front left, front right, rear axle (select-low).
+const CHANNELS: usize = 3;
+
+/// Sensor readings.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Sensors {
+    /// Linear wheel speeds ω·r, km/h, FL, FR, RL, RR.
+    pub wheel_speed_kmh: [f32; 4],
+}
+
+/// Actuator commands.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Actuators {
+    /// Brake applied per wheel, FL, FR, RL, RR, 0..100 (% of full brake torque).
+    pub brake: [f32; 4],
+}
+
+/// Whether the ABS and traction control may act.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Availability {
+    /// Inputs good: ABS and traction control work.
+    #[default]
+    Available,
+    /// VehicleSpeedMsg stale: the driver's brake passes through.
+    NoSpeedReference,
+    /// A wheel speed reading is invalid now, or a sensor fault was confirmed: the
+    /// driver's brake passes through.
+    WheelSensorFault,
+}
+
+/// Where the brake command the ECU works with comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BrakeSource {
+    /// PedalBrake, fresh.
+    #[default]
+    Driver,
+    /// PedalBrake stale: the last good command, held.
+    HoldLast,
+    /// PedalBrake stale for longer than the hold: controlled stop.
+    ControlledStop,
+}
+
+/// What the ECU decided in its last step, for logs and the virtual car's trace.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Status {
+    /// Whether ABS and traction control may act.
+    pub availability: Availability,
+    /// Where the brake command came from.
+    pub brake_source: BrakeSource,
+    /// The brake command used (the driver's, or the fail-safe one), 0..100.
+    pub driver_brake: f32,
+    /// ABS release per wheel, FL, FR, RL, RR, 0..100.
+    pub release: [f32; 4],
+    /// Brake applied per wheel, FL, FR, RL, RR, 0..100.
+    pub brake: [f32; 4],
+    /// Whether any ABS channel is engaged.
+    pub abs_active: bool,
+    /// Whether traction control is engaged.
+    pub traction_active: bool,
+    /// Traction-control cut, 0..100.
+    pub traction_cut: f32,
+}
+
+/// The ABS / brakes ECU's logic.
+#[derive(Clone, Debug)]
+pub struct AbsEcu {
+    variant: Variant,
+    vehicle_speed: Input<VehicleSpeedMsg>,
+    pedal_brake: Input<PedalBrake>,
+    abs_pids: [Pid; CHANNELS],
+    engaged: [bool; CHANNELS],
+    abs_last_acted: Option<Instant>,
+    tc_pid: Pid,
+    tc_last_acted: Option<Instant>,
+    pedal_lost_since: Option<Instant>,
+    failsafe_brake: f32,
+    implausible_since: [Option<Instant>; 4],
+    sensor_fault: bool,
+    status: Status,
+    last_step: Option<Instant>,
+    tx_wheels: PeriodicTx,
+    tx_abs: PeriodicTx,
+    tx_trac: PeriodicTx,
+    dtcs: Dtcs,
+}
+
+impl AbsEcu {
+    /// The ECU at power-up (`now`), running `variant`.
+    pub fn new(variant: Variant, now: Instant) -> Self {
+        Self {
+            variant,
+            vehicle_speed: Input::new(now),
+            pedal_brake: Input::new(now),
+            abs_pids: [ABS_PID; CHANNELS],
+            engaged: [false; CHANNELS],
+            abs_last_acted: None,
+            tc_pid: TC_PID,
+            tc_last_acted: None,
+            pedal_lost_since: None,
+            failsafe_brake: 0.0,
+            implausible_since: [None; 4],
+            sensor_fault: false,
+            status: Status::default(),
+            last_step: None,
+            tx_wheels: PeriodicTx::of::<WheelSpeedMsg>(),
+            tx_abs: PeriodicTx::of::<AbsMsg>(),
+            tx_trac: PeriodicTx::of::<TracMsg>(),
+            dtcs: Dtcs::new(),
+        }
+    }
+
+    /// The software variant running.
+    pub fn variant(&self) -> Variant {
+        self.variant
+    }
+
+    /// What the last step decided.
+    pub fn status(&self) -> Status {
+        self.status
+    }
+
+    /// Whether a wheel speed sensor fault was confirmed (ABS off until restart).
+    pub fn wheel_sensor_fault(&self) -> bool {
+        self.sensor_fault
+    }
+
+    /// Checks the wheel speed readings: returns them with invalid ones replaced by 0, and
+    /// whether all four are valid now. Debounces implausible readings into the DTCs.
+    fn check_wheel_sensors(&mut self, now: Instant, raw: &[f32; 4]) -> ([f32; 4], bool) {
+        let valid = raw.map(|w| w.is_finite() && (0.0..=WHEEL_SPEED_MAX_KMH).contains(&w));
+        let mut all_valid = true;
+        for (i, ((w, ok), (since, dtc))) in raw
+            .iter()
+            .zip(valid)
+            .zip(self.implausible_since.iter_mut().zip(WHEEL_SENSOR_DTCS))
+            .enumerate()
+        {
+            all_valid &= ok;
+            let isolated = raw
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .all(|(_, other)| (w - other).abs() > WHEEL_PLAUSIBILITY_DIFF_KMH);
+            if ok && !isolated {
+                *since = None;
+                self.dtcs.report_passed(dtc);
+                continue;
+            }
+            let first = *since.get_or_insert(now);
+            if now.micros_since(first) >= WHEEL_PLAUSIBILITY_DEBOUNCE_US {
+                if self.dtcs.report_failed(dtc, now) {
+                    autoplug_log::warn!("abs: wheel {} speed sensor implausible, DTC", i);
+                }
+                if !self.sensor_fault {
+                    autoplug_log::warn!("abs: wheel sensor fault, ABS off until restart");
+                    self.sensor_fault = true;
+                }
+            }
+        }
+        let mut sanitized = [0.0f32; 4];
+        for ((out, w), ok) in sanitized.iter_mut().zip(raw).zip(valid) {
+            if ok {
+                *out = *w;
+            }
+        }
+        (sanitized, all_valid)
+    }
+
+    /// The brake command to work with: the driver's, or the fail-safe one when PedalBrake
+    /// is stale.
+    fn brake_command(&mut self, now: Instant, pedal_stale: bool, dt_s: f32) -> (f32, BrakeSource) {
+        let last_good = limit(self.pedal_brake.value().brake_cmd, 0.0, 100.0);
+        if !pedal_stale {
+            self.pedal_lost_since = None;
+            self.failsafe_brake = last_good;
+            return (last_good, BrakeSource::Driver);
+        }
+        let since = *self.pedal_lost_since.get_or_insert(now);
+        if now.micros_since(since) < PEDAL_LOSS_HOLD_US {
+            self.failsafe_brake = last_good;
+            return (last_good, BrakeSource::HoldLast);
+        }
+        if self.status.brake_source != BrakeSource::ControlledStop {
+            autoplug_log::warn!("abs: brake command lost, controlled stop");
+        }
+        let target = last_good.max(CONTROLLED_STOP_BRAKE);
+        self.failsafe_brake = limit(
+            self.failsafe_brake + CONTROLLED_STOP_RAMP_PER_S * dt_s,
+            0.0,
+            target,
+        );
+        (self.failsafe_brake, BrakeSource::ControlledStop)
+    }
+
+    /// Disengages every ABS channel: releases 0, controllers reset.
+    fn abs_off(&mut self) {
+        if self.engaged.iter().any(|e| *e) {
+            autoplug_log::info!("abs: disengaged");
+        }
+        self.engaged = [false; CHANNELS];
+        self.abs_last_acted = None;
+        for pid in &mut self.abs_pids {
+            pid.reset();
+        }
+    }
+
+    /// The ABS release per wheel.
+    fn abs(&mut self, now: Instant, v: f32, wheels: &[f32; 4], brake: f32, dt_s: f32) -> [f32; 4] {
+        if self.variant == Variant::Faulty || brake <= BRAKING_THRESHOLD || v < ABS_MIN_SPEED_KMH {
+            self.abs_off();
+            return [0.0; 4];
+        }
+        let [fl, fr, rl, rr] = wheels.map(|w| (v - w) / v.max(SLIP_SPEED_FLOOR_KMH));
+        // Select-low on the rear axle: the rear channel follows the wheel that slips more.
+        let channel_slip = [fl, fr, rl.max(rr)];
+        let was_active = self.engaged.iter().any(|e| *e);
+        let mut release = [0.0f32; CHANNELS];
+        let mut acted = false;
+        for (((pid, engaged), slip), out) in self
+            .abs_pids
+            .iter_mut()
+            .zip(self.engaged.iter_mut())
+            .zip(channel_slip)
+            .zip(release.iter_mut())
+        {
+            if slip > SLIP_THRESHOLD {
+                *engaged = true;
+                acted = true;
+            }
+            if !*engaged {
+                continue;
+            }
+            // Reverse-acting loop: negating set point and measurement gives the error
+            // `slip − target` and a derivative on +slip, so more slip means more release.
+            let command = pid.update(-SLIP_TARGET, -slip, dt_s);
+            acted |= command >= RELEASE_ACTIVE_MIN;
+            if command >= brake {
+                // The brake on this wheel is saturated at 0: reset (pulsing).
+                pid.reset();
+            }
+            // Releasing more than the driver brakes has no effect: report what acts.
+            *out = command.min(brake);
+        }
+        if acted {
+            self.abs_last_acted = Some(now);
+        }
+        let timed_out = self
+            .abs_last_acted
+            .is_none_or(|t| now.micros_since(t) >= ABS_TIMEOUT_US);
+        if timed_out {
+            self.abs_off();
+            return [0.0; 4];
+        }
+        if !was_active && self.engaged.iter().any(|e| *e) {
+            autoplug_log::info!("abs: engaged at {} km/h", v);
+        }
+        let [r_fl, r_fr, r_rear] = release;
+        [r_fl, r_fr, r_rear, r_rear]
+    }
+
+    /// Disengages traction control: cut 0, controller reset.
+    fn tc_off(&mut self) {
+        self.tc_last_acted = None;
+        self.tc_pid.reset();
+    }
+
+    /// The traction-control cut.
+    fn traction(&mut self, now: Instant, v: f32, wheels: &[f32; 4], brake: f32, dt_s: f32) -> f32 {
+        if brake > BRAKING_THRESHOLD {
+            self.tc_off();
+            return 0.0;
+        }
+        let reference = v.max(TC_SPEED_FLOOR_KMH);
+        let mut worst = f32::MIN;
+        let mut spinning = false;
+        for w in wheels {
+            let excess = w - v;
+            let slip = excess / reference;
+            spinning |= excess > TC_MIN_EXCESS_KMH && slip > TC_SLIP_THRESHOLD;
+            worst = worst.max(slip);
+        }
+        if spinning && self.tc_last_acted.is_none() {
+            autoplug_log::info!("abs: traction control at {} km/h", v);
+            self.tc_last_acted = Some(now);
+        }
+        let Some(last_acted) = self.tc_last_acted else {
+            return 0.0;
+        };
+        let cut = self.tc_pid.update(-TC_SLIP_TARGET, -worst, dt_s);
+        if spinning || cut >= CUT_ACTIVE_MIN {
+            self.tc_last_acted = Some(now);
+        } else if now.micros_since(last_acted) >= TC_HOLD_US {
+            self.tc_off();
+            return 0.0;
+        }
+        cut
+    }
+}
+
+impl EcuLogic for AbsEcu {
+    type Sensors = Sensors;
+    type Actuators = Actuators;
+
+    const NODE: Node = Node::ABS;
+    const STEP_PERIOD_US: u64 = STEP_PERIOD_US;
+
+    fn on_frame(&mut self, now: Instant, frame: &Frame) {
+        let _ = receive(&mut self.vehicle_speed, &mut self.dtcs, now, frame)
+            || receive(&mut self.pedal_brake, &mut self.dtcs, now, frame);
+    }
+
+    fn step(&mut self, now: Instant, sensors: &Sensors) -> Actuators {
+        let dt_s = match self.last_step {
+            Some(last) => now.micros_since(last) as f32 * 1e-6,
+            None => STEP_PERIOD_US as f32 * 1e-6,
+        };
+        self.last_step = Some(now);
+
+        let speed_stale = supervise(&mut self.vehicle_speed, &mut self.dtcs, now);
+        let pedal_stale = supervise(&mut self.pedal_brake, &mut self.dtcs, now);
+        let (wheels, readings_valid) = self.check_wheel_sensors(now, &sensors.wheel_speed_kmh);
+        let (brake, brake_source) = self.brake_command(now, pedal_stale, dt_s);
+        let v = limit(
+            self.vehicle_speed.value().vehicle_speed,
+            0.0,
+            WHEEL_SPEED_MAX_KMH,
+        );
+
+        let availability = if self.sensor_fault || !readings_valid {
+            Availability::WheelSensorFault
+        } else if speed_stale {
+            Availability::NoSpeedReference
+        } else {
+            Availability::Available
+        };
+        let (release, cut) = if availability == Availability::Available {
+            let release = self.abs(now, v, &wheels, brake, dt_s);
+            let cut = self.traction(now, v, &wheels, brake, dt_s);
+            (release, cut)
+        } else {
+            self.abs_off();
+            self.tc_off();
+            ([0.0; 4], 0.0)
+        };
+        let release = release.map(|r| limit(r, 0.0, 100.0));
+        let cut = limit(cut, 0.0, 100.0);
+        let [a, b, c, d] = release.map(|r| limit(brake - r, 0.0, brake));
+
+        self.status = Status {
+            availability,
+            brake_source,
+            driver_brake: brake,
+            release,
+            brake: [a, b, c, d],
+            abs_active: self.engaged.iter().any(|e| *e),
+            traction_active: self.tc_last_acted.is_some(),
+            traction_cut: cut,
+        };
+        let [w_fl, w_fr, w_rl, w_rr] = wheels;
+        let [r_fl, r_fr, r_rl, r_rr] = release;
+        self.tx_wheels.set_message(&WheelSpeedMsg {
+            wheel_speed_fl: w_fl,
+            wheel_speed_fr: w_fr,
+            wheel_speed_rl: w_rl,
+            wheel_speed_rr: w_rr,
+        });
+        self.tx_abs.set_message(&AbsMsg {
+            brake_fl: a,
+            brake_fr: b,
+            brake_rl: c,
+            brake_rr: d,
+            abs_release_fl: r_fl,
+            abs_release_fr: r_fr,
+            abs_release_rl: r_rl,
+            abs_release_rr: r_rr,
+        });
+        self.tx_trac.set_message(&TracMsg { traction_cut: cut });
+        Actuators {
+            brake: [a, b, c, d],
+        }
+    }
+
+    fn poll_transmit(&mut self, now: Instant) -> Option<Frame> {
+        // Lowest identifier first: WheelSpeedMsg 0x00C, AbsMsg 0x00E, TracMsg 0x00F.
+        self.tx_wheels
+            .poll(now)
+            .or_else(|| self.tx_abs.poll(now))
+            .or_else(|| self.tx_trac.poll(now))
+    }
+
+    fn dtcs(&self) -> &Dtcs {
+        &self.dtcs
+    }
+}
+
+/// `x` limited to `[lo, hi]`, NaN to `lo`; never panics (unlike `f32::clamp`).
+fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_nan() || x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
+/// Test cases shared by the host and on-target suites.
+#[cfg(any(test, feature = "test-cases"))]
+pub mod test_cases;
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,134 @@
+//! Engine ECU (node 0x03), spec section 2 and the report's pseudocode 5.2.1.6.
+//!
+//! Reads the engine speed and the fuel level and publishes them on EngineMsg every 20 ms
+//! (and at once on a change), with the engine mode (sport/economy) echoed from the console's
+//! AccMsg bit 2. The transmission takes its shift schedule from this echo. The engine ECU
+//! drives nothing: [`EcuLogic::step`] returns a [`Status`] of what it reports.
+//!
+//! Readings are clamped to what EngineMsg can carry: 0..[`ENGINE_RPM_MAX`] rpm and
+//! 0..[`FUEL_LEVEL_MAX_L`] L (0.25 L per bit); an unreadable (NaN) sensor reports 0.
+//!
+//! Safe state per stale input (3 periods without a valid frame):
+//!
+//! | input | stale after | safe state | DTC |
+//! |---|---|---|---|
+//! | AccMsg | 300 ms | report **economy** mode: the transmission then uses the gentler, earlier-shifting schedule, the conservative choice when the driver's choice is unknown | lost communication with the console ECU |
+//!
+//! For the same reason the engine reports economy from power-up until the first valid
+//! AccMsg arrives.
+#![no_std]
+#![deny(missing_docs)]
+
+use autoplug_can::{AccMsg, EngineMode, EngineMsg, Frame, Node};
+use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
+use autoplug_scaling::clamp_finite;
+
+/// Highest engine speed EngineMsg carries, rpm (raw 255); above the EVO VI's red line.
+pub const ENGINE_RPM_MAX: f32 = 9000.0;
+
+/// Highest fuel level EngineMsg carries, litres (raw 255 at 0.25 L); the tank holds 48 L.
+pub const FUEL_LEVEL_MAX_L: f32 = 63.75;
+
+/// The engine mode reported while the console's choice is unknown (see the crate docs).
+pub const SAFE_ENGINE_MODE: EngineMode = EngineMode::Economy;
+
+/// Control period: the rate EngineMsg is published at.
+pub const STEP_PERIOD_US: u64 = 20_000;
+
+/// Engine sensor readings.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Sensors {
+    /// Engine speed, rpm.
+    pub engine_rpm: f32,
+    /// Fuel in the tank, litres.
+    pub fuel_level_l: f32,
+}
+
+/// The engine ECU drives no actuator: this is what it reports on EngineMsg.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Status {
+    /// Engine speed reported, rpm, 0..9000.
+    pub engine_rpm: f32,
+    /// Fuel level reported, litres, 0..63.75.
+    pub fuel_level_l: f32,
+    /// Engine mode echoed (economy while AccMsg is stale or not yet received).
+    pub engine_mode: EngineMode,
+}
+
+impl Default for Status {
+    fn default() -> Self {
+        Self {
+            engine_rpm: 0.0,
+            fuel_level_l: 0.0,
+            engine_mode: SAFE_ENGINE_MODE,
+        }
+    }
+}
+
+/// The engine ECU's logic.
+#[derive(Clone, Debug)]
+pub struct EngineEcu {
+    console: Input<AccMsg>,
+    tx_engine: PeriodicTx,
+    dtcs: Dtcs,
+}
+
+impl EngineEcu {
+    /// The ECU at power-up (`now`).
+    pub fn new(now: Instant) -> Self {
+        Self {
+            console: Input::new(now),
+            tx_engine: PeriodicTx::of::<EngineMsg>(),
+            dtcs: Dtcs::new(),
+        }
+    }
+}
+
+impl EcuLogic for EngineEcu {
+    type Sensors = Sensors;
+    type Actuators = Status;
+
+    const NODE: Node = Node::Engine;
+    const STEP_PERIOD_US: u64 = STEP_PERIOD_US;
+
+    fn on_frame(&mut self, now: Instant, frame: &Frame) {
+        receive(&mut self.console, &mut self.dtcs, now, frame);
+    }
+
+    fn step(&mut self, now: Instant, sensors: &Sensors) -> Status {
+        let stale = supervise(&mut self.console, &mut self.dtcs, now);
+        let engine_mode = if stale || !self.console.ever_received() {
+            SAFE_ENGINE_MODE
+        } else {
+            self.console.value().engine_mode
+        };
+        let status = Status {
+            engine_rpm: clamp_finite(sensors.engine_rpm, 0.0, ENGINE_RPM_MAX),
+            fuel_level_l: clamp_finite(sensors.fuel_level_l, 0.0, FUEL_LEVEL_MAX_L),
+            engine_mode,
+        };
+        self.tx_engine.set_message(&EngineMsg {
+            engine_rpm: status.engine_rpm,
+            fuel_level: status.fuel_level_l,
+            engine_mode: status.engine_mode,
+        });
+        status
+    }
+
+    fn poll_transmit(&mut self, now: Instant) -> Option<Frame> {
+        self.tx_engine.poll(now)
+    }
+
+    fn dtcs(&self) -> &Dtcs {
+        &self.dtcs
+    }
+}
+
+/// Test cases shared by the host and on-target suites.
+#[cfg(any(test, feature = "test-cases"))]
+pub mod test_cases;
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,34 @@
+use crate::test_cases;
+use crate::*;
+use proptest::prelude::*;
+
+macro_rules! shared_cases {
+    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
+}
+
+shared_cases!(
+    reports_rpm_and_fuel,
+    echoes_the_engine_mode,
+    stale_console_reports_economy,
+    invalid_console_frame_records_a_dtc,
+);
+
+proptest! {
+    /// Any readings: the status stays within what EngineMsg carries and the frame sent
+    /// decodes back to it within half a step.
+    #[test]
+    fn reports_within_limits(rpm in any::<f32>(), fuel in any::<f32>(), byte in any::<u8>()) {
+        let mut ecu = EngineEcu::new(Instant::ZERO);
+        ecu.on_frame(Instant::ZERO, &Frame::new(u32::from(AccMsg::ID), &[byte]).unwrap());
+        let status = ecu.step(Instant::ZERO, &Sensors { engine_rpm: rpm, fuel_level_l: fuel });
+        prop_assert!((0.0..=ENGINE_RPM_MAX).contains(&status.engine_rpm));
+        prop_assert!((0.0..=FUEL_LEVEL_MAX_L).contains(&status.fuel_level_l));
+        let expected = if byte & 0b0100 != 0 { EngineMode::Economy } else { EngineMode::Sport };
+        prop_assert_eq!(status.engine_mode, expected);
+        let frame = ecu.poll_transmit(Instant::ZERO).unwrap();
+        let msg = EngineMsg::decode(frame.data()).unwrap();
+        prop_assert!((msg.engine_rpm - status.engine_rpm).abs() <= 18.0);
+        prop_assert!((msg.fuel_level - status.fuel_level_l).abs() <= 0.125);
+        prop_assert_eq!(msg.engine_mode, status.engine_mode);
+    }
+}
