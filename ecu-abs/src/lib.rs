@@ -83,6 +83,7 @@
 use autoplug_can::{AbsMsg, Frame, Node, PedalBrake, TracMsg, VehicleSpeedMsg, WheelSpeedMsg};
 use autoplug_ecu::{
     receive, supervise, Dtc, DtcSystem, Dtcs, EcuLogic, Input, Instant, PeriodicTx,
+    FTB_SIGNAL_PLAUSIBILITY,
 };
 use autoplug_pid::{Pid, PidConfig};
 
@@ -205,9 +206,6 @@ pub const WHEEL_PLAUSIBILITY_DIFF_KMH: f32 = 50.0;
 /// An implausible wheel speed sets its DTC after this long (µs). Longer than any wheel
 /// lock the correct ABS allows, so braking does not trip it.
 pub const WHEEL_PLAUSIBILITY_DEBOUNCE_US: u64 = 500_000;
-
-/// Failure-type byte of J2012: "signal plausibility failure".
-pub const FTB_SIGNAL_PLAUSIBILITY: u8 = 0x64;
 
 /// Wheel speed sensor DTCs, FL, FR, RL, RR (the common SAE chassis codes C0035, C0040,
 /// C0045, C0050 "wheel speed sensor circuit"), with failure type 0x64.

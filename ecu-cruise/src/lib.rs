@@ -1,8 +1,8 @@
 //! Cruise control ECU (node 0x0D), spec section 2.
 //!
 //! Reads the vehicle speed and publishes it (VehicleSpeedMsg). When cruise is enabled
-//! (CruiseModeMsg from the steering buttons; the pedals ECU cancels it), it latches the
-//! current speed as the set speed and runs PI feedback on the speed error; the command in
+//! (CruiseModeMsg from the steering buttons; the pedals ECU cancels it) for two steps in a
+//! row, it latches the current speed as the set speed and runs PI feedback on the speed error; the command in
 //! [-100, 100] goes out as CruiseAccelMsg (positive accelerates, negative brakes).
 //! Disabled: command 0 and the integrator reset.
 //!
@@ -51,6 +51,11 @@ const SPEED_PID: Pid = match Pid::new(TUNING) {
 /// The faulty software's dead band around the set speed, km/h.
 pub const FAULTY_DEAD_BAND_KMH: f32 = 1.0;
 
+/// Steps the request must read "on" in a row before cruise engages. CruiseModeMsg has two
+/// senders: a steering "on" frame already queued when the pedals' cancel goes out can
+/// reach the bus just after it; requiring the request to persist filters that frame out.
+pub const ENGAGE_CONFIRM_STEPS: u8 = 2;
+
 /// Control period: the rate VehicleSpeedMsg is published at.
 pub const STEP_PERIOD_US: u64 = 10_000;
 
@@ -82,7 +87,11 @@ pub struct CruiseEcu {
     cruise_mode: Input<CruiseModeMsg>,
     pid: Pid,
     status: Status,
-    previous_request: CruiseMode,
+    /// An "off" has been seen since cruise last disengaged or lost its input: only then
+    /// may an "on" engage it.
+    armed: bool,
+    /// Consecutive steps the request has read "on".
+    on_steps: u8,
     last_step: Option<Instant>,
     tx_speed: PeriodicTx,
     tx_command: PeriodicTx,
@@ -97,7 +106,8 @@ impl CruiseEcu {
             cruise_mode: Input::new(now),
             pid: SPEED_PID,
             status: Status::default(),
-            previous_request: CruiseMode::Off,
+            armed: true,
+            on_steps: 0,
             last_step: None,
             tx_speed: PeriodicTx::of::<VehicleSpeedMsg>(),
             tx_command: PeriodicTx::of::<CruiseAccelMsg>(),
@@ -171,18 +181,26 @@ impl EcuLogic for CruiseEcu {
         let speed = sensors.vehicle_speed_kmh;
 
         if supervise(&mut self.cruise_mode, &mut self.dtcs, now) {
-            // Safe state. Remember the request as "on", so that when the frames return
-            // still saying "on", cruise stays off until the driver switches it off and on.
+            // Safe state. Disarm, so that when the frames return still saying "on", cruise
+            // stays off until the driver switches it off and on.
             self.disengage();
-            self.previous_request = CruiseMode::On;
+            self.armed = false;
+            self.on_steps = 0;
         } else {
-            let request = self.cruise_mode.value().cruise_mode;
-            match (self.previous_request, request, self.status.engaged) {
-                (CruiseMode::Off, CruiseMode::On, false) => self.engage(speed),
-                (_, CruiseMode::Off, true) => self.disengage(),
-                _ => {}
+            match self.cruise_mode.value().cruise_mode {
+                CruiseMode::Off => {
+                    self.disengage();
+                    self.armed = true;
+                    self.on_steps = 0;
+                }
+                CruiseMode::On => {
+                    self.on_steps = self.on_steps.saturating_add(1);
+                    if self.armed && !self.status.engaged && self.on_steps >= ENGAGE_CONFIRM_STEPS {
+                        self.engage(speed);
+                        self.armed = false;
+                    }
+                }
             }
-            self.previous_request = request;
         }
 
         if self.status.engaged {

@@ -104,44 +104,57 @@ pub fn engages_on_the_edge_and_latches_the_speed() {
     let status = ecu.step(
         ms(10),
         &Sensors {
+            vehicle_speed_kmh: 89.0,
+        },
+    );
+    assert!(!status.engaged, "one step of 'on' is not enough");
+    let status = ecu.step(
+        ms(20),
+        &Sensors {
             vehicle_speed_kmh: 90.0,
         },
     );
-    assert!(status.engaged);
+    assert!(status.engaged, "'on' for two steps engages");
     assert_eq!(status.set_speed_kmh, 90.0);
     let status = ecu.step(
-        ms(20),
+        ms(30),
         &Sensors {
             vehicle_speed_kmh: 85.0,
         },
     );
     assert!(status.command > 0.0, "below the set speed: accelerate");
     let status = ecu.step(
-        ms(30),
+        ms(40),
         &Sensors {
             vehicle_speed_kmh: 95.0,
         },
     );
     assert!(status.command < 0.0, "above the set speed: brake");
-    ecu.on_frame(ms(40), &mode_frame(false));
+    ecu.on_frame(ms(50), &mode_frame(false));
     let status = ecu.step(
-        ms(40),
+        ms(50),
         &Sensors {
             vehicle_speed_kmh: 95.0,
         },
     );
     assert_eq!(status, Status::default(), "off: disengaged, command 0");
     // Switching on again latches the new speed, with the integrator reset.
-    ecu.on_frame(ms(50), &mode_frame(true));
+    ecu.on_frame(ms(60), &mode_frame(true));
+    ecu.step(
+        ms(60),
+        &Sensors {
+            vehicle_speed_kmh: 70.0,
+        },
+    );
     let status = ecu.step(
-        ms(50),
+        ms(70),
         &Sensors {
             vehicle_speed_kmh: 70.0,
         },
     );
     assert_eq!((status.engaged, status.set_speed_kmh), (true, 70.0));
     let status = ecu.step(
-        ms(60),
+        ms(80),
         &Sensors {
             vehicle_speed_kmh: 70.0,
         },
@@ -150,6 +163,63 @@ pub fn engages_on_the_edge_and_latches_the_speed() {
         status.command.abs() < 1e-6,
         "no error, fresh integrator: no command"
     );
+}
+
+/// A single stray "on" frame right after a cancel (a queued steering frame that lost the
+/// race with the pedals' "off") does not engage cruise.
+pub fn a_stray_on_after_a_cancel_does_not_engage() {
+    let mut ecu = CruiseEcu::new(Variant::Correct, ms(0));
+    ecu.on_frame(ms(0), &mode_frame(true));
+    ecu.step(
+        ms(0),
+        &Sensors {
+            vehicle_speed_kmh: 100.0,
+        },
+    );
+    assert!(
+        ecu.step(
+            ms(10),
+            &Sensors {
+                vehicle_speed_kmh: 100.0
+            }
+        )
+        .engaged
+    );
+    ecu.on_frame(ms(11), &mode_frame(false)); // the pedals' cancel
+    let status = ecu.step(
+        ms(20),
+        &Sensors {
+            vehicle_speed_kmh: 99.0,
+        },
+    );
+    assert!(!status.engaged);
+    ecu.on_frame(ms(22), &mode_frame(true)); // the stale steering frame
+    assert!(
+        !ecu.step(
+            ms(30),
+            &Sensors {
+                vehicle_speed_kmh: 98.0
+            }
+        )
+        .engaged
+    );
+    ecu.on_frame(ms(31), &mode_frame(false)); // steering adopted the cancel
+    for t in (40..200).step_by(10) {
+        if t % 20 == 0 {
+            ecu.on_frame(ms(t), &mode_frame(false));
+        }
+        assert!(
+            !ecu.step(
+                ms(t),
+                &Sensors {
+                    vehicle_speed_kmh: 97.0
+                }
+            )
+            .engaged,
+            "at {} ms",
+            t
+        );
+    }
 }
 
 /// On a level road the PI holds the set speed within 1 km/h after 8 s; a 6 % grade costs
@@ -193,9 +263,15 @@ pub fn holds_speed_and_rejects_a_grade() {
 pub fn stale_cruise_mode_disengages() {
     let mut ecu = CruiseEcu::new(Variant::Correct, ms(0));
     ecu.on_frame(ms(0), &mode_frame(true));
+    ecu.step(
+        ms(0),
+        &Sensors {
+            vehicle_speed_kmh: 90.0,
+        },
+    );
     assert!(
         ecu.step(
-            ms(0),
+            ms(10),
             &Sensors {
                 vehicle_speed_kmh: 90.0
             }
@@ -204,7 +280,7 @@ pub fn stale_cruise_mode_disengages() {
     );
     let period = u64::from(CruiseModeMsg::CYCLE_TIME_MS);
     let mut disengaged_at = None;
-    for t in (10..=200).step_by(10) {
+    for t in (20..=200).step_by(10) {
         let status = ecu.step(
             ms(t),
             &Sensors {
@@ -242,8 +318,14 @@ pub fn stale_cruise_mode_disengages() {
         .engaged
     );
     ecu.on_frame(ms(230), &mode_frame(true));
-    let status = ecu.step(
+    ecu.step(
         ms(230),
+        &Sensors {
+            vehicle_speed_kmh: 80.0,
+        },
+    );
+    let status = ecu.step(
+        ms(240),
         &Sensors {
             vehicle_speed_kmh: 80.0,
         },

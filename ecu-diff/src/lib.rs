@@ -166,7 +166,7 @@ impl DiffEcu {
     /// Why control is off, if it is, apart from the size of the error.
     fn hold_reason(&self) -> Option<Mode> {
         let (Some(speed), Some(steering), Some(abs)) =
-            (known(&self.speed), known(&self.steering), known(&self.abs))
+            (self.speed.known(), self.steering.known(), self.abs.known())
         else {
             return Some(Mode::InputsLost);
         };
@@ -185,11 +185,6 @@ impl DiffEcu {
             None
         }
     }
-}
-
-/// An input's value if it is fresh and was received at least once.
-fn known<M: autoplug_can::CanMessage>(input: &Input<M>) -> Option<&M> {
-    (input.ever_received() && !input.is_stale()).then(|| input.value())
 }
 
 impl EcuLogic for DiffEcu {

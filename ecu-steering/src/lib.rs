@@ -34,7 +34,7 @@
 #![deny(missing_docs)]
 
 use autoplug_can::{CruiseMode, CruiseModeMsg, Frame, Node, ShiftMsg, ShiftRequest, SteeringMsg};
-use autoplug_ecu::{invalid_data, Dtc, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
+use autoplug_ecu::{invalid_data, receive_from, Dtc, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 
 /// The steering range, degrees either side of straight ahead: the catalogue's SteeringMsg
 /// range (raw 10..90), and what the steering actuator accepts.
@@ -170,23 +170,13 @@ impl EcuLogic for SteeringEcu {
     const STEP_PERIOD_US: u64 = STEP_PERIOD_US;
 
     fn on_frame(&mut self, now: Instant, frame: &Frame) {
-        // Not `receive`: it would charge an invalid frame to the message's first sender,
-        // this ECU; the cancels come from the pedals.
-        let Some(result) = self.cancel.accept(now, frame) else {
-            return;
-        };
-        if let Err(error) = result {
-            let newly = self.dtcs.report_failed(INVALID_CANCEL_DTC, now);
-            if newly {
-                autoplug_log::warn!(
-                    "{}: invalid frame ({:?}), DTC recorded",
-                    CruiseModeMsg::NAME,
-                    error
-                );
-            }
+        // Charged to the pedals: CruiseModeMsg's first sender is this ECU, but the only
+        // CruiseModeMsg frames it hears are the pedals' cancels (no loopback).
+        if !receive_from(Node::Pedals, &mut self.cancel, &mut self.dtcs, now, frame)
+            || !self.cancel.latest_frame_valid()
+        {
             return;
         }
-        self.dtcs.report_passed(INVALID_CANCEL_DTC);
         if self.cancel.value().cruise_mode == CruiseMode::Off && self.cruise == CruiseMode::On {
             autoplug_log::info!("steering: cruise cancelled by the pedals");
             // At once, so that no transmit poll before the next step undoes it.

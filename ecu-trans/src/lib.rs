@@ -394,12 +394,12 @@ impl TransEcu {
 
     /// The road speed, if known (fresh and received at least once).
     fn road_speed(&self) -> Option<f32> {
-        known(&self.speed).map(|m| m.vehicle_speed)
+        self.speed.known().map(|m| m.vehicle_speed)
     }
 
     /// The engine speed, if known.
     fn engine_rpm(&self) -> Option<f32> {
-        known(&self.engine).map(|m| m.engine_rpm)
+        self.engine.known().map(|m| m.engine_rpm)
     }
 
     /// Whether a request may change the gear (report 5.2.1.9 step 5).
@@ -496,11 +496,6 @@ impl TransEcu {
     }
 }
 
-/// An input's value if it is fresh and was received at least once.
-fn known<M: autoplug_can::CanMessage>(input: &Input<M>) -> Option<&M> {
-    (input.ever_received() && !input.is_stale()).then(|| input.value())
-}
-
 impl EcuLogic for TransEcu {
     type Sensors = Sensors;
     type Actuators = Actuators;
@@ -539,7 +534,9 @@ impl EcuLogic for TransEcu {
             self.pending = None;
             self.shift_mode = mode;
         }
-        self.schedule_mode = known(&self.engine)
+        self.schedule_mode = self
+            .engine
+            .known()
             .map(|m| m.engine_mode)
             .unwrap_or(EngineMode::Economy);
         self.track_requests(shift_stale);

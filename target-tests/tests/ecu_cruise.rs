@@ -19,6 +19,11 @@ mod tests {
     }
 
     #[test]
+    fn a_stray_on_after_a_cancel_does_not_engage() {
+        test_cases::a_stray_on_after_a_cancel_does_not_engage();
+    }
+
+    #[test]
     fn holds_speed_and_rejects_a_grade() {
         test_cases::holds_speed_and_rejects_a_grade();
     }

@@ -29,6 +29,9 @@ pub struct Dtc(u32);
 pub const FTB_MISSING_MESSAGE: u8 = 0x87;
 /// Failure-type byte: a received signal was invalid (J2012 "signal invalid").
 pub const FTB_SIGNAL_INVALID: u8 = 0x86;
+/// Failure-type byte: a reading contradicts the others (J2012 "signal plausibility
+/// failure").
+pub const FTB_SIGNAL_PLAUSIBILITY: u8 = 0x64;
 
 impl Dtc {
     /// A DTC from its system letter, its four digits as written (`0x0100` for `U0100`, the

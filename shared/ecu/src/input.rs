@@ -31,6 +31,7 @@ pub struct Input<M: CanMessage> {
     ever_received: bool,
     invalid_frames: u32,
     last_error: Option<DecodeError>,
+    latest_frame_valid: bool,
 }
 
 impl<M: CanMessage> Input<M> {
@@ -45,6 +46,7 @@ impl<M: CanMessage> Input<M> {
             ever_received: false,
             invalid_frames: 0,
             last_error: None,
+            latest_frame_valid: false,
         }
     }
 
@@ -55,6 +57,7 @@ impl<M: CanMessage> Input<M> {
             return None;
         }
         let result = self.value.update_from_data(frame.data());
+        self.latest_frame_valid = result.is_ok();
         match result {
             Ok(()) => {
                 self.last_valid = now;
@@ -89,6 +92,11 @@ impl<M: CanMessage> Input<M> {
         &self.value
     }
 
+    /// The value, if it can be trusted: received at least once and not stale.
+    pub fn known(&self) -> Option<&M> {
+        (self.ever_received && self.freshness == Freshness::Fresh).then_some(&self.value)
+    }
+
     /// Whether the last check found the input stale.
     pub fn is_stale(&self) -> bool {
         self.freshness == Freshness::Stale
@@ -97,6 +105,12 @@ impl<M: CanMessage> Input<M> {
     /// Whether a valid frame has arrived since start.
     pub fn ever_received(&self) -> bool {
         self.ever_received
+    }
+
+    /// Whether the most recent frame of this message was fully valid: act on an event
+    /// carried by a frame (a cancel) only then, not on a kept last good value.
+    pub fn latest_frame_valid(&self) -> bool {
+        self.latest_frame_valid
     }
 
     /// Frames refused (wrong length or invalid values) since start.

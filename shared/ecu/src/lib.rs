@@ -20,7 +20,7 @@ mod tx;
 
 pub use dtc::{
     invalid_data, lost_communication, status, Dtc, DtcRecord, DtcStore, DtcSystem,
-    FTB_MISSING_MESSAGE, FTB_SIGNAL_INVALID,
+    FTB_MISSING_MESSAGE, FTB_SIGNAL_INVALID, FTB_SIGNAL_PLAUSIBILITY,
 };
 pub use input::{Freshness, Input, STALE_AFTER_PERIODS};
 pub use time::Instant;
@@ -69,14 +69,26 @@ pub fn receive<M: CanMessage>(
     now: Instant,
     frame: &Frame,
 ) -> bool {
+    receive_from(sender_of::<M>(), input, dtcs, now, frame)
+}
+
+/// [`receive`] for a message with several senders, charging faults to `sender`, the one
+/// this ECU listens to (CruiseModeMsg: the steering ECU hears only the pedals' cancels).
+pub fn receive_from<M: CanMessage>(
+    sender: Node,
+    input: &mut Input<M>,
+    dtcs: &mut Dtcs,
+    now: Instant,
+    frame: &Frame,
+) -> bool {
+    let dtc = invalid_data(sender);
     match input.accept(now, frame) {
         None => false,
         Some(Ok(())) => {
-            dtcs.report_passed(invalid_data(sender_of::<M>()));
+            dtcs.report_passed(dtc);
             true
         }
         Some(Err(error)) => {
-            let dtc = invalid_data(sender_of::<M>());
             if dtcs.report_failed(dtc, now) {
                 autoplug_log::warn!("{}: invalid frame ({:?}), DTC recorded", M::NAME, error);
             }
