@@ -1,0 +1,331 @@
+//! Tyre forces: Pacejka magic formula, combined slip by the similarity method, and a
+//! first-order carcass model that makes the forces well behaved down to standstill.
+//!
+//! **Steady state.** Pure-slip forces follow the magic formula
+//! `F = D·g(B·s)`, `g(z) = sin(C·atan(z − E·(z − atan z)))`, with `D = μ·Fz` (μ with a
+//! mild load sensitivity), longitudinal slip `s_x = (ω·r − v_x)/|v_x|` and lateral slip
+//! `s_y = −v_y/|v_x|` (= −tan α). `B` is set so the slip stiffness `B·C·D` is a fixed
+//! multiple of the load whatever the road friction: a tyre on ice is as stiff as on
+//! asphalt, it just saturates earlier. Longitudinal and lateral curves share `C` and `E`
+//! and differ in stiffness, i.e. in `B`.
+//!
+//! **Combined slip (Pacejka's similarity method).** The shape is evaluated once, at the
+//! combined argument `z = |(B_x·s_x, B_y·s_y)|` (each slip relative to its own peak
+//! slip), and the force `D·g(z)` is split in proportion to the two components. That is a
+//! friction circle: a locked wheel has no cornering force left, a wheel at the cornering
+//! limit none for braking.
+//!
+//! **Carcass dynamics (Rill, "Road Vehicle Dynamics", 2012, §3.10).** The contact patch
+//! deflects by `x_e` against a carcass spring `c` and damper `d`; the force is
+//! `c·x_e + d·ẋ_e`, and `ẋ_e` follows from equating it with the steady-state force
+//! linearised as `f·s` (`f` = secant slip stiffness). This gives the relaxation length
+//! at speed and, at standstill, a damped spring instead of a slip that divides by zero:
+//! a braked car on a slope stands still, and a stopping car does not jitter. The
+//! deflection update is backward Euler, so it is stable for any step.
+
+use crate::params::TyreParams;
+
+/// The magic-formula shape `g(z) = sin(C·atan(z − E·(z − atan z)))`, peak value 1.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct MagicFormula {
+    c: f64,
+    e: f64,
+}
+
+impl MagicFormula {
+    /// # Panics
+    /// If `C` is outside (1, 2) (no peak, or a force that reverses) or `E >= 1`.
+    pub(crate) fn new(c: f64, e: f64) -> Self {
+        assert!(c > 1.0 && c < 2.0, "magic formula: C must be in (1, 2)");
+        assert!(e < 1.0, "magic formula: E must be below 1");
+        Self { c, e }
+    }
+
+    pub(crate) fn value(&self, z: f64) -> f64 {
+        let argument = if self.e == 0.0 {
+            z
+        } else {
+            z - self.e * (z - z.atan())
+        };
+        (self.c * argument.atan()).sin()
+    }
+
+    /// `g(z)/(C·z)` for `z >= 0`: the secant stiffness relative to the initial slope,
+    /// 1 at `z = 0`.
+    fn secant_ratio(&self, z: f64) -> f64 {
+        if z < 1e-4 {
+            // g(z) = C·z·(1 + O(z²)).
+            1.0
+        } else {
+            self.value(z) / (self.c * z)
+        }
+    }
+}
+
+/// Tyre characteristics shared by the four wheels (derived once from [`TyreParams`]).
+#[derive(Clone, Debug)]
+pub(crate) struct TyreModel {
+    shape: MagicFormula,
+    longitudinal_stiffness_per_load: f64,
+    nominal_load_n: f64,
+    load_sensitivity: f64,
+    carcass_long_stiffness: f64,
+    carcass_long_damping: f64,
+    carcass_lat_stiffness: f64,
+    carcass_lat_damping: f64,
+    slip_regularisation_speed: f64,
+}
+
+/// Contact-patch deflections of one tyre, m.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct TyreState {
+    deflection_long_m: f64,
+    deflection_lat_m: f64,
+}
+
+/// What one tyre update yields.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ContactForces {
+    /// In the wheel plane, N, positive forward.
+    pub(crate) longitudinal_n: f64,
+    /// Perpendicular to the wheel plane, N, positive to the left.
+    pub(crate) lateral_n: f64,
+    /// Longitudinal slip `(ω·r − v_x)/(|v_x| + v_reg)`.
+    pub(crate) slip: f64,
+}
+
+/// Contact-patch kinematics of one wheel, in the wheel's own axes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ContactKinematics {
+    /// Normal load, N.
+    pub(crate) load_n: f64,
+    /// Road friction coefficient under the wheel.
+    pub(crate) mu: f64,
+    /// Velocity of the wheel centre along the wheel plane, m/s.
+    pub(crate) v_long: f64,
+    /// Velocity of the wheel centre across the wheel plane, m/s.
+    pub(crate) v_lat: f64,
+    /// Circumferential speed ω·r, m/s.
+    pub(crate) surface_speed: f64,
+    /// Cornering stiffness per newton of load of this wheel's axle, 1/rad.
+    pub(crate) cornering_stiffness_per_load: f64,
+}
+
+impl TyreModel {
+    pub(crate) fn new(p: &TyreParams, nominal_load_n: f64) -> Self {
+        Self {
+            shape: MagicFormula::new(p.shape_c, p.curvature_e),
+            longitudinal_stiffness_per_load: p.longitudinal_stiffness_per_load,
+            nominal_load_n,
+            load_sensitivity: p.friction_load_sensitivity,
+            carcass_long_stiffness: p.longitudinal_carcass_stiffness_n_per_m,
+            carcass_long_damping: p.longitudinal_carcass_damping_n_s_per_m,
+            carcass_lat_stiffness: p.lateral_carcass_stiffness_n_per_m,
+            carcass_lat_damping: p.lateral_carcass_damping_n_s_per_m,
+            slip_regularisation_speed: p.slip_regularisation_speed_mps,
+        }
+    }
+
+    /// Friction coefficient under `load_n`: drops with load, so the four tyres together
+    /// never give more than μ·m·g (the nominal load is the average static wheel load).
+    fn effective_mu(&self, mu: f64, load_n: f64) -> f64 {
+        let relative_load = (load_n - self.nominal_load_n) / self.nominal_load_n;
+        mu * (1.0 - self.load_sensitivity * relative_load).max(0.2)
+    }
+
+    /// Advances the tyre's deflections by `dt` (`inv_dt` = 1/`dt`) and returns the
+    /// forces it transmits.
+    pub(crate) fn update(
+        &self,
+        state: &mut TyreState,
+        k: &ContactKinematics,
+        dt: f64,
+        inv_dt: f64,
+    ) -> ContactForces {
+        let inv_speed = 1.0 / (k.v_long.abs() + self.slip_regularisation_speed);
+        let slip_long = (k.surface_speed - k.v_long) * inv_speed;
+        let slip_lat = -k.v_lat * inv_speed;
+
+        // Steady state as secant stiffnesses f = F/s. With B = k/(C·μ) the magic
+        // formula's D·B·g(z)/z is Fz·k·g(z)/(C·z): μ only enters through z.
+        let (secant_long, secant_lat) = if k.load_n > 0.0 {
+            let stiff_long = self.longitudinal_stiffness_per_load * slip_long;
+            let stiff_lat = k.cornering_stiffness_per_load * slip_lat;
+            let z = (stiff_long * stiff_long + stiff_lat * stiff_lat).sqrt()
+                / (self.shape.c * self.effective_mu(k.mu, k.load_n));
+            let secant = k.load_n * self.shape.secant_ratio(z);
+            (
+                secant * self.longitudinal_stiffness_per_load,
+                secant * k.cornering_stiffness_per_load,
+            )
+        } else {
+            (0.0, 0.0)
+        };
+
+        let longitudinal_n = carcass_force(
+            &mut state.deflection_long_m,
+            secant_long * inv_speed,
+            k.v_long - k.surface_speed,
+            self.carcass_long_stiffness,
+            self.carcass_long_damping,
+            dt,
+            inv_dt,
+        );
+        let lateral_n = carcass_force(
+            &mut state.deflection_lat_m,
+            secant_lat * inv_speed,
+            k.v_lat,
+            self.carcass_lat_stiffness,
+            self.carcass_lat_damping,
+            dt,
+            inv_dt,
+        );
+        ContactForces {
+            longitudinal_n,
+            lateral_n,
+            slip: slip_long,
+        }
+    }
+}
+
+/// One direction of Rill's first-order carcass model.
+///
+/// `slip_damping` is `f/(|v_x| + v_reg)` (the steady-state force is
+/// `−slip_damping · sliding_speed`); the deflection obeys
+/// `ẋ_e = −(slip_damping·sliding_speed + c·x_e)/(slip_damping + d)`, integrated by
+/// backward Euler. Returns `c·x_e + d·ẋ_e`.
+fn carcass_force(
+    deflection: &mut f64,
+    slip_damping: f64,
+    sliding_speed: f64,
+    stiffness: f64,
+    damping: f64,
+    dt: f64,
+    inv_dt: f64,
+) -> f64 {
+    let total_damping = slip_damping + damping;
+    let previous = *deflection;
+    let mut next = (total_damping * previous - dt * slip_damping * sliding_speed)
+        / (total_damping + dt * stiffness);
+    // A deflection this small is zero; flushing keeps subnormals out of the arithmetic.
+    if next.abs() < 1e-15 {
+        next = 0.0;
+    }
+    *deflection = next;
+    stiffness * next + damping * (next - previous) * inv_dt
+}
+
+/// Steady-state pure-slip longitudinal force per newton of load at the nominal load
+/// (the average static wheel load), for road friction `mu` and slip `slip`
+/// (−1 = locked wheel). For the locked-wheel stopping distance `v²/(2·μ_slide·g)`.
+pub fn longitudinal_friction_coefficient(p: &TyreParams, mu: f64, slip: f64) -> f64 {
+    let shape = MagicFormula::new(p.shape_c, p.curvature_e);
+    let b = p.longitudinal_stiffness_per_load / (p.shape_c * mu);
+    mu * shape.value(b * slip.abs()) * slip.signum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::VehicleParams;
+
+    fn steady_force(model: &TyreModel, k: &ContactKinematics) -> ContactForces {
+        let mut state = TyreState::default();
+        let mut forces = ContactForces::default();
+        for _ in 0..5000 {
+            forces = model.update(&mut state, k, 1e-3, 1e3);
+        }
+        forces
+    }
+
+    fn kinematics(v_long: f64, v_lat: f64, surface_speed: f64) -> ContactKinematics {
+        ContactKinematics {
+            load_n: 4000.0,
+            mu: 1.0,
+            v_long,
+            v_lat,
+            surface_speed,
+            cornering_stiffness_per_load: 14.0,
+        }
+    }
+
+    #[test]
+    fn shape_peaks_at_one_and_saturates() {
+        let shape = MagicFormula::new(1.5, 0.0);
+        // E = 0: the peak is where C·atan(z) = π/2.
+        let peak_z = (core::f64::consts::FRAC_PI_2 / 1.5).tan();
+        assert!((shape.value(peak_z) - 1.0).abs() < 1e-12);
+        assert!(shape.value(0.9 * peak_z) < 1.0 && shape.value(1.1 * peak_z) < 1.0);
+        assert!((shape.secant_ratio(1e-6) - 1.0).abs() < 1e-9);
+        assert!((shape.secant_ratio(2e-4) - 1.0).abs() < 1e-6);
+        // A non-zero E moves the peak but keeps its height.
+        let curved = MagicFormula::new(1.5, 0.5);
+        let max = (1..2000)
+            .map(|i| curved.value(f64::from(i) * 0.005))
+            .fold(0.0, f64::max);
+        assert!((max - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn steady_state_matches_the_magic_formula_and_stiffness() {
+        let p = VehicleParams::evo_vi().tyre;
+        let model = TyreModel::new(&p, 4000.0);
+        // Small slip: F = k·Fz·s.
+        let f = steady_force(&model, &kinematics(20.0, 0.0, 20.0 * 1.005));
+        assert!((f.longitudinal_n / (20.0 * 4000.0 * 0.005) - 1.0).abs() < 0.01);
+        // Locked wheel: the sliding friction of the pure formula.
+        let f = steady_force(&model, &kinematics(20.0, 0.0, 0.0));
+        let mu_slide = longitudinal_friction_coefficient(&p, 1.0, -1.0);
+        assert!((f.longitudinal_n / 4000.0 - mu_slide).abs() < 0.002);
+        assert!((-0.85..-0.75).contains(&mu_slide), "{mu_slide}");
+        // Small slip angle: F = k·Fz·tan α, opposing the lateral velocity.
+        let f = steady_force(&model, &kinematics(20.0, -0.1, 20.0));
+        assert!((f.lateral_n / (14.0 * 4000.0 * 0.005) - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn combined_slip_stays_inside_the_friction_circle() {
+        let p = VehicleParams::evo_vi().tyre;
+        let model = TyreModel::new(&p, 4000.0);
+        for (slip, angle) in [
+            (0.05, 0.05),
+            (0.2, 0.1),
+            (-0.5, 0.3),
+            (-1.0, 0.05),
+            (0.1, 1.0),
+        ] {
+            let v = 20.0;
+            let f = steady_force(
+                &model,
+                &kinematics(v, -v * f64::tan(angle), v * (1.0 + slip)),
+            );
+            let total = f.longitudinal_n.hypot(f.lateral_n);
+            assert!(
+                total <= 4000.0 * 1.0001,
+                "slip {slip} angle {angle}: {total}"
+            );
+        }
+    }
+
+    #[test]
+    fn carcass_holds_a_standing_tyre_like_a_spring() {
+        let p = VehicleParams::evo_vi().tyre;
+        let model = TyreModel::new(&p, 4000.0);
+        let mut state = TyreState::default();
+        // Push the contact patch 1 mm backwards relative to the locked wheel, then hold.
+        let k_moving = kinematics(-0.01, 0.0, 0.0);
+        for _ in 0..100 {
+            model.update(&mut state, &k_moving, 1e-3, 1e3);
+        }
+        let k_still = kinematics(0.0, 0.0, 0.0);
+        let held = model.update(&mut state, &k_still, 1e-3, 1e3).longitudinal_n;
+        // ≈ c·x = 350 N (the secant damping lets the patch slide a little while pushed).
+        assert!((held - 350.0).abs() < 35.0, "{held}");
+        let mut later = held;
+        for _ in 0..5000 {
+            later = model.update(&mut state, &k_still, 1e-3, 1e3).longitudinal_n;
+        }
+        // The regularisation leaks the deflection only very slowly.
+        assert!(later > 0.5 * held, "{later}");
+    }
+}
