@@ -54,21 +54,19 @@ use autoplug_ecu::{
     receive, supervise, Dtc, DtcSystem, Dtcs, EcuLogic, Input, Instant, PeriodicTx,
 };
 
-/// Ratios of 1st to 6th gear. 1st to 5th are the Lancer EVO VI's five-speed gearbox; the
-/// EVO VI had no 6th gear, but the report's car shows six, so 6th = 0.600 is this
-/// project's choice (a slightly longer overdrive step than 4th to 5th). Shared with the
-/// vehicle model, which a host test checks.
-pub const GEAR_RATIOS: [f32; 6] = [2.785, 1.950, 1.407, 1.031, 0.761, 0.600];
+/// Ratios of 1st to 6th gear: the transmission's calibration of the gearbox it controls,
+/// the six-speed box of `VehicleParams::evo_vi()` in the vehicle model (a host test in
+/// `host-tests/` checks the two agree; the model documents the source).
+pub const GEAR_RATIOS: [f32; 6] = [2.909, 1.944, 1.434, 1.100, 0.868, 0.693];
 
-/// Reverse gear ratio (EVO VI), as a magnitude.
-pub const REVERSE_RATIO: f32 = 3.416;
+/// Reverse gear ratio, as a magnitude (same calibration source).
+pub const REVERSE_RATIO: f32 = 3.3;
 
 /// Final drive ratio (EVO VI).
 pub const FINAL_DRIVE_RATIO: f32 = 4.529;
 
-/// Rolling radius of the tyres (EVO VI, 225/45 R17), m: converts road speed to engine
-/// speed.
-pub const TYRE_RADIUS_M: f32 = 0.316;
+/// Rolling radius of the tyres (225/45 ZR17), m: converts road speed to engine speed.
+pub const TYRE_RADIUS_M: f32 = 0.31;
 
 /// Highest engine speed a driver's downshift may give, rpm: a margin under the ~7500 rpm
 /// redline, for the RPM signal's 35 rpm resolution and its 20 ms age.

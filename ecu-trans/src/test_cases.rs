@@ -227,18 +227,18 @@ pub fn publishes_gear_and_mode_every_20_ms() {
 /// next gear's downshift point (hysteresis), economy upshifts near 3200 rpm, sport near
 /// 6800 rpm, and every sport shift point lies above economy's.
 pub fn calibration_and_schedules_are_consistent() {
-    assert_eq!(GEAR_RATIOS, [2.785, 1.950, 1.407, 1.031, 0.761, 0.600]);
+    assert_eq!(GEAR_RATIOS, [2.909, 1.944, 1.434, 1.100, 0.868, 0.693]);
     assert_eq!(
         (REVERSE_RATIO, FINAL_DRIVE_RATIO, TYRE_RADIUS_M),
-        (3.416, 4.529, 0.316)
+        (3.3, 4.529, 0.31)
     );
     assert_eq!(gear_ratio(Gear::Neutral), None);
-    assert_eq!(gear_ratio(Gear::Sixth), Some(0.600));
-    // 1000 rpm in 1st is 9.4 km/h; 6th at 150 km/h is 3400 rpm.
-    assert!((road_speed_kmh(1000.0, 2.785) - 9.44).abs() < 0.05);
-    assert!((engine_rpm_at(150.0, 0.600) - 3422.0).abs() < 10.0);
-    let expected_economy_up = [30.2, 43.2, 59.8, 81.6, 110.6];
-    let expected_sport_up = [64.2, 91.7, 127.1, 173.5, 235.0];
+    assert_eq!(gear_ratio(Gear::Sixth), Some(0.693));
+    // 1000 rpm in 1st is 8.87 km/h; 6th at 150 km/h is 4028 rpm.
+    assert!((road_speed_kmh(1000.0, 2.909) - 8.87).abs() < 0.05);
+    assert!((engine_rpm_at(150.0, 0.693) - 4028.0).abs() < 10.0);
+    let expected_economy_up = [28.4, 42.5, 57.6, 75.1, 95.1];
+    let expected_sport_up = [60.3, 90.3, 122.4, 159.5, 202.2];
     for i in 0..5 {
         assert!((ECONOMY.upshift_kmh[i] - expected_economy_up[i]).abs() < 0.1);
         assert!((SPORT.upshift_kmh[i] - expected_sport_up[i]).abs() < 0.1);
@@ -555,8 +555,8 @@ pub fn neutral_and_reverse_in_automatic() {
 }
 
 /// Manual downshift over-rev protection: predicted RPM = engine RPM × ratio(target) /
-/// ratio(current). 3rd to 2nd at 5500 rpm would give 7620 rpm: refused, gear kept; at
-/// 4500 rpm (6240 rpm after) it goes. Down from 1st to Neutral is never refused.
+/// ratio(current). 3rd to 2nd at 5500 rpm would give 7456 rpm: refused, gear kept; at
+/// 4500 rpm (6100 rpm after) it goes. Down from 1st to Neutral is never refused.
 pub fn manual_downshift_that_would_over_rev_is_refused() {
     let mut bench = Bench::new(Gear::Third, ShiftMode::Manual, EngineMode::Sport, 110.0);
     bench.rpm = Some(5500.0);
@@ -574,11 +574,11 @@ pub fn manual_downshift_that_would_over_rev_is_refused() {
     assert_eq!(bench.engaged, Gear::Second);
     assert!(!bench.ecu.status().last_request_refused);
     bench.settle();
-    // 2nd to 1st at 5050 rpm: 7210 rpm, just over the limit; at 4800: 6860, allowed.
+    // 2nd to 1st at 5050 rpm: 7557 rpm, over the limit; at 4600: 6883, allowed.
     bench.rpm = Some(5050.0);
     bench.press(ShiftRequest::Down);
     assert_eq!(bench.engaged, Gear::Second);
-    bench.rpm = Some(4800.0);
+    bench.rpm = Some(4600.0);
     bench.settle();
     bench.press(ShiftRequest::Down);
     assert_eq!(bench.engaged, Gear::First);
@@ -621,8 +621,8 @@ pub fn stale_vehicle_speed_holds_the_gear() {
     assert!(bench.ecu.dtcs().get(dtc).is_some(), "stays stored");
     assert_eq!(
         bench.engaged,
-        Gear::Fifth,
-        "schedule resumes: 100 km/h is 5th"
+        Gear::Sixth,
+        "schedule resumes: 100 km/h is 6th in economy"
     );
 
     let mut bench = Bench::new(Gear::Neutral, ShiftMode::Manual, EngineMode::Economy, 0.0);

@@ -91,6 +91,11 @@ impl Timeline {
         }
     }
 
+    /// The controls before any event.
+    pub fn initial_controls(&self) -> &DriverControls {
+        &self.controls
+    }
+
     /// The controls at `t_s` (call with non-decreasing times). Each event whose time has
     /// come is applied once, and handed to `on_event` for what is not a driver control
     /// (road changes, faults).

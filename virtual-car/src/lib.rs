@@ -3,6 +3,7 @@
 #![deny(missing_docs)]
 
 pub mod candump;
+pub mod car;
 pub mod driver;
 pub mod plot;
 pub mod scenario;

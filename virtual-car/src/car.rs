@@ -1,0 +1,619 @@
+//! The virtual car: the vehicle model, the bit-timed bus and the nine ECUs' logic, wired as
+//! on the bench. Each ECU reads its sensors from the model (or the driver's controls), runs
+//! its control step at its own period, and talks to the others only through CAN frames on
+//! the bus; its actuator commands drive the model.
+//!
+//! Time advances in 1 ms ticks of simulated time. The ECUs are not synchronised: each has
+//! a fixed phase offset, as independent boards would, which also spreads the bus traffic.
+
+use crate::driver::{DriverControls, Timeline};
+use crate::scenario::{Activation, Event, GearName, Scenario, Software};
+use autoplug_can::{Frame, Gear as CanGear, Node};
+use autoplug_ecu::{Dtcs, EcuLogic, Instant};
+use autoplug_scaling::units::{celsius_to_fahrenheit, fahrenheit_to_celsius};
+use autoplug_vehicle::{
+    Actuators as VehicleActuators, Environment, Gear as VehicleGear, InitialState, Vehicle,
+    VehicleParams, VehicleState,
+};
+use autoplug_virtual_bus::{AcceptanceFilter, BusConfig, NodeId, Outcome, VirtualBus};
+
+/// Simulated time per tick.
+pub const TICK_US: u64 = 1_000;
+
+/// A frame that was on the bus, for the log.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoggedFrame {
+    /// When it was received (end of frame), µs.
+    pub t_us: u64,
+    /// The frame.
+    pub frame: Frame,
+    /// The sender's DBC name, or "External" for a socketcand client.
+    pub sender: &'static str,
+}
+
+/// One ECU on the bus.
+struct Slot<E: EcuLogic> {
+    ecu: E,
+    node: NodeId,
+    next_step_us: u64,
+    outputs: Option<E::Actuators>,
+}
+
+impl<E: EcuLogic> Slot<E>
+where
+    E::Actuators: Copy,
+{
+    fn new(ecu: E, bus: &mut VirtualBus, phase_us: u64) -> Self {
+        let filter = AcceptanceFilter::ids(E::NODE.received_ids());
+        let node = bus.attach(E::NODE.name(), filter);
+        Self {
+            ecu,
+            node,
+            next_step_us: phase_us % E::STEP_PERIOD_US,
+            outputs: None,
+        }
+    }
+
+    fn deliver(&mut self, bus: &mut VirtualBus) {
+        while let Some(delivered) = bus.recv(self.node) {
+            let at = Instant::from_micros(delivered.t_ns / 1000);
+            self.ecu.on_frame(at, &delivered.frame);
+        }
+    }
+
+    fn step_if_due(&mut self, t_us: u64, sensors: impl FnOnce() -> E::Sensors) {
+        if t_us >= self.next_step_us {
+            let outputs = self.ecu.step(Instant::from_micros(t_us), &sensors());
+            self.outputs = Some(outputs);
+            self.next_step_us += E::STEP_PERIOD_US;
+        }
+    }
+
+    fn transmit(&mut self, bus: &mut VirtualBus, t_us: u64) {
+        let now = Instant::from_micros(t_us);
+        while let Some(frame) = self.ecu.poll_transmit(now) {
+            // A full transmit queue is counted by the bus; the ECU's next period resends.
+            let _ = bus.send(self.node, frame, t_us * 1000);
+        }
+    }
+}
+
+/// The nine ECUs.
+struct Ecus {
+    pedals: Slot<ecu_pedals::PedalsEcu>,
+    steering: Slot<ecu_steering::SteeringEcu>,
+    console: Slot<ecu_console::ConsoleEcu>,
+    engine: Slot<ecu_engine::EngineEcu>,
+    trans: Slot<ecu_trans::TransEcu>,
+    cabin: Slot<ecu_cabin::CabinEcu>,
+    diff: Slot<ecu_diff::DiffEcu>,
+    cruise: Slot<ecu_cruise::CruiseEcu>,
+    abs: Slot<ecu_abs::AbsEcu>,
+}
+
+/// Everything recorded about one moment, in physical units from the model (not the
+/// quantised CAN values).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TraceRow {
+    /// Time, s.
+    pub t_s: f64,
+    /// Position east, m.
+    pub x_m: f64,
+    /// Position north, m.
+    pub y_m: f64,
+    /// Heading, rad.
+    pub heading_rad: f64,
+    /// Longitudinal speed, km/h.
+    pub speed_kmh: f64,
+    /// Yaw rate, rad/s.
+    pub yaw_rate_rad_s: f64,
+    /// Reference yaw rate, rad/s.
+    pub yaw_rate_ref_rad_s: f64,
+    /// Wheel speeds FL, FR, RL, RR, km/h.
+    pub wheel_speed_kmh: [f64; 4],
+    /// Applied brake per wheel (the ABS ECU's output), %.
+    pub brake: [f64; 4],
+    /// ABS release per wheel, %.
+    pub abs_release: [f64; 4],
+    /// Driver's accelerator pedal, %.
+    pub accel_pedal: f64,
+    /// Driver's brake pedal, %.
+    pub brake_pedal: f64,
+    /// Accelerator command (pedals ECU), %.
+    pub accel_cmd: f64,
+    /// Brake command (pedals ECU), %.
+    pub brake_cmd: f64,
+    /// Steering wheel angle at the steering actuator, degrees.
+    pub steering_deg: f64,
+    /// Engaged gear: -1 reverse, 0 neutral, 1..6.
+    pub gear: i32,
+    /// Engine speed, rpm.
+    pub engine_rpm: f64,
+    /// Fuel in the tank, L.
+    pub fuel_l: f64,
+    /// Cabin temperature, °F.
+    pub cabin_temp_f: f64,
+    /// Cabin set temperature, °F.
+    pub cabin_set_f: f64,
+    /// Fan power, %.
+    pub fan: f64,
+    /// Cruise engaged.
+    pub cruise_on: bool,
+    /// Cruise set speed, km/h.
+    pub cruise_set_kmh: f64,
+    /// Cruise command, -100..100.
+    pub cruise_cmd: f64,
+    /// Rear torque split applied, N·m.
+    pub torque_split_nm: f64,
+    /// Headlights on.
+    pub headlights: bool,
+    /// Brake lights on.
+    pub brake_lights: bool,
+    /// ABS acting.
+    pub abs_active: bool,
+    /// Traction control cut, %.
+    pub traction_cut: f64,
+    /// Longitudinal acceleration, m/s².
+    pub ax_mps2: f64,
+    /// Lateral acceleration, m/s².
+    pub ay_mps2: f64,
+    /// Distance travelled, m.
+    pub distance_m: f64,
+}
+
+/// The running car.
+pub struct VirtualCar {
+    scenario: Scenario,
+    vehicle: Vehicle,
+    environment: Environment,
+    bus: VirtualBus,
+    ecus: Ecus,
+    external: NodeId,
+    timeline: Timeline,
+    controls: DriverControls,
+    t_us: u64,
+    log: Vec<LoggedFrame>,
+    node_names: Vec<&'static str>,
+}
+
+fn vehicle_gear(gear: GearName) -> VehicleGear {
+    match gear {
+        GearName::Reverse => VehicleGear::Reverse,
+        GearName::Neutral => VehicleGear::Neutral,
+        GearName::Forward(n) => VehicleGear::Forward(n),
+    }
+}
+
+/// The model's engaged gear as the gear lines report it.
+pub fn can_gear(gear: VehicleGear) -> CanGear {
+    match gear {
+        VehicleGear::Reverse => CanGear::Reverse,
+        VehicleGear::Neutral | VehicleGear::Forward(0) => CanGear::Neutral,
+        VehicleGear::Forward(1) => CanGear::First,
+        VehicleGear::Forward(2) => CanGear::Second,
+        VehicleGear::Forward(3) => CanGear::Third,
+        VehicleGear::Forward(4) => CanGear::Fourth,
+        VehicleGear::Forward(5) => CanGear::Fifth,
+        VehicleGear::Forward(_) => CanGear::Sixth,
+    }
+}
+
+/// The transmission ECU's gear command as the gearbox takes it.
+pub fn commanded_gear(gear: CanGear) -> VehicleGear {
+    match gear {
+        CanGear::Reverse => VehicleGear::Reverse,
+        CanGear::Neutral => VehicleGear::Neutral,
+        CanGear::First => VehicleGear::Forward(1),
+        CanGear::Second => VehicleGear::Forward(2),
+        CanGear::Third => VehicleGear::Forward(3),
+        CanGear::Fourth => VehicleGear::Forward(4),
+        CanGear::Fifth => VehicleGear::Forward(5),
+        CanGear::Sixth => VehicleGear::Forward(6),
+    }
+}
+
+fn gear_number(gear: VehicleGear) -> i32 {
+    match gear {
+        VehicleGear::Reverse => -1,
+        VehicleGear::Neutral => 0,
+        VehicleGear::Forward(n) => i32::from(n),
+    }
+}
+
+fn environment_of(scenario: &Scenario) -> Environment {
+    let road = &scenario.road;
+    Environment {
+        mu: [road.mu_left, road.mu_right, road.mu_left, road.mu_right],
+        grade_percent: road.grade_percent,
+        ambient_c: road.ambient_c,
+        sun_load_w: road.sun_load_w,
+    }
+}
+
+/// Phase of each ECU's control step, µs: spread over the first 5 ms.
+const PHASES_US: [u64; 9] = [0, 600, 1200, 1800, 2400, 3000, 3600, 4200, 4800];
+
+impl VirtualCar {
+    /// The car at the start of a scenario.
+    pub fn new(scenario: &Scenario) -> Self {
+        let environment = environment_of(scenario);
+        let initial = InitialState {
+            speed_kmh: scenario.initial.speed_kmh,
+            gear: vehicle_gear(scenario.initial.gear),
+            fuel_l: scenario.initial.fuel_l,
+            cabin_temp_c: f64::from(fahrenheit_to_celsius(scenario.initial.cabin_temp_f as f32)),
+            x_m: 0.0,
+            y_m: 0.0,
+            heading_rad: 0.0,
+        };
+        let vehicle = Vehicle::new(VehicleParams::evo_vi(), environment, initial, scenario.seed);
+        let mut bus = VirtualBus::new(BusConfig {
+            seed: scenario.seed,
+            // Drained every tick: a 1 ms tick holds at most ~10 frames.
+            event_log_capacity: 1024,
+            ..BusConfig::default()
+        });
+        let start = Instant::ZERO;
+        let cruise_variant = match scenario.ecus.cruise {
+            Software::Correct => ecu_cruise::Variant::Correct,
+            Software::Faulty => ecu_cruise::Variant::Faulty,
+        };
+        let abs_variant = match scenario.ecus.abs {
+            Software::Correct => ecu_abs::Variant::Correct,
+            Software::Faulty => ecu_abs::Variant::Faulty,
+        };
+        let ecus = Ecus {
+            pedals: Slot::new(ecu_pedals::PedalsEcu::new(start), &mut bus, PHASES_US[0]),
+            steering: Slot::new(
+                ecu_steering::SteeringEcu::new(start),
+                &mut bus,
+                PHASES_US[1],
+            ),
+            console: Slot::new(ecu_console::ConsoleEcu::new(start), &mut bus, PHASES_US[2]),
+            engine: Slot::new(ecu_engine::EngineEcu::new(start), &mut bus, PHASES_US[3]),
+            trans: Slot::new(ecu_trans::TransEcu::new(start), &mut bus, PHASES_US[4]),
+            cabin: Slot::new(ecu_cabin::CabinEcu::new(), &mut bus, PHASES_US[5]),
+            diff: Slot::new(ecu_diff::DiffEcu::new(start), &mut bus, PHASES_US[6]),
+            cruise: Slot::new(
+                ecu_cruise::CruiseEcu::new(cruise_variant, start),
+                &mut bus,
+                PHASES_US[7],
+            ),
+            abs: Slot::new(
+                ecu_abs::AbsEcu::new(abs_variant, start),
+                &mut bus,
+                PHASES_US[8],
+            ),
+        };
+        // The gateway listens to everything (and acknowledges), like the middleware on
+        // the bench; tools attached over socketcand send through this node too.
+        let external = bus.attach("External", AcceptanceFilter::All);
+        let node_names = bus.nodes().map(|n| node_name(bus.node_name(n))).collect();
+        let timeline = Timeline::new(scenario);
+        let mut car = Self {
+            scenario: scenario.clone(),
+            vehicle,
+            environment,
+            bus,
+            ecus,
+            external,
+            controls: *timeline.initial_controls(),
+            timeline,
+            t_us: 0,
+            log: Vec::with_capacity(1 << 16),
+            node_names,
+        };
+        car.controls = car.timeline.advance(0.0, |_| {});
+        car
+    }
+
+    /// Simulated time, µs.
+    pub fn time_us(&self) -> u64 {
+        self.t_us
+    }
+
+    /// The scenario being run.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// The vehicle's state.
+    pub fn vehicle(&self) -> &VehicleState {
+        self.vehicle.state()
+    }
+
+    /// The driver's controls now.
+    pub fn controls(&self) -> &DriverControls {
+        &self.controls
+    }
+
+    /// The bus, for statistics.
+    pub fn bus(&self) -> &VirtualBus {
+        &self.bus
+    }
+
+    /// Frames logged so far.
+    pub fn log(&self) -> &[LoggedFrame] {
+        &self.log
+    }
+
+    /// Takes the frames logged so far (for streaming them to a file or a client).
+    pub fn take_log(&mut self) -> Vec<LoggedFrame> {
+        std::mem::take(&mut self.log)
+    }
+
+    /// The cruise ECU's last decision.
+    pub fn cruise_status(&self) -> ecu_cruise::Status {
+        self.ecus.cruise.ecu.status()
+    }
+
+    /// The ABS ECU's last decision.
+    pub fn abs_status(&self) -> ecu_abs::Status {
+        self.ecus.abs.ecu.status()
+    }
+
+    /// The transmission ECU's state.
+    pub fn trans_status(&self) -> ecu_trans::Status {
+        self.ecus.trans.ecu.status()
+    }
+
+    /// The differential ECU's state.
+    pub fn diff_status(&self) -> ecu_diff::Status {
+        self.ecus.diff.ecu.status()
+    }
+
+    /// Every ECU's DTCs, by node.
+    pub fn dtcs(&self) -> [(Node, &Dtcs); 9] {
+        let e = &self.ecus;
+        [
+            (Node::Engine, e.engine.ecu.dtcs()),
+            (Node::Pedals, e.pedals.ecu.dtcs()),
+            (Node::Steering, e.steering.ecu.dtcs()),
+            (Node::Transmission, e.trans.ecu.dtcs()),
+            (Node::Cabin, e.cabin.ecu.dtcs()),
+            (Node::Console, e.console.ecu.dtcs()),
+            (Node::Differential, e.diff.ecu.dtcs()),
+            (Node::Cruise, e.cruise.ecu.dtcs()),
+            (Node::ABS, e.abs.ecu.dtcs()),
+        ]
+    }
+
+    /// Puts a frame from an outside tool (socketcand client) on the bus.
+    pub fn inject(&mut self, frame: Frame) {
+        let _ = self.bus.send(self.external, frame, self.t_us * 1000);
+    }
+
+    /// Stops or resumes a node's transmissions (fault injection).
+    pub fn set_silenced(&mut self, node: Node, silenced: bool) {
+        if let Some(id) = self.node_id(node) {
+            self.bus.set_silenced(id, silenced);
+        }
+    }
+
+    fn node_id(&self, node: Node) -> Option<NodeId> {
+        self.bus
+            .nodes()
+            .find(|&n| self.bus.node_name(n) == node.name())
+    }
+
+    /// Whether the scenario's time is up.
+    pub fn finished(&self) -> bool {
+        self.t_us as f64 >= self.scenario.duration_s * 1e6
+    }
+
+    /// One trace row for the present moment.
+    pub fn trace_row(&self) -> TraceRow {
+        let s = self.vehicle.state();
+        let abs = self.ecus.abs.ecu.status();
+        let cruise = self.ecus.cruise.ecu.status();
+        let pedals = self.ecus.pedals.outputs.unwrap_or_default();
+        let c = &self.controls;
+        TraceRow {
+            t_s: self.t_us as f64 * 1e-6,
+            x_m: s.x_m,
+            y_m: s.y_m,
+            heading_rad: s.heading_rad,
+            speed_kmh: s.speed_mps * 3.6,
+            yaw_rate_rad_s: s.yaw_rate_rad_s,
+            yaw_rate_ref_rad_s: s.yaw_rate_ref_rad_s,
+            wheel_speed_kmh: s.wheel_speed_mps.map(|v| v * 3.6),
+            brake: self.applied_brake().map(|b| b * 100.0),
+            abs_release: abs.release.map(f64::from),
+            accel_pedal: c.accelerator,
+            brake_pedal: c.brake,
+            accel_cmd: f64::from(pedals.accelerator_cmd),
+            brake_cmd: f64::from(pedals.brake_cmd),
+            steering_deg: self.steering_command(),
+            gear: gear_number(s.gear),
+            engine_rpm: s.engine_rpm,
+            fuel_l: s.fuel_l,
+            cabin_temp_f: f64::from(celsius_to_fahrenheit(s.cabin_temp_c as f32)),
+            cabin_set_f: c.set_temp_f,
+            fan: self.ecus.cabin.outputs.map_or(0.0, |a| f64::from(a.fan)),
+            cruise_on: cruise.engaged,
+            cruise_set_kmh: f64::from(cruise.set_speed_kmh),
+            cruise_cmd: f64::from(cruise.command),
+            torque_split_nm: s.torque_split_nm,
+            headlights: s.headlights,
+            brake_lights: s.brake_lights,
+            abs_active: abs.abs_active,
+            traction_cut: f64::from(abs.traction_cut),
+            ax_mps2: s.ax_mps2,
+            ay_mps2: s.ay_mps2,
+            distance_m: s.distance_m,
+        }
+    }
+
+    fn applied_brake(&self) -> [f64; 4] {
+        self.ecus
+            .abs
+            .outputs
+            .map_or([0.0; 4], |a| a.brake.map(|b| f64::from(b) / 100.0))
+    }
+
+    fn steering_command(&self) -> f64 {
+        self.ecus
+            .steering
+            .outputs
+            .map_or(0.0, |a| f64::from(a.steering_cmd_deg))
+    }
+
+    /// Advances one tick (1 ms of simulated time).
+    pub fn tick(&mut self) {
+        let t_us = self.t_us;
+        let t_s = t_us as f64 * 1e-6;
+
+        // The driver, and the road and fault changes of the timeline.
+        let mut road_changes = Vec::new();
+        self.controls = self
+            .timeline
+            .advance(t_s, |event| road_changes.push(event.clone()));
+        for event in road_changes {
+            self.apply_event(&event);
+        }
+
+        // Frames that completed by now reach their receivers.
+        self.bus.run_until(t_us * 1000);
+        self.collect_log();
+        let e = &mut self.ecus;
+        e.pedals.deliver(&mut self.bus);
+        e.steering.deliver(&mut self.bus);
+        e.console.deliver(&mut self.bus);
+        e.engine.deliver(&mut self.bus);
+        e.trans.deliver(&mut self.bus);
+        e.cabin.deliver(&mut self.bus);
+        e.diff.deliver(&mut self.bus);
+        e.cruise.deliver(&mut self.bus);
+        e.abs.deliver(&mut self.bus);
+        while self.bus.recv(self.external).is_some() {}
+
+        // Each ECU's control step, when due, on its own sensors.
+        let s = self.vehicle.state();
+        let c = self.controls;
+        e.pedals.step_if_due(t_us, || ecu_pedals::Sensors {
+            accelerator_pedal: c.accelerator as f32,
+            brake_pedal: c.brake as f32,
+        });
+        e.steering.step_if_due(t_us, || ecu_steering::Sensors {
+            wheel_angle_deg: c.steering_deg as f32,
+            shift_up_button: c.buttons.shift_up,
+            shift_down_button: c.buttons.shift_down,
+            cruise_on_button: c.buttons.cruise_on,
+            cruise_off_button: c.buttons.cruise_off,
+        });
+        e.console.step_if_due(t_us, || ecu_console::Sensors {
+            headlight_switch: c.headlights,
+            economy_mode_switch: c.economy_mode,
+            manual_mode_switch: c.manual_mode,
+        });
+        e.engine.step_if_due(t_us, || ecu_engine::Sensors {
+            engine_rpm: s.engine_rpm as f32,
+            fuel_level_l: s.fuel_l as f32,
+        });
+        e.trans.step_if_due(t_us, || ecu_trans::Sensors {
+            current_gear: can_gear(s.gear),
+        });
+        e.cabin.step_if_due(t_us, || ecu_cabin::Sensors {
+            cabin_temp_f: s.cabin_temp_sensor_f(),
+            set_temp_f: c.set_temp_f as f32,
+        });
+        e.diff.step_if_due(t_us, || ecu_diff::Sensors {
+            yaw_rate_error_rad_s: s.yaw_rate_error_rad_s as f32,
+        });
+        e.cruise.step_if_due(t_us, || ecu_cruise::Sensors {
+            vehicle_speed_kmh: s.speed_kmh(),
+        });
+        e.abs.step_if_due(t_us, || ecu_abs::Sensors {
+            wheel_speed_kmh: s.wheel_speeds_kmh(),
+        });
+
+        // Frames due now go to the ECUs' transmit queues.
+        e.pedals.transmit(&mut self.bus, t_us);
+        e.steering.transmit(&mut self.bus, t_us);
+        e.console.transmit(&mut self.bus, t_us);
+        e.engine.transmit(&mut self.bus, t_us);
+        e.trans.transmit(&mut self.bus, t_us);
+        e.cabin.transmit(&mut self.bus, t_us);
+        e.diff.transmit(&mut self.bus, t_us);
+        e.cruise.transmit(&mut self.bus, t_us);
+        e.abs.transmit(&mut self.bus, t_us);
+
+        // The actuators drive the car for the next tick.
+        let actuators = self.actuators();
+        self.vehicle.step(&actuators, TICK_US as f64 * 1e-6);
+        self.t_us += TICK_US;
+    }
+
+    /// What the ECUs' outputs command the vehicle to do. Before an ECU's first step its
+    /// actuator rests in its neutral position.
+    fn actuators(&self) -> VehicleActuators {
+        let e = &self.ecus;
+        let pedals = e.pedals.outputs.unwrap_or_default();
+        let console = e.console.outputs.unwrap_or_default();
+        let torque_split = match self.scenario.ecus.differential {
+            Activation::Enabled => e.diff.outputs.map_or(0.0, |a| f64::from(a.torque_split_nm)),
+            Activation::Disabled => 0.0,
+        };
+        VehicleActuators {
+            accelerator: f64::from(pedals.accelerator_cmd) / 100.0,
+            brake: self.applied_brake(),
+            steering_wheel_deg: self.steering_command(),
+            gear: e
+                .trans
+                .outputs
+                .map_or(self.vehicle.state().gear, |a| commanded_gear(a.gear_cmd)),
+            torque_split_nm: torque_split,
+            fan: e.cabin.outputs.map_or(0.0, |a| f64::from(a.fan) / 100.0),
+            headlights: console.headlights,
+            brake_lights: console.brake_lights,
+        }
+    }
+
+    fn apply_event(&mut self, event: &Event) {
+        let mut env = self.environment;
+        if let Some(g) = event.grade_percent {
+            env.grade_percent = g;
+        }
+        if let Some(mu) = event.mu_left {
+            env.mu[0] = mu;
+            env.mu[2] = mu;
+        }
+        if let Some(mu) = event.mu_right {
+            env.mu[1] = mu;
+            env.mu[3] = mu;
+        }
+        if env != self.environment {
+            self.environment = env;
+            self.vehicle.set_environment(env);
+        }
+        if let Some(fault) = &event.fault {
+            for (name, silenced) in [(&fault.silence, true), (&fault.restore, false)] {
+                if let Some(node) = name
+                    .as_deref()
+                    .and_then(|n| Node::ALL.iter().find(|node| node.name() == n))
+                {
+                    self.set_silenced(*node, silenced);
+                }
+            }
+        }
+    }
+
+    fn collect_log(&mut self) {
+        for event in self.bus.drain_events() {
+            if matches!(event.outcome, Outcome::Received { .. } | Outcome::Dropped) {
+                self.log.push(LoggedFrame {
+                    t_us: event.end_ns / 1000,
+                    frame: event.frame,
+                    sender: self.node_names[event.from.index()],
+                });
+            }
+        }
+    }
+}
+
+fn node_name(name: &str) -> &'static str {
+    Node::ALL
+        .iter()
+        .find(|n| n.name() == name)
+        .map_or("External", |n| n.name())
+}
