@@ -135,6 +135,16 @@ pub const ABS_TUNING: PidConfig = PidConfig {
     output_max: 100.0,
 };
 
+/// Front-axle yaw-moment build-up delay: while the front axle is under ABS control, the
+/// front wheel braked harder may exceed the other's applied brake by at most this margin
+/// at first, in percentage points...
+pub const YAW_DELAY_INITIAL_MARGIN: f32 = 10.0;
+
+/// ... and the margin then grows at this rate, %/s, so the yaw moment of the high-friction
+/// side builds up slowly instead of spinning the car (full asymmetry after several seconds,
+/// when speed has dropped).
+pub const YAW_DELAY_MARGIN_RATE_PER_S: f32 = 15.0;
+
 /// The ABS channel controller, built at compile time: an invalid tuning fails the build.
 const ABS_PID: Pid = match Pid::new(ABS_TUNING) {
     Ok(pid) => pid,
@@ -293,6 +303,8 @@ pub struct AbsEcu {
     abs_pids: [Pid; CHANNELS],
     engaged: [bool; CHANNELS],
     abs_last_acted: Option<Instant>,
+    /// Allowed front-axle brake difference while the front axle is under control, %.
+    yaw_delay_margin: Option<f32>,
     tc_pid: Pid,
     tc_last_acted: Option<Instant>,
     pedal_lost_since: Option<Instant>,
@@ -317,6 +329,7 @@ impl AbsEcu {
             abs_pids: [ABS_PID; CHANNELS],
             engaged: [false; CHANNELS],
             abs_last_acted: None,
+            yaw_delay_margin: None,
             tc_pid: TC_PID,
             tc_last_acted: None,
             pedal_lost_since: None,
@@ -417,6 +430,7 @@ impl AbsEcu {
 
     /// Disengages every ABS channel: releases 0, controllers reset.
     fn abs_off(&mut self) {
+        self.yaw_delay_margin = None;
         if self.engaged.iter().any(|e| *e) {
             autoplug_log::info!("abs: disengaged");
         }
@@ -477,8 +491,37 @@ impl AbsEcu {
         if !was_active && self.engaged.iter().any(|e| *e) {
             autoplug_log::info!("abs: engaged at {} km/h", v);
         }
-        let [r_fl, r_fr, r_rear] = release;
+        let [r_fl, r_fr] = self.delay_yaw_moment([release[0], release[1]], brake, dt_s);
+        let r_rear = release[2];
         [r_fl, r_fr, r_rear, r_rear]
+    }
+
+    /// Yaw-moment build-up delay on the front axle (split friction): while the front axle
+    /// is under ABS control, the front wheel braked harder may exceed the other's applied
+    /// brake by at most a margin that grows with time. On even friction both fronts brake
+    /// alike and this does nothing; on split friction it keeps the high-friction side from
+    /// yawing the car before the margin has grown (and the speed has dropped).
+    fn delay_yaw_moment(&mut self, release: [f32; 2], brake: f32, dt_s: f32) -> [f32; 2] {
+        if !(self.engaged[0] || self.engaged[1]) {
+            self.yaw_delay_margin = None;
+            return release;
+        }
+        let margin = match self.yaw_delay_margin {
+            None => YAW_DELAY_INITIAL_MARGIN,
+            Some(m) => (m + YAW_DELAY_MARGIN_RATE_PER_S * dt_s).min(100.0),
+        };
+        self.yaw_delay_margin = Some(margin);
+        let applied = release.map(|r| brake - r);
+        let (low, high) = if applied[0] <= applied[1] {
+            (0, 1)
+        } else {
+            (1, 0)
+        };
+        let mut out = release;
+        if applied[high] > applied[low] + margin {
+            out[high] = (brake - (applied[low] + margin)).clamp(0.0, brake);
+        }
+        out
     }
 
     /// Disengages traction control: cut 0, controller reset.

@@ -327,17 +327,20 @@ pub fn light_braking_passes_the_command_through() {
     }
 }
 
-/// A wheel running into lock gets a release (PID on slip), the others keep the driver's
-/// brake; more slip gives more release; the applied brake never exceeds the command.
+/// A wheel running into lock gets a release (PID on slip); the rear wheels keep the
+/// driver's brake and the other front wheel is held to the yaw-moment delay margin; more
+/// slip gives more release; the applied brake never exceeds the command.
 pub fn slipping_wheel_is_released() {
     let mut ecu = AbsEcu::new(Variant::Correct, ms(0));
     let out = step_with(&mut ecu, 0, 100.0, 80.0, [70.0, 98.0, 98.0, 98.0]);
     let status = ecu.status();
     assert!(status.abs_active);
     assert!(status.release[0] > 0.0, "FL slips 0.30: released");
-    assert_eq!(&status.release[1..], &[0.0; 3]);
+    assert_eq!(&status.release[2..], &[0.0; 2]);
     assert_eq!(out.brake[0], 80.0 - status.release[0]);
-    assert_eq!(&out.brake[1..], &[80.0; 3]);
+    let front_right_cap = (out.brake[0] + YAW_DELAY_INITIAL_MARGIN).min(80.0);
+    assert!((out.brake[1] - front_right_cap).abs() < 1e-3);
+    assert_eq!(&out.brake[2..], &[80.0; 2]);
     // A fresh controller: more slip, more release (P + D).
     let mut other = AbsEcu::new(Variant::Correct, ms(0));
     step_with(&mut other, 0, 100.0, 80.0, [80.0, 98.0, 98.0, 98.0]);
@@ -456,6 +459,42 @@ pub fn rear_axle_is_select_low() {
     let mut mirrored = AbsEcu::new(Variant::Correct, ms(0));
     step_with(&mut mirrored, 0, 100.0, 100.0, [98.0, 98.0, 60.0, 97.0]);
     assert_eq!(mirrored.status().release, [0.0, 0.0, rr, rr]);
+}
+
+/// Front-axle yaw-moment build-up delay: with only the front left slipping (split
+/// friction), the front right may brake at most `YAW_DELAY_INITIAL_MARGIN` harder at
+/// first, the margin then grows at `YAW_DELAY_MARGIN_RATE_PER_S`; on even friction (both
+/// fronts alike) nothing changes.
+pub fn front_axle_yaw_moment_builds_up_slowly() {
+    let mut ecu = AbsEcu::new(Variant::Correct, ms(0));
+    let out = step_with(&mut ecu, 0, 100.0, 100.0, [60.0, 99.0, 99.0, 99.0]);
+    let [fl, fr, _, _] = out.brake;
+    assert!(fl < 100.0, "the slipping wheel is released");
+    assert!(
+        (fr - (fl + YAW_DELAY_INITIAL_MARGIN)).abs() < 1e-3,
+        "front right {} limited to front left {} + margin",
+        fr,
+        fl
+    );
+    // One second later the margin has grown by the rate.
+    let mut t = 0;
+    let mut last = out;
+    while t < 1_000_000 {
+        t += 5_000;
+        last = step_with(&mut ecu, t, 100.0, 100.0, [60.0, 99.0, 99.0, 99.0]);
+    }
+    let [fl, fr, _, _] = last.brake;
+    let expected = YAW_DELAY_INITIAL_MARGIN + YAW_DELAY_MARGIN_RATE_PER_S * 1.0;
+    assert!(
+        fr - fl <= expected + 0.5 && fr - fl >= expected - 1.0,
+        "margin after 1 s: {} (expected about {})",
+        fr - fl,
+        expected
+    );
+    // Even friction: both fronts slip alike, no extra release.
+    let mut even = AbsEcu::new(Variant::Correct, ms(0));
+    let out = step_with(&mut even, 0, 100.0, 100.0, [70.0, 70.0, 99.0, 99.0]);
+    assert_eq!(out.brake[0], out.brake[1]);
 }
 
 /// When a release saturates the brake (applied 0) the channel's PID is reset: the next

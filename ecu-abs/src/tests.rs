@@ -12,6 +12,7 @@ shared_cases!(
     full_braking_on_low_friction,
     faulty_build_locks_the_wheels,
     rear_axle_is_select_low,
+    front_axle_yaw_moment_builds_up_slowly,
     saturated_brake_resets_the_controller,
     abs_inactive_below_the_minimum_speed,
     abs_times_out_after_it_stops_acting,

@@ -43,6 +43,11 @@ mod tests {
     }
 
     #[test]
+    fn front_axle_yaw_moment_builds_up_slowly() {
+        test_cases::front_axle_yaw_moment_builds_up_slowly();
+    }
+
+    #[test]
     fn saturated_brake_resets_the_controller() {
         test_cases::saturated_brake_resets_the_controller();
     }

@@ -6,6 +6,7 @@ pub mod candump;
 pub mod car;
 pub mod driver;
 pub mod plot;
+pub mod report;
 pub mod scenario;
 pub mod socketcand;
 

@@ -1,0 +1,198 @@
+//! `virtual-car`: runs scenarios on the AutoPlug virtual car and writes their reports.
+//!
+//!     virtual-car run scenarios/drive-cycle.toml            # as fast as possible
+//!     virtual-car run scenarios/cruise-hold.toml --realtime --socketcand 127.0.0.1:29536
+//!     virtual-car list
+
+use autoplug_virtual_car::report::{self, RunRecord};
+use autoplug_virtual_car::scenario::Scenario;
+use autoplug_virtual_car::socketcand::SocketcandServer;
+use clap::{Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+#[derive(Parser)]
+#[command(
+    name = "virtual-car",
+    version,
+    about = "The AutoPlug virtual car: vehicle model, CAN bus and the nine ECUs, driven by scenario files"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Runs scenarios and writes trace.csv, bus.log, summary.json and plots for each.
+    Run {
+        /// Scenario files (TOML).
+        #[arg(required = true)]
+        scenarios: Vec<PathBuf>,
+        /// Output folder; each scenario writes into a folder named after it.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Pace the simulation to real time (default: as fast as the machine allows).
+        #[arg(long)]
+        realtime: bool,
+        /// Serve the bus over the socketcand protocol (raw mode) at HOST:PORT, so that
+        /// python-can, cantools and SavvyCAN can attach. Implies --realtime.
+        #[arg(long, value_name = "HOST:PORT")]
+        socketcand: Option<String>,
+        /// With --socketcand: wait up to this many seconds for a client in raw mode before
+        /// starting.
+        #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+        wait_for_client: f64,
+    },
+    /// Lists the scenarios in a folder with their descriptions.
+    List {
+        /// Folder of scenario files.
+        #[arg(default_value = "scenarios")]
+        dir: PathBuf,
+    },
+}
+
+fn main() -> ExitCode {
+    match Cli::parse().command {
+        Command::Run {
+            scenarios,
+            out,
+            realtime,
+            socketcand,
+            wait_for_client,
+        } => {
+            let server = match socketcand.as_deref().map(SocketcandServer::start) {
+                None => None,
+                Some(Ok(server)) => {
+                    println!("socketcand: serving can0 on {}", server.address());
+                    Some(server)
+                }
+                Some(Err(e)) => {
+                    eprintln!(
+                        "error: cannot serve socketcand on {}: {e}",
+                        socketcand.unwrap_or_default()
+                    );
+                    return ExitCode::from(2);
+                }
+            };
+            if let Some(server) = &server {
+                let deadline = Instant::now() + Duration::from_secs_f64(wait_for_client.max(0.0));
+                while server.raw_clients() == 0 && Instant::now() < deadline {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+            }
+            let mut failed = false;
+            for path in &scenarios {
+                match Scenario::load(path) {
+                    Ok(scenario) => {
+                        if let Err(e) = run_one(
+                            &scenario,
+                            &out,
+                            realtime || server.is_some(),
+                            server.as_ref(),
+                        ) {
+                            eprintln!("error: {}: {e}", path.display());
+                            failed = true;
+                        }
+                    }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        failed = true;
+                    }
+                }
+            }
+            if failed {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Command::List { dir } => list(&dir),
+    }
+}
+
+fn run_one(
+    scenario: &Scenario,
+    out: &Path,
+    realtime: bool,
+    server: Option<&SocketcandServer>,
+) -> std::io::Result<()> {
+    let wall = Instant::now();
+    let mut served = 0;
+    let record: RunRecord = report::run_with(scenario, |car| {
+        if let Some(server) = server {
+            while let Some(client) = server.try_recv() {
+                car.inject(client.frame);
+            }
+            let log = car.log();
+            for entry in &log[served..] {
+                let from_client = (entry.sender == "External").then_some(0);
+                // Clients get every frame but their own (socketcand does not echo);
+                // frames injected by a client carry no client id here, so none are echoed.
+                if from_client.is_none() {
+                    server.broadcast(entry.t_us, &entry.frame, None);
+                }
+            }
+            served = log.len();
+        }
+        if realtime && car.time_us() % 10_000 == 0 {
+            let target = Duration::from_micros(car.time_us());
+            if let Some(wait) = target.checked_sub(wall.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+    });
+    let elapsed = wall.elapsed().as_secs_f64();
+    let dir = out.join(&scenario.name);
+    report::write_outputs(&dir, &record)?;
+    println!("{}", scenario.name);
+    if !scenario.description.is_empty() {
+        println!("  {}", scenario.description);
+    }
+    print!("{}", record.summary.table());
+    println!(
+        "  {:<28} {:.3} s wall for {:.1} s simulated ({:.0}x real time)",
+        "run time",
+        elapsed,
+        scenario.duration_s,
+        scenario.duration_s / elapsed.max(1e-9)
+    );
+    println!("  {:<28} {}", "written to", dir.display());
+    Ok(())
+}
+
+fn list(dir: &Path) -> ExitCode {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) => {
+            eprintln!("error: cannot read {}: {e}", dir.display());
+            return ExitCode::FAILURE;
+        }
+    };
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    paths.sort();
+    let mut ok = true;
+    for path in paths {
+        match Scenario::load(&path) {
+            Ok(s) => println!(
+                "{:<32} {:>6.1} s  {}",
+                path.display(),
+                s.duration_s,
+                s.description
+            ),
+            Err(e) => {
+                eprintln!("error: {e}");
+                ok = false;
+            }
+        }
+    }
+    if ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
