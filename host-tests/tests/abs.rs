@@ -1,0 +1,104 @@
+//! ABS against the vehicle model (spec section 7: wheel speeds, brake commands, PID
+//! operation; section 8, scenario 2).
+
+use autoplug_host_tests::*;
+
+fn faulty_dry() -> autoplug_virtual_car::scenario::Scenario {
+    let mut s = scenario("stop-100-dry");
+    s.name = "stop-100-dry-faulty".into();
+    s.ecus.abs = autoplug_virtual_car::scenario::Software::Faulty;
+    s
+}
+
+/// Full braking from 100 km/h on µ = 1.0 stops within 1.10 × v²/(2µg), no wheel stays
+/// locked, the brake command pulses; the faulty software locks the wheels and stops
+/// measurably longer.
+#[test]
+fn full_braking_on_dry_asphalt() {
+    let r = run(&scenario("stop-100-dry"));
+    let stop = r.summary.stops.first().expect("a stop");
+    assert!(stop.from_kmh > 95.0, "braking from {} km/h", stop.from_kmh);
+    assert!(
+        stop.ratio_to_limit <= 1.10,
+        "{} m = {} x the limit",
+        stop.distance_m,
+        stop.ratio_to_limit
+    );
+    assert!(
+        stop.longest_wheel_lock_s <= 0.1,
+        "a wheel locked for {} s",
+        stop.longest_wheel_lock_s
+    );
+    assert!(stop.heading_change_deg.abs() < 2.0);
+    // ABS acted: releases were commanded and varied (pulsing).
+    let releases: Vec<f64> = window(&r.trace, stop.start_s, stop.start_s + stop.duration_s)
+        .map(|row| row.abs_release[0])
+        .collect();
+    let active = releases.iter().filter(|x| **x > 1.0).count();
+    assert!(
+        active > releases.len() / 2,
+        "release active in {active} of {} rows",
+        releases.len()
+    );
+    let (lo, hi) = releases
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(*x), b.max(*x)));
+    assert!(
+        hi - lo > 10.0,
+        "release between {lo} and {hi}: no modulation"
+    );
+
+    let bad = run(&faulty_dry());
+    let bad_stop = bad.summary.stops.first().expect("a stop");
+    assert!(
+        bad_stop.longest_wheel_lock_s >= 1.0,
+        "faulty: wheels locked {} s",
+        bad_stop.longest_wheel_lock_s
+    );
+    assert!(
+        bad_stop.distance_m >= 1.1 * stop.distance_m,
+        "faulty {} m vs correct {} m",
+        bad_stop.distance_m,
+        stop.distance_m
+    );
+    assert!(
+        bad.trace
+            .iter()
+            .all(|row| row.abs_release.iter().all(|x| *x == 0.0)),
+        "faulty never releases"
+    );
+}
+
+/// On a wet road ABS still keeps the wheels turning and stays near the limit.
+#[test]
+fn full_braking_on_a_wet_road() {
+    let r = run(&scenario("stop-100-wet"));
+    let stop = r.summary.stops.first().expect("a stop");
+    assert!(
+        stop.ratio_to_limit <= 1.15,
+        "{} x the limit",
+        stop.ratio_to_limit
+    );
+    assert!(stop.longest_wheel_lock_s <= 0.1);
+}
+
+/// The report's high-speed stop: from 185+ km/h the wheel speeds stay close to the vehicle
+/// speed (no wheel below half of it while above 30 km/h).
+#[test]
+fn high_speed_stop_keeps_the_wheels_turning() {
+    let r = run(&scenario("abs-stop-190"));
+    let stop = r.summary.stops.first().expect("a stop");
+    assert!(stop.from_kmh > 180.0);
+    for row in window(&r.trace, stop.start_s + 0.3, stop.start_s + stop.duration_s) {
+        if row.speed_kmh > 30.0 {
+            for w in row.wheel_speed_kmh {
+                assert!(
+                    w > 0.5 * row.speed_kmh,
+                    "wheel at {w:.1} km/h, car at {:.1} at {:.2} s",
+                    row.speed_kmh,
+                    row.t_s
+                );
+            }
+        }
+    }
+}

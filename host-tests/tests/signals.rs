@@ -1,0 +1,116 @@
+//! What reaches the bus matches the vehicle (spec section 7: each ECU reads and reports
+//! its signals; the middleware's data matches what was sent): engine RPM, fuel level and
+//! steering angle on CAN agree with the model within their quantisation; brake lights
+//! follow the brake pedal.
+
+use autoplug_can::{EngineMsg, Message, SteeringMsg};
+use autoplug_host_tests::*;
+use autoplug_virtual_car::car::VirtualCar;
+
+/// Runs `scenario` and checks every EngineMsg and SteeringMsg against the model state at
+/// the moment the sending ECU read its sensors (its frame goes out within that step).
+#[test]
+fn engine_and_steering_signals_match_the_model() {
+    let s = inline(
+        r#"
+name = "signals"
+duration_s = 12.0
+[driver]
+accelerator = 40.0
+[[at]]
+t_s = 4.0
+ramp_s = 4.0
+steering_deg = -100.0
+"#,
+    );
+    let mut car = VirtualCar::new(&s);
+    let rpm_step = EngineMsg::ENGINE_RPM.factor();
+    let fuel_step = EngineMsg::FUEL_LEVEL.factor();
+    let angle_step = SteeringMsg::STEERING_ANGLE.factor();
+    let (mut engine_frames, mut steering_frames) = (0, 0);
+    let mut checked = 0;
+    while !car.finished() {
+        // The model's values now, before the tick in which the ECUs read them.
+        let model_rpm = car.vehicle().engine_rpm;
+        let model_fuel = car.vehicle().fuel_l;
+        let model_angle = car.controls().steering_deg;
+        let seen = car.log().len();
+        car.tick();
+        for entry in &car.log()[seen..] {
+            match Message::from_frame(&entry.frame).expect("catalogue frame") {
+                Message::EngineMsg(m) => {
+                    engine_frames += 1;
+                    // The ECU sampled within the last 20 ms: allow the change over it.
+                    let drift = 40.0;
+                    assert!(
+                        (f64::from(m.engine_rpm) - model_rpm).abs()
+                            <= rpm_step as f64 / 2.0 + drift,
+                        "EngineRPM {} vs model {model_rpm:.0}",
+                        m.engine_rpm
+                    );
+                    assert!(
+                        (f64::from(m.fuel_level) - model_fuel).abs()
+                            <= fuel_step as f64 / 2.0 + 0.01
+                    );
+                    checked += 1;
+                }
+                Message::SteeringMsg(m) => {
+                    steering_frames += 1;
+                    // The ramp moves 25 deg/s: 10 ms of it on top of half a step.
+                    assert!(
+                        (f64::from(m.steering_angle) - model_angle).abs()
+                            <= angle_step as f64 / 2.0 + 0.5,
+                        "SteeringAngle {} vs wheel {model_angle:.2}",
+                        m.steering_angle
+                    );
+                    checked += 1;
+                }
+                _ => {}
+            }
+        }
+    }
+    assert!(
+        engine_frames >= 12 * 50 - 5,
+        "{engine_frames} EngineMsg in 12 s (20 ms period)"
+    );
+    assert!(
+        steering_frames >= 12 * 100 - 5,
+        "{steering_frames} SteeringMsg in 12 s (10 ms period)"
+    );
+    assert!(checked > 1500);
+}
+
+/// Brake lights come on with the brake pedal and go off after it.
+#[test]
+fn brake_lights_follow_the_brake_pedal() {
+    let s = inline(
+        r#"
+name = "lights"
+duration_s = 6.0
+[initial]
+speed_kmh = 60.0
+gear = "3"
+[[at]]
+t_s = 2.0
+brake = 30.0
+[[at]]
+t_s = 3.0
+brake = 0.0
+"#,
+    );
+    let r = run(&s);
+    assert!(!at(&r.trace, 1.9).brake_lights);
+    let on = r
+        .trace
+        .iter()
+        .find(|row| row.brake_lights)
+        .expect("brake lights came on");
+    assert!(on.t_s >= 2.0 && on.t_s <= 2.05, "on at {:.3} s", on.t_s);
+    assert!(at(&r.trace, 2.9).brake_lights);
+    let off = r
+        .trace
+        .iter()
+        .find(|row| row.t_s > 3.0 && !row.brake_lights)
+        .expect("off again");
+    assert!(off.t_s <= 3.05, "off at {:.3} s", off.t_s);
+}
