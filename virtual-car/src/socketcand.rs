@@ -9,6 +9,9 @@
 //! `shared/spec/tool-interop.md`: each handshake reply is a write of its own, no frame is
 //! sent before raw mode is acknowledged, Nagle is off, identifiers are exactly 3 hex digits
 //! and a frame without data keeps its empty field. A client never receives its own frames.
+//! Frames start [`RAW_MODE_GRACE`] after the rawmode `< ok >` is written: python-can reads
+//! that reply with a single `recv()`, and a frame that reaches its socket first is glued to
+//! the reply and fails its connect.
 //!
 //! The simulation thread only calls [`SocketcandServer::broadcast`] and
 //! [`SocketcandServer::try_recv`], which never block it: each client has a writer thread fed
@@ -26,6 +29,12 @@ use std::time::Duration;
 /// The bus name clients open.
 pub const BUS_NAME: &str = "can0";
 
+/// Time between writing the rawmode `< ok >` and a client's first frame. python-can compares
+/// that reply with what one `recv()` returns; on a busy machine it may reach that `recv()`
+/// milliseconds after the reply arrived, and a frame arriving meanwhile makes the connect
+/// fail (`Expected '< ok >' got: '< ok >< frame ...'`).
+pub const RAW_MODE_GRACE: Duration = Duration::from_millis(50);
+
 /// A frame a client sent, and which client.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ClientFrame {
@@ -38,7 +47,15 @@ pub struct ClientFrame {
 struct Client {
     id: u64,
     raw_mode: Arc<AtomicBool>,
-    outbox: Sender<String>,
+    outbox: Sender<Outgoing>,
+}
+
+/// What a client's writer thread is asked to do.
+enum Outgoing {
+    /// Write this message (one write of its own).
+    Message(String),
+    /// The rawmode `< ok >` has been written: after [`RAW_MODE_GRACE`], let frames through.
+    EnterRawMode,
 }
 
 /// The running server.
@@ -97,7 +114,7 @@ impl SocketcandServer {
             if Some(c.id) == from_client || !c.raw_mode.load(Ordering::Acquire) {
                 return true;
             }
-            c.outbox.send(text.clone()).is_ok()
+            c.outbox.send(Outgoing::Message(text.clone())).is_ok()
         });
     }
 
@@ -175,12 +192,15 @@ fn serve(
 ) -> io::Result<()> {
     stream.set_nonblocking(false)?;
     stream.set_nodelay(true)?;
-    let (outbox, outgoing) = mpsc::channel::<String>();
+    let (outbox, outgoing) = mpsc::channel::<Outgoing>();
     let raw_mode = Arc::new(AtomicBool::new(false));
     let writer_stream = stream.try_clone()?;
-    thread::spawn(move || write_loop(writer_stream, outgoing));
+    {
+        let raw_mode = Arc::clone(&raw_mode);
+        thread::spawn(move || write_loop(writer_stream, outgoing, raw_mode));
+    }
     outbox
-        .send("< hi >".to_string())
+        .send(Outgoing::Message("< hi >".to_string()))
         .map_err(|_| io::Error::other("writer ended"))?;
     clients
         .lock()
@@ -190,20 +210,30 @@ fn serve(
             raw_mode: Arc::clone(&raw_mode),
             outbox: outbox.clone(),
         });
-    thread::spawn(move || read_loop(stream, id, outbox, raw_mode, to_sim, refused));
+    thread::spawn(move || read_loop(stream, id, outbox, to_sim, refused));
     Ok(())
 }
 
 /// One write per message: python-can compares each handshake reply as a whole `recv()`.
-fn write_loop(stream: TcpStream, outgoing: Receiver<String>) {
+/// Raw mode starts here, [`RAW_MODE_GRACE`] after its `< ok >` went out, so no frame is
+/// queued for the client before then.
+fn write_loop(stream: TcpStream, outgoing: Receiver<Outgoing>, raw_mode: Arc<AtomicBool>) {
     let mut out = BufWriter::new(stream);
-    for message in outgoing {
-        if out
-            .write_all(message.as_bytes())
-            .and_then(|_| out.flush())
-            .is_err()
-        {
-            break;
+    for item in outgoing {
+        match item {
+            Outgoing::Message(message) => {
+                if out
+                    .write_all(message.as_bytes())
+                    .and_then(|_| out.flush())
+                    .is_err()
+                {
+                    break;
+                }
+            }
+            Outgoing::EnterRawMode => {
+                thread::sleep(RAW_MODE_GRACE);
+                raw_mode.store(true, Ordering::Release);
+            }
         }
     }
 }
@@ -211,14 +241,16 @@ fn write_loop(stream: TcpStream, outgoing: Receiver<String>) {
 fn read_loop(
     mut stream: TcpStream,
     id: u64,
-    outbox: Sender<String>,
-    raw_mode: Arc<AtomicBool>,
+    outbox: Sender<Outgoing>,
     to_sim: Sender<ClientFrame>,
     refused: Arc<AtomicU64>,
 ) {
     let mut buffer = Vec::with_capacity(1024);
     let mut chunk = [0u8; 1024];
     let mut opened = false;
+    // Raw mode as far as the client's commands go: sending is allowed from the `< ok >` on
+    // (frames to the client start a grace later, see `write_loop`).
+    let mut raw = false;
     loop {
         let n = match stream.read(&mut chunk) {
             Ok(0) | Err(_) => break,
@@ -239,7 +271,8 @@ fn read_loop(
                     ))
                 }
                 Ok(Command::RawMode) if opened => {
-                    entering_raw = true;
+                    entering_raw = !raw;
+                    raw = true;
                     Some("< ok >".to_string())
                 }
                 Ok(Command::RawMode) => {
@@ -247,7 +280,7 @@ fn read_loop(
                     Some("< error open a bus before rawmode >".to_string())
                 }
                 Ok(Command::Echo) => Some("< echo >".to_string()),
-                Ok(Command::Send(frame)) if raw_mode.load(Ordering::Acquire) => {
+                Ok(Command::Send(frame)) if raw => {
                     if to_sim.send(ClientFrame { client: id, frame }).is_err() {
                         return;
                     }
@@ -264,13 +297,14 @@ fn read_loop(
                 }
             };
             if let Some(reply) = reply {
-                if outbox.send(reply).is_err() {
+                if outbox.send(Outgoing::Message(reply)).is_err() {
                     return;
                 }
             }
-            // Frames only after the rawmode acknowledgement is queued, so it goes out first.
-            if entering_raw {
-                raw_mode.store(true, Ordering::Release);
+            // Frames only after the rawmode acknowledgement is written, and a grace later
+            // (the writer thread switches raw mode on).
+            if entering_raw && outbox.send(Outgoing::EnterRawMode).is_err() {
+                return;
             }
         }
         if buffer.len() > 64 * 1024 {

@@ -278,6 +278,57 @@ mod socketcand {
         assert_eq!(server.refused_commands(), 3);
         assert!(server.try_recv().is_none());
     }
+
+    /// python-can reads the rawmode `< ok >` with one `recv()` and compares it whole: a
+    /// client that joins a running bus and reaches that `recv()` late must still find the
+    /// reply alone, not glued to frames. It may send at once.
+    #[test]
+    fn the_rawmode_reply_is_not_glued_to_frames() {
+        use crate::socketcand::RAW_MODE_GRACE;
+        assert!(
+            RAW_MODE_GRACE >= Duration::from_millis(30),
+            "room for a late recv()"
+        );
+        let server = SocketcandServer::start("127.0.0.1:0").unwrap();
+        let address = server.address();
+        let client = std::thread::spawn(move || {
+            let mut client = TcpStream::connect(address).unwrap();
+            client
+                .set_read_timeout(Some(Duration::from_millis(50)))
+                .unwrap();
+            let mut got = String::new();
+            read_until(&mut client, &mut got, "< hi >");
+            client.write_all(b"< open can0 >").unwrap();
+            read_until(&mut client, &mut got, "< hi >< ok >");
+            client.write_all(b"< rawmode >< send 123 1 01 >").unwrap();
+            // A slow client: the reply (and, without the grace, frames) arrive before it
+            // reads.
+            std::thread::sleep(Duration::from_millis(10));
+            read_until(&mut client, &mut got, "< hi >< ok >< ok >");
+            let handshake = got.clone();
+            // Frames follow after the grace.
+            read_until(&mut client, &mut got, "< frame 003 ");
+            handshake
+        });
+        // The bus is busy: a frame every millisecond.
+        let mut t_us = 0;
+        while !client.is_finished() {
+            server.broadcast(t_us, &Frame::new(0x003, &[42]).unwrap(), None);
+            t_us += 1000;
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let handshake = client.join().unwrap();
+        assert_eq!(
+            handshake, "< hi >< ok >< ok >",
+            "the rawmode reply must come alone"
+        );
+        // The send right after rawmode was accepted.
+        assert_eq!(
+            server.try_recv().map(|f| f.frame),
+            Some(Frame::new(0x123, &[1]).unwrap())
+        );
+        assert_eq!(server.refused_commands(), 0);
+    }
 }
 
 #[test]
