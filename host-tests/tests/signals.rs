@@ -114,3 +114,57 @@ brake = 0.0
         .expect("off again");
     assert!(off.t_s <= 3.05, "off at {:.3} s", off.t_s);
 }
+
+/// The headlight switch on the console lights the headlights (through the console ECU),
+/// and the engine-mode switch reaches the engine ECU's EngineMsg through AccMsg.
+#[test]
+fn console_switches_reach_the_car_and_the_bus() {
+    let s = inline(
+        r#"
+name = "console"
+duration_s = 3.0
+[driver]
+economy_mode = false
+[[at]]
+t_s = 1.0
+headlights = true
+economy_mode = true
+"#,
+    );
+    let r = run(&s);
+    assert!(!at(&r.trace, 0.9).headlights);
+    let on = r
+        .trace
+        .iter()
+        .find(|row| row.headlights)
+        .expect("headlights came on");
+    assert!(on.t_s <= 1.02, "on at {:.3} s", on.t_s);
+    // EngineMsg echoes the mode: sport before the switch, economy within a few frames after.
+    let modes: Vec<(u64, autoplug_can::EngineMode)> = r
+        .log
+        .iter()
+        .filter_map(|e| match Message::from_frame(&e.frame) {
+            Ok(Message::EngineMsg(m)) => Some((e.t_us, m.engine_mode)),
+            _ => None,
+        })
+        .collect();
+    let before: Vec<_> = modes
+        .iter()
+        .filter(|(t, _)| *t > 300_000 && *t < 1_000_000)
+        .collect();
+    assert!(
+        !before.is_empty()
+            && before
+                .iter()
+                .all(|(_, m)| *m == autoplug_can::EngineMode::Sport)
+    );
+    let switched = modes
+        .iter()
+        .find(|(t, m)| *t >= 1_000_000 && *m == autoplug_can::EngineMode::Economy)
+        .expect("EngineMsg reports economy");
+    assert!(
+        switched.0 <= 1_060_000,
+        "economy on the bus at {} us",
+        switched.0
+    );
+}
