@@ -168,3 +168,63 @@ economy_mode = true
         switched.0
     );
 }
+
+/// The pedals ECU reads both pedals and reports them: PedalAccel and PedalBrake on the bus
+/// carry the driver's pedals (no cruise, no traction cut here) within their 1 % step.
+#[test]
+fn pedal_commands_on_the_bus_follow_the_pedals() {
+    let s = inline(
+        r#"
+name = "pedals"
+duration_s = 6.0
+[[at]]
+t_s = 0.5
+ramp_s = 1.0
+accelerator = 40.0
+[[at]]
+t_s = 3.0
+accelerator = 0.0
+ramp_s = 0.5
+brake = 35.0
+"#,
+    );
+    let mut car = VirtualCar::new(&s);
+    let (mut accel_frames, mut brake_frames) = (0, 0);
+    while !car.finished() {
+        let pedals = *car.controls();
+        let seen = car.log().len();
+        car.tick();
+        for entry in &car.log()[seen..] {
+            // A ramp of 40 %/s moves 0.4 % in the 10 ms since the ECU sampled.
+            match Message::from_frame(&entry.frame).expect("catalogue frame") {
+                Message::PedalAccel(m) => {
+                    accel_frames += 1;
+                    let driver = if pedals.brake > 5.0 {
+                        0.0
+                    } else {
+                        pedals.accelerator
+                    };
+                    assert!(
+                        (f64::from(m.accel_cmd) - driver).abs() <= 0.5 + 0.8,
+                        "AccelCmd {} vs pedal {driver:.2}",
+                        m.accel_cmd
+                    );
+                }
+                Message::PedalBrake(m) => {
+                    brake_frames += 1;
+                    assert!(
+                        (f64::from(m.brake_cmd) - pedals.brake).abs() <= 0.5 + 0.8,
+                        "BrakeCmd {} vs pedal {:.2}",
+                        m.brake_cmd,
+                        pedals.brake
+                    );
+                }
+                _ => {}
+            }
+        }
+    }
+    assert!(
+        accel_frames >= 595 && brake_frames >= 595,
+        "{accel_frames} / {brake_frames} frames in 6 s"
+    );
+}
