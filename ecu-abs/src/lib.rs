@@ -11,10 +11,29 @@
 //! [`ABS_MIN_SPEED_KMH`], the ECU computes each wheel's slip
 //! `(v − v_wheel) / max(v, SLIP_SPEED_FLOOR_KMH)`. A wheel whose slip exceeds
 //! [`SLIP_THRESHOLD`] is slipping: its control channel engages and a PID on the slip error
-//! (`slip − SLIP_TARGET`, target just below the tyre's peak-friction slip) computes an ABS
+//! (`slip − target`, the target just below the tyre's peak-friction slip) computes an ABS
 //! release command in 0..100. The brake applied to each wheel is the driver's command
 //! minus the release, limited to [0, 100]; it is never above the driver's command.
 //!
+//! - **Slip target: the tyre's own friction peak.** [`SLIP_TARGET`] is just below the
+//!   peak-friction slip of a tyre on dry asphalt. On ice and snow the peak lies at a few
+//!   per cent (Burckhardt's friction curves; so do the vehicle model's tyres, whose slip
+//!   stiffness does not depend on the road), and a wheel held at 12 % there is far past
+//!   its peak: it has lost a part of its braking force and nearly all its side force.
+//!   Other low-friction surfaces (wet cobblestones) peak at 12–15 % like asphalt, so the
+//!   ECU does not guess the peak from the friction: it measures it. When a channel has to
+//!   release its wheel completely (see *Saturation* below), the wheel spins back up under
+//!   its tyre's force alone, so its acceleration is largest at the slip of the friction
+//!   peak. From then on the channel regulates to [`PEAK_TARGET_FRACTION`] of the slip at
+//!   that hardest acceleration (between [`SLIP_TARGET_MIN`] and [`SLIP_TARGET_MAX`]). The
+//!   measurement only counts if the wheel was seen accelerating harder towards the peak
+//!   (by [`PEAK_RISE_FACTOR`] to [`PEAK_RISE_MAX_FACTOR`]; more means the road changed)
+//!   after the brake pressure had fallen ([`PEAK_LEARN_SETTLE_S`]), so a fast recovery on
+//!   a high-friction road teaches nothing and keeps [`SLIP_TARGET`]. If the road gets
+//!   better (the car decelerates more than the learned peak suggests), the target follows
+//!   the deceleration up again: [`SLIP_TARGET`] × deceleration /
+//!   [`DECEL_AT_FULL_FRICTION_MPS2`] (deceleration from VehicleSpeedMsg, low-pass filtered
+//!   over [`DECEL_FILTER_TAU_S`]). A new stop starts again from [`SLIP_TARGET`].
 //! - **Channels.** Three, as in a classic 3-channel ABS: front left and front right are
 //!   controlled individually (the fronts carry most of the braking); the rear axle is one
 //!   channel controlled on the rear wheel with the *larger* slip, and both rear wheels get
@@ -22,12 +41,30 @@
 //!   wheel can take). On split-μ the rear axle then keeps its side grip and builds no yaw
 //!   moment, so the car keeps its heading; the cost is a little rear braking on the
 //!   high-μ side.
-//! - **Pulsing.** When a channel's release reaches the driver's command (the brake on that
-//!   wheel is saturated at 0), its PID is reset, as the report's ABS did. The reset is the
-//!   anti-windup against the real actuator limit (the driver's command, not 100): the
-//!   wheel is fully released and spins up, and the controller restarts from its P + D
-//!   response, so the brake pressure pulses. Only the saturated channel is reset: resetting
-//!   the others would dump the release they hold and lock them.
+//! - **Yaw-moment limit on the front axle** (modified individual control): while the front
+//!   axle is under ABS control, the front wheel braked harder may exceed the other's
+//!   applied brake by at most a margin that starts at [`YAW_DELAY_INITIAL_MARGIN`] and
+//!   grows at [`YAW_DELAY_MARGIN_RATE_PER_S`]. On split friction the front axle thus brakes
+//!   almost select-low: the high-friction side adds little yaw moment, which matters
+//!   because the ABS cannot count on the driver counter-steering (the virtual car's driver
+//!   holds the wheel straight). On even friction both fronts brake alike and the limit
+//!   does nothing.
+//! - **Saturation (pulsing).** When a channel's release reaches the driver's command (the
+//!   wheel's brake is released completely), the wheel is held released until it has spun
+//!   back up: its slip below [`RECOVERED_SLIP`], or its acceleration fallen to
+//!   [`PEAK_PASSED_FRACTION`] of its maximum (past the friction peak), at most
+//!   [`RECOVERY_TIMEOUT_US`]. Then the controller is reset, as the report's ABS did, but to
+//!   the brake the tyre was measured to carry rather than to zero: the unbraked wheel's
+//!   hardest acceleration `a` gives the tyre's torque `I·a/r` (calibration:
+//!   [`WHEEL_INERTIA_KGM2`], [`WHEEL_RADIUS_M`], [`BRAKE_TORQUE_AT_FULL_NM`]), and the brake
+//!   returns at [`REAPPLY_FRACTION`] of it (a pressure memory). Between saturations the
+//!   integral holds at most the driver's command: anti-windup against the real actuator
+//!   limit (the driver's command, not 100). The pressure pulses around the level the road
+//!   can take. (The report's reset to zero threw away the integral, which on a
+//!   low-friction road *is* the release the wheel needs: the controller re-applied its
+//!   P-term brake, 10–20 %, while the wheel was still deep in slip. A front tyre on
+//!   μ = 0.2 carries only ≈ 9 % of the front brake, so the released wheel stayed ≈ 30 km/h
+//!   slow.)
 //! - **Timeout.** The ABS has *acted* in a step when a wheel was slipping or a release of
 //!   at least [`RELEASE_ACTIVE_MIN`] was commanded. After [`ABS_TIMEOUT_US`] without
 //!   acting, every channel disengages: PIDs reset, release 0, so the next event starts
@@ -114,9 +151,78 @@ pub const ABS_MIN_SPEED_KMH: f32 = 5.0;
 /// so that an engaged channel keeps being seen as acting while it regulates.
 pub const SLIP_THRESHOLD: f32 = 0.10;
 
-/// Slip the ABS regulates to: just below the tyre's peak-friction slip (~0.15), on the
-/// stable side of the friction curve where the tyre still steers.
+/// Slip the ABS regulates to until a channel has measured its tyre's friction peak: just
+/// below the peak-friction slip on a high-friction road (~0.13), on the stable side of the
+/// friction curve where the tyre still steers.
 pub const SLIP_TARGET: f32 = 0.12;
+
+/// Smallest slip target, for ice: its peak-friction slip is a few per cent. Also keeps
+/// the target clear of the 1 km/h resolution of the speed reference.
+pub const SLIP_TARGET_MIN: f32 = 0.03;
+
+/// A channel that has measured its tyre's peak-friction slip regulates to this fraction
+/// of it: just on the stable side of the peak, where the tyre still has side force.
+pub const PEAK_TARGET_FRACTION: f32 = 0.9;
+
+/// While a released wheel spins back up, its acceleration is not used for this long after
+/// the release, s: the brake pressure is still falling (about four of its time constants),
+/// so the acceleration says more about the brake than about the tyre.
+pub const PEAK_LEARN_SETTLE_S: f32 = 0.08;
+
+/// Least wheel acceleration (ω̇·r, m/s²) that counts as a tyre pulling its wheel back up:
+/// a front tyre on ice (μ = 0.2) gives about 50–70 m/s².
+pub const PEAK_LEARN_MIN_ACCEL_MPS2: f32 = 10.0;
+
+/// A released wheel's acceleration must have risen by at least this factor above its
+/// first valid sample for its maximum to count as the tyre's peak (the recovery started
+/// beyond the peak, on the falling side of the friction curve, and went through it) ...
+pub const PEAK_RISE_FACTOR: f32 = 1.1;
+
+/// ... and by at most this factor: a sliding tyre keeps 0.6–0.9 of its peak friction, so a
+/// larger rise means the road changed under the wheel (ice to asphalt), not a peak.
+pub const PEAK_RISE_MAX_FACTOR: f32 = 2.0;
+
+/// A released wheel has passed its tyre's friction peak when its acceleration has fallen
+/// below this fraction of the largest value seen: the release ends, and the slip at which
+/// the wheel accelerated hardest is the tyre's peak-friction slip.
+pub const PEAK_PASSED_FRACTION: f32 = 0.85;
+
+/// A released wheel whose slip is below this has spun back up: the release ends (and the
+/// peak is taken where the wheel accelerated hardest, if it had not been seen to pass).
+pub const RECOVERED_SLIP: f32 = 0.03;
+
+/// Largest slip target a measured peak can give: tyres on some surfaces peak at 15–20 %.
+pub const SLIP_TARGET_MAX: f32 = 0.18;
+
+/// Longest full release while a wheel spins back up, µs; a recovery that takes longer
+/// teaches nothing.
+pub const RECOVERY_TIMEOUT_US: u64 = 600_000;
+
+/// After a full release the brake returns at this fraction of the torque the tyre was
+/// measured to carry (the unbraked wheel's hardest acceleration), so the wheel comes back
+/// just under its peak instead of from zero or from full brake.
+pub const REAPPLY_FRACTION: f32 = 0.9;
+
+/// Calibration of the EVO VI's brakes: brake torque at 100 % command, N·m, per channel
+/// (front left, front right, rear), as in the vehicle model's parameters (Brembo 4-pot
+/// front, 2-pot rear).
+pub const BRAKE_TORQUE_AT_FULL_NM: [f32; 3] = [3000.0, 3000.0, 1400.0];
+
+/// Calibration: rotating inertia of one wheel with its brake disc and half shaft, kg·m².
+pub const WHEEL_INERTIA_KGM2: f32 = 1.2;
+
+/// Calibration: rolling radius of the 225/45 ZR17 tyres, m.
+pub const WHEEL_RADIUS_M: f32 = 0.31;
+
+/// Deceleration the car reaches under ABS on a road of friction 1 (dry asphalt), m/s²
+/// (0.92 g): once a channel has learned a low peak slip, its target rises again with the
+/// deceleration relative to this (a better road).
+pub const DECEL_AT_FULL_FRICTION_MPS2: f32 = 9.0;
+
+/// Time constant of the low-pass filter on the vehicle deceleration, s: smooths the
+/// 1 km/h steps of VehicleSpeedMsg (one every 30 ms at 1 g, every 140 ms on ice) and
+/// still follows a change of road within about a second.
+pub const DECEL_FILTER_TAU_S: f32 = 0.3;
 
 /// Slip is computed relative to at least this speed (km/h). At low speed the 1 km/h
 /// resolution of VehicleSpeedMsg would make the relative slip noise; below this speed the
@@ -135,15 +241,22 @@ pub const ABS_TUNING: PidConfig = PidConfig {
     output_max: 100.0,
 };
 
-/// Front-axle yaw-moment build-up delay: while the front axle is under ABS control, the
-/// front wheel braked harder may exceed the other's applied brake by at most this margin
-/// at first, in percentage points...
-pub const YAW_DELAY_INITIAL_MARGIN: f32 = 10.0;
+/// Front-axle yaw-moment limit: while the front axle is under ABS control, the front wheel
+/// braked harder may exceed the other's applied brake by at most this margin at first, in
+/// percentage points: on split friction the front axle starts select-low...
+///
+/// Why so strict: each point of front brake difference is ≈ 30 N·m of brake torque, a
+/// yaw moment of ≈ 75 N·m. With the low-friction tyres braking at their limit the car
+/// has only about half its cornering stiffness to resist it, and a yaw moment of a few
+/// hundred N·m held for the ten seconds of a stop on ice turns an uncorrected car by
+/// 10–20°; the high-friction side's extra braking would shorten that stop by only a few
+/// per cent.
+pub const YAW_DELAY_INITIAL_MARGIN: f32 = 0.0;
 
-/// ... and the margin then grows at this rate, %/s, so the yaw moment of the high-friction
-/// side builds up slowly instead of spinning the car (full asymmetry after several seconds,
-/// when speed has dropped).
-pub const YAW_DELAY_MARGIN_RATE_PER_S: f32 = 15.0;
+/// ... and the margin then grows at this rate, %/s: a slow build-up (a real yaw-moment
+/// build-up delay reaches full asymmetry within a second or two, for a driver who
+/// counter-steers), so that the yaw moment stays small while the speed is high.
+pub const YAW_DELAY_MARGIN_RATE_PER_S: f32 = 0.3;
 
 /// The ABS channel controller, built at compile time: an invalid tuning fails the build.
 const ABS_PID: Pid = match Pid::new(ABS_TUNING) {
@@ -229,6 +342,31 @@ pub const WHEEL_SENSOR_DTCS: [Dtc; 4] = [
 /// ABS control channels: front left, front right, rear axle (select-low).
 const CHANNELS: usize = 3;
 
+/// What a channel's full release does in this step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Release {
+    /// No full release in progress.
+    None,
+    /// The wheel is still spinning back up: keep the brake released.
+    Holding,
+    /// The wheel has spun back up: brake again, at this brake command (0..100) if the
+    /// tyre's force could be measured.
+    Ended(Option<f32>),
+}
+
+/// A completely released wheel spinning back up, watched for its tyre's friction peak.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Recovery {
+    /// When the release began.
+    since: Instant,
+    /// The first wheel acceleration seen after the settling time, m/s².
+    first_accel_mps2: Option<f32>,
+    /// Largest wheel acceleration seen after the settling time, m/s².
+    max_accel_mps2: f32,
+    /// The channel's slip at that acceleration.
+    slip_at_max: f32,
+}
+
 /// Sensor readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -288,6 +426,8 @@ pub struct Status {
     pub brake: [f32; 4],
     /// Whether any ABS channel is engaged.
     pub abs_active: bool,
+    /// Slip each ABS channel regulates to (front left, front right, rear axle).
+    pub slip_target: [f32; 3],
     /// Whether traction control is engaged.
     pub traction_active: bool,
     /// Traction-control cut, 0..100.
@@ -305,6 +445,16 @@ pub struct AbsEcu {
     abs_last_acted: Option<Instant>,
     /// Allowed front-axle brake difference while the front axle is under control, %.
     yaw_delay_margin: Option<f32>,
+    /// Low-pass filtered vehicle deceleration while braking, m/s², for the slip target.
+    decel_mps2: f32,
+    /// The speed reference at the previous braking step, km/h.
+    previous_speed_kmh: Option<f32>,
+    /// Wheel speeds at the previous braking step, km/h.
+    previous_wheels_kmh: Option<[f32; 4]>,
+    /// Per channel: a full release in progress, watched for the friction peak.
+    recovery: [Option<Recovery>; CHANNELS],
+    /// Per channel: the tyre's peak-friction slip, once measured in this stop.
+    peak_slip: [Option<f32>; CHANNELS],
     tc_pid: Pid,
     tc_last_acted: Option<Instant>,
     pedal_lost_since: Option<Instant>,
@@ -330,6 +480,11 @@ impl AbsEcu {
             engaged: [false; CHANNELS],
             abs_last_acted: None,
             yaw_delay_margin: None,
+            decel_mps2: 0.0,
+            previous_speed_kmh: None,
+            previous_wheels_kmh: None,
+            recovery: [None; CHANNELS],
+            peak_slip: [None; CHANNELS],
             tc_pid: TC_PID,
             tc_last_acted: None,
             pedal_lost_since: None,
@@ -441,42 +596,154 @@ impl AbsEcu {
         }
     }
 
+    /// Forgets what the last stop learned about the road: the next one starts from
+    /// [`SLIP_TARGET`].
+    fn reset_friction_estimate(&mut self) {
+        self.decel_mps2 = 0.0;
+        self.previous_speed_kmh = None;
+        self.previous_wheels_kmh = None;
+        self.recovery = [None; CHANNELS];
+        self.peak_slip = [None; CHANNELS];
+    }
+
+    /// Follows the vehicle deceleration while braking (speed reference `v`, km/h).
+    fn update_friction_estimate(&mut self, v: f32, dt_s: f32) {
+        if let Some(previous) = self.previous_speed_kmh {
+            if dt_s > 0.0 {
+                let raw = (previous - v) / 3.6 / dt_s;
+                let alpha = dt_s / (DECEL_FILTER_TAU_S + dt_s);
+                self.decel_mps2 += (raw - self.decel_mps2) * alpha;
+            }
+        }
+        self.previous_speed_kmh = Some(v);
+    }
+
+    /// The slip channel `ch` regulates to: [`SLIP_TARGET`] until the channel has measured
+    /// its tyre's peak, then just below the peak, or higher if the car decelerates more
+    /// than that peak suggests; within [`SLIP_TARGET_MIN`]..=[`SLIP_TARGET_MAX`].
+    fn slip_target(&self, ch: usize) -> f32 {
+        match self.peak_slip.get(ch).copied().flatten() {
+            None => SLIP_TARGET,
+            Some(peak) => {
+                let friction = limit(self.decel_mps2 / DECEL_AT_FULL_FRICTION_MPS2, 0.0, 1.0);
+                let target = (PEAK_TARGET_FRACTION * peak).max(SLIP_TARGET * friction);
+                limit(target, SLIP_TARGET_MIN, SLIP_TARGET_MAX)
+            }
+        }
+    }
+
+    /// Follows a completely released wheel spinning back up (slip `slip`, acceleration
+    /// `accel_mps2`).
+    fn watch_recovery(&mut self, ch: usize, now: Instant, slip: f32, accel_mps2: f32) -> Release {
+        let Some(recovery) = self.recovery.get_mut(ch).and_then(|r| r.as_mut()) else {
+            return Release::None;
+        };
+        let elapsed = now.micros_since(recovery.since);
+        if elapsed >= (PEAK_LEARN_SETTLE_S * 1e6) as u64 {
+            recovery.first_accel_mps2.get_or_insert(accel_mps2);
+            if accel_mps2 > recovery.max_accel_mps2 {
+                recovery.max_accel_mps2 = accel_mps2;
+                recovery.slip_at_max = slip;
+            }
+        }
+        if elapsed >= RECOVERY_TIMEOUT_US {
+            self.recovery[ch] = None;
+            return Release::Ended(None);
+        }
+        // A maximum only counts as the friction peak if the wheel was seen accelerating
+        // harder towards it: the recovery started beyond the peak and went through it.
+        let through_peak = recovery.max_accel_mps2 >= PEAK_LEARN_MIN_ACCEL_MPS2
+            && recovery.first_accel_mps2.is_some_and(|first| {
+                recovery.max_accel_mps2 >= PEAK_RISE_FACTOR * first
+                    && recovery.max_accel_mps2 <= PEAK_RISE_MAX_FACTOR * first
+            });
+        let peak_passed =
+            through_peak && accel_mps2 < PEAK_PASSED_FRACTION * recovery.max_accel_mps2;
+        if slip >= RECOVERED_SLIP && !peak_passed {
+            return Release::Holding;
+        }
+        // Spun back up through the friction peak: the hardest acceleration was there.
+        let learned = through_peak.then_some(recovery.slip_at_max);
+        // The unbraked wheel's hardest acceleration measures the most its tyre carries:
+        // ω̇·I = F·r, so a brake torque of I·a/r holds the wheel there.
+        let reapply = (recovery.max_accel_mps2 >= PEAK_LEARN_MIN_ACCEL_MPS2).then(|| {
+            let torque_nm = WHEEL_INERTIA_KGM2 * recovery.max_accel_mps2 / WHEEL_RADIUS_M;
+            let full_nm = BRAKE_TORQUE_AT_FULL_NM[ch.min(CHANNELS - 1)];
+            REAPPLY_FRACTION * 100.0 * torque_nm / full_nm
+        });
+        self.recovery[ch] = None;
+        if learned.is_some() {
+            self.peak_slip[ch] = learned;
+        }
+        Release::Ended(reapply)
+    }
+
     /// The ABS release per wheel.
     fn abs(&mut self, now: Instant, v: f32, wheels: &[f32; 4], brake: f32, dt_s: f32) -> [f32; 4] {
         if self.variant == Variant::Faulty || brake <= BRAKING_THRESHOLD || v < ABS_MIN_SPEED_KMH {
             self.abs_off();
+            self.reset_friction_estimate();
             return [0.0; 4];
         }
+        self.update_friction_estimate(v, dt_s);
         let [fl, fr, rl, rr] = wheels.map(|w| (v - w) / v.max(SLIP_SPEED_FLOOR_KMH));
         // Select-low on the rear axle: the rear channel follows the wheel that slips more.
+        let rear_wheel = if rr > rl { 3 } else { 2 };
         let channel_slip = [fl, fr, rl.max(rr)];
+        let channel_wheel = [0, 1, rear_wheel];
+        // Wheel accelerations ω̇·r, m/s².
+        let accel = match self.previous_wheels_kmh {
+            Some(previous) if dt_s > 0.0 => {
+                core::array::from_fn(|i| (wheels[i] - previous[i]) / 3.6 / dt_s)
+            }
+            _ => [0.0f32; 4],
+        };
+        self.previous_wheels_kmh = Some(*wheels);
         let was_active = self.engaged.iter().any(|e| *e);
         let mut release = [0.0f32; CHANNELS];
         let mut acted = false;
-        for (((pid, engaged), slip), out) in self
-            .abs_pids
-            .iter_mut()
-            .zip(self.engaged.iter_mut())
-            .zip(channel_slip)
-            .zip(release.iter_mut())
-        {
+        for ch in 0..CHANNELS {
+            let slip = channel_slip[ch];
             if slip > SLIP_THRESHOLD {
-                *engaged = true;
+                self.engaged[ch] = true;
                 acted = true;
             }
-            if !*engaged {
+            if !self.engaged[ch] {
                 continue;
+            }
+            let phase = self.watch_recovery(ch, now, slip, accel[channel_wheel[ch]]);
+            let target = self.slip_target(ch);
+            let holding = phase == Release::Holding;
+            let pid = &mut self.abs_pids[ch];
+            if let Release::Ended(Some(reapply)) = phase {
+                // Brake again at what the tyre was measured to carry (pressure memory).
+                pid.set_integral(brake - limit(reapply, 0.0, brake));
             }
             // Reverse-acting loop: negating set point and measurement gives the error
             // `slip − target` and a derivative on +slip, so more slip means more release.
-            let command = pid.update(-SLIP_TARGET, -slip, dt_s);
-            acted |= command >= RELEASE_ACTIVE_MIN;
-            if command >= brake {
-                // The brake on this wheel is saturated at 0: reset (pulsing).
-                pid.reset();
+            let command = pid.update(-target, -slip, dt_s);
+            acted |= command >= RELEASE_ACTIVE_MIN || holding;
+            if pid.integral() > brake || holding {
+                // Anti-windup against the real limit: releasing more than the driver
+                // brakes has no effect, so the integral holds at most the driver's command
+                // (and all of it while the wheel spins back up).
+                pid.set_integral(brake);
+            }
+            if holding {
+                release[ch] = brake;
+                continue;
+            }
+            if command >= brake && slip > target {
+                // Released completely: watch the wheel spin back up for its peak.
+                self.recovery[ch] = Some(Recovery {
+                    since: now,
+                    first_accel_mps2: None,
+                    max_accel_mps2: 0.0,
+                    slip_at_max: slip,
+                });
             }
             // Releasing more than the driver brakes has no effect: report what acts.
-            *out = command.min(brake);
+            release[ch] = command.min(brake);
         }
         if acted {
             self.abs_last_acted = Some(now);
@@ -496,11 +763,11 @@ impl AbsEcu {
         [r_fl, r_fr, r_rear, r_rear]
     }
 
-    /// Yaw-moment build-up delay on the front axle (split friction): while the front axle
-    /// is under ABS control, the front wheel braked harder may exceed the other's applied
-    /// brake by at most a margin that grows with time. On even friction both fronts brake
+    /// Yaw-moment limit on the front axle (split friction): while the front axle is under
+    /// ABS control, the front wheel braked harder may exceed the other's applied brake by
+    /// at most a margin that grows slowly with time. On even friction both fronts brake
     /// alike and this does nothing; on split friction it keeps the high-friction side from
-    /// yawing the car before the margin has grown (and the speed has dropped).
+    /// yawing the car.
     fn delay_yaw_moment(&mut self, release: [f32; 2], brake: f32, dt_s: f32) -> [f32; 2] {
         if !(self.engaged[0] || self.engaged[1]) {
             self.yaw_delay_margin = None;
@@ -605,6 +872,7 @@ impl EcuLogic for AbsEcu {
             (release, cut)
         } else {
             self.abs_off();
+            self.reset_friction_estimate();
             self.tc_off();
             ([0.0; 4], 0.0)
         };
@@ -619,6 +887,7 @@ impl EcuLogic for AbsEcu {
             release,
             brake: [a, b, c, d],
             abs_active: self.engaged.iter().any(|e| *e),
+            slip_target: core::array::from_fn(|ch| self.slip_target(ch)),
             traction_active: self.tc_last_acted.is_some(),
             traction_cut: cut,
         };

@@ -63,12 +63,18 @@ pub mod plant {
 
     /// Normalised friction (peak 1) at `slip` (positive braking, negative driving).
     pub fn friction(slip: f32) -> f32 {
+        friction_peaking_at(slip, SLIP_PEAK)
+    }
+
+    /// Normalised friction (peak 1 at slip `peak`) at `slip` (positive braking, negative
+    /// driving).
+    pub fn friction_peaking_at(slip: f32, peak: f32) -> f32 {
         let s = slip.abs();
-        let f = if s <= SLIP_PEAK {
-            let x = s / SLIP_PEAK;
+        let f = if s <= peak {
+            let x = s / peak;
             2.0 * x - x * x
         } else {
-            let past = ((s - SLIP_PEAK) / (1.0 - SLIP_PEAK)).min(1.0);
+            let past = ((s - peak) / (1.0 - peak)).min(1.0);
             1.0 - (1.0 - SLIDING_RATIO) * past
         };
         if slip < 0.0 {
@@ -95,6 +101,9 @@ pub mod plant {
         pub brake_torque_max_nm: f32,
         /// Brake lag time constant, s.
         pub brake_lag_s: f32,
+        /// Slip of the tyres' peak friction ([`SLIP_PEAK`] unless changed: ice peaks at a
+        /// few per cent).
+        pub slip_peak: f32,
     }
 
     impl Plant {
@@ -109,6 +118,7 @@ pub mod plant {
                 distance_m: 0.0,
                 brake_torque_max_nm: BRAKE_TORQUE_MAX_NM,
                 brake_lag_s: BRAKE_LAG_S,
+                slip_peak: SLIP_PEAK,
             }
         }
 
@@ -142,7 +152,7 @@ pub mod plant {
                     let slip =
                         (self.v_mps - wheel_v) / self.v_mps.max(wheel_v).max(SLIP_SPEED_FLOOR_MPS);
                     // Road force on the car along x (negative when braking).
-                    let fx = -friction(slip) * mu * fz;
+                    let fx = -friction_peaking_at(slip, self.slip_peak) * mu * fz;
                     force += fx;
                     let torque = drive - *torque_now - WHEEL_RADIUS_M * fx;
                     *omega = (*omega + torque / WHEEL_INERTIA * DT_S).max(0.0);
@@ -176,6 +186,8 @@ pub struct BrakeRun {
     pub release_changes: u32,
     /// Largest release difference between the two rear wheels.
     pub rear_release_mismatch: f32,
+    /// Lowest slip target any channel regulated to.
+    pub lowest_slip_target: f32,
 }
 
 /// Brakes with `pedal` from `kmh` to a standstill on roads of peak friction `mu`, feeding
@@ -201,6 +213,7 @@ pub fn brake_run_on(
         release_steps: 0,
         release_changes: 0,
         rear_release_mismatch: 0.0,
+        lowest_slip_target: f32::MAX,
     };
     let mut lock_ms = [0u64; 4];
     let mut last_release = [0.0f32; 4];
@@ -234,6 +247,9 @@ pub fn brake_run_on(
         last_release = status.release;
         let [_, _, rl, rr] = status.release;
         run.rear_release_mismatch = run.rear_release_mismatch.max((rl - rr).abs());
+        for target in status.slip_target {
+            run.lowest_slip_target = run.lowest_slip_target.min(target);
+        }
         while ecu.poll_transmit(us(t)).is_some() {}
 
         car.advance(step_s, out.brake, [0.0; 4]);
@@ -497,20 +513,94 @@ pub fn front_axle_yaw_moment_builds_up_slowly() {
     assert_eq!(out.brake[0], out.brake[1]);
 }
 
-/// When a release saturates the brake (applied 0) the channel's PID is reset: the next
-/// step starts again from the P + D response instead of the wound-up integral.
+/// When a release saturates the brake (applied 0) the channel holds the wheel released
+/// until it has spun back up (a fresh P + D response would brake a wheel still deep in
+/// slip again), watching its acceleration. Then the controller is reset to the brake the
+/// tyre was measured to carry (the unbraked wheel's hardest acceleration, I·a/r), and the
+/// channel regulates to just below the slip of that hardest acceleration, the tyre's
+/// friction peak.
 pub fn saturated_brake_resets_the_controller() {
     let mut ecu = AbsEcu::new(Variant::Correct, ms(0));
     // Deep slip with a light driver command: the release reaches the command at once.
     step_with(&mut ecu, 0, 100.0, 20.0, [50.0, 98.0, 98.0, 98.0]);
     assert_eq!(ecu.status().release[0], 20.0);
     assert_eq!(ecu.status().brake[0], 0.0);
-    // A modest slip afterwards: a fresh controller's response, not a wound-up one.
-    step_with(&mut ecu, 5_000, 100.0, 20.0, [85.0, 98.0, 98.0, 98.0]);
-    let mut fresh = AbsEcu::new(Variant::Correct, ms(0));
-    step_with(&mut fresh, 5_000, 100.0, 20.0, [85.0, 98.0, 98.0, 98.0]);
-    assert_eq!(ecu.status().release[0], fresh.status().release[0]);
-    assert!(ecu.status().release[0] > 0.0 && ecu.status().release[0] < 20.0);
+    // The wheel spins back up (5 ms steps). For the first 80 ms the brake pressure is
+    // still falling and the acceleration is not used; then it rises to 50 m/s² at 3.5 %
+    // slip and drops: the tyre's peak has passed.
+    let mut wheel = 85.0f32;
+    let mut t = 0;
+    let mut step_up = |ecu: &mut AbsEcu, t: &mut u64, dw: f32| {
+        *t += 5_000;
+        wheel += dw;
+        step_with(ecu, *t, 100.0, 20.0, [wheel, 98.0, 98.0, 98.0]);
+        ecu.status()
+    };
+    for _ in 0..16 {
+        let status = step_up(&mut ecu, &mut t, 0.5);
+        assert_eq!(status.brake[0], 0.0, "held released at {} km/h", wheel);
+        assert_eq!(status.slip_target[0], SLIP_TARGET);
+    }
+    for dw in [0.5, 0.6, 0.7, 0.8, 0.9] {
+        assert_eq!(step_up(&mut ecu, &mut t, dw).brake[0], 0.0);
+    }
+    // 50 m/s² was the hardest (0.9 km/h in 5 ms), at 96.5 km/h: 3.5 % slip.
+    let status = step_up(&mut ecu, &mut t, 0.5);
+    let peak_target = PEAK_TARGET_FRACTION * 0.035;
+    assert!(
+        (status.slip_target[0] - peak_target).abs() < 1e-3,
+        "target {} after a peak at 3.5 % slip",
+        status.slip_target[0]
+    );
+    // Braking again from about what the tyre carried: 1.2 · 50 / 0.31 ≈ 194 N·m, 6.5 % of
+    // the front brake, times REAPPLY_FRACTION (plus the D term's response to the wheel
+    // still spinning up), well under the driver's 20 %.
+    let reapply = REAPPLY_FRACTION * 100.0 * 1.2 * 50.0 / 0.31 / 3000.0;
+    assert!(
+        status.brake[0] >= reapply && status.brake[0] < 2.5 * reapply,
+        "brakes again at {} (expected from {})",
+        status.brake[0],
+        reapply
+    );
+    // The other channels learned nothing.
+    assert_eq!(status.slip_target[1], SLIP_TARGET);
+    assert_eq!(status.slip_target[2], SLIP_TARGET);
+}
+
+/// The slip target follows the tyre's own friction peak, measured when a wheel has to be
+/// released completely and spins back up. On ice whose friction peaks at 3 % slip (as the
+/// vehicle model's tyres do on μ = 0.2) the channels learn it and regulate near it, where
+/// a tyre still has side force (the fixed 12 % target held the wheels four times past
+/// the peak), and still stop short without a locked wheel. On a surface that peaks at
+/// 15 % (the test plant's usual tyre, like wet cobblestones) the target stays at
+/// [`SLIP_TARGET`] or above.
+pub fn released_wheel_teaches_the_friction_peak() {
+    let mut ice = plant::Plant::new(100.0, [0.2; 4]);
+    ice.slip_peak = 0.03;
+    let run = brake_run_on(Variant::Correct, ice, 100.0, None);
+    assert!(
+        run.lowest_slip_target <= 0.05,
+        "lowest target {} on ice peaking at 3 %",
+        run.lowest_slip_target
+    );
+    let ideal = plant::ideal_stop_m(100.0, 0.2);
+    assert!(
+        run.distance_m <= 1.2 * ideal,
+        "stopped in {} m, ideal {} m",
+        run.distance_m,
+        ideal
+    );
+    assert!(
+        run.longest_lock_ms <= 150,
+        "locked {} ms",
+        run.longest_lock_ms
+    );
+    let usual = brake_run(Variant::Correct, 100.0, [0.2; 4], 100.0);
+    assert!(
+        usual.lowest_slip_target >= SLIP_TARGET,
+        "lowest target {} on a tyre peaking at 15 %",
+        usual.lowest_slip_target
+    );
 }
 
 /// ABS is off below the minimum speed: even a locked wheel gets the driver's brake, so

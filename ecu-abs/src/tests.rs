@@ -14,6 +14,7 @@ shared_cases!(
     rear_axle_is_select_low,
     front_axle_yaw_moment_builds_up_slowly,
     saturated_brake_resets_the_controller,
+    released_wheel_teaches_the_friction_peak,
     abs_inactive_below_the_minimum_speed,
     abs_times_out_after_it_stops_acting,
     traction_control_cuts_on_a_spinning_wheel,

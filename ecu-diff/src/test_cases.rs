@@ -11,6 +11,11 @@ fn ms(t: u64) -> Instant {
     Instant::from_millis(t)
 }
 
+/// A yaw-rate error outside the dead band whose P response (kp × error) stays inside the
+/// split's range, rad/s: the size of the error of a step steer at the limit.
+const ERROR: f32 = 0.12;
+const _: () = assert!(ERROR > YAW_DEAD_BAND_RAD_S && TUNING.kp * ERROR < SPLIT_LIMIT_NM);
+
 /// The other ECUs around the differential ECU.
 struct Bench {
     ecu: DiffEcu,
@@ -140,7 +145,7 @@ pub fn publishes_split_and_yaw_error_every_10_ms() {
 /// positive split (more torque to the right rear: counter-clockwise moment), a negative
 /// error a negative split; the first active step is the P response kp × error.
 pub fn split_sign_follows_the_yaw_error() {
-    for error in [0.5f32, -0.5, 1.2, -1.2] {
+    for error in [ERROR, -ERROR, 0.1, -0.1] {
         let mut bench = Bench::new();
         let split = bench.step(error);
         assert_eq!(bench.mode(), Mode::Active);
@@ -160,32 +165,41 @@ pub fn split_sign_follows_the_yaw_error() {
     // from the error alone.
     let mut bench = Bench::new();
     bench.steering_deg = -45.0;
-    assert!(bench.step(0.5) > 0.0);
+    assert!(bench.step(ERROR) > 0.0);
+    // A large error uses the whole range at once.
+    let mut bench = Bench::new();
+    assert_eq!(bench.step(0.5), SPLIT_LIMIT_NM);
 }
 
-/// Dead band with hysteresis: 0.04 rad/s does not start control, 0.06 does; once active,
-/// 0.04 keeps it active, 0.02 stops it (split 0, PID reset: the next start is pure P).
+/// Dead band with hysteresis: an error just inside [`YAW_DEAD_BAND_RAD_S`] does not start
+/// control, one just outside does; once active, an error between the exit threshold and
+/// the dead band keeps it active, one below [`YAW_DEAD_BAND_EXIT_RAD_S`] stops it (split 0,
+/// PID reset: the next start is pure P).
 pub fn dead_band_with_hysteresis() {
+    let inside = YAW_DEAD_BAND_RAD_S - 0.01;
+    let outside = YAW_DEAD_BAND_RAD_S + 0.01;
+    let between = 0.5 * (YAW_DEAD_BAND_RAD_S + YAW_DEAD_BAND_EXIT_RAD_S);
+    let below = YAW_DEAD_BAND_EXIT_RAD_S - 0.01;
     let mut bench = Bench::new();
-    assert_eq!(bench.hold(0.04, 20), 0.0);
+    assert_eq!(bench.hold(inside, 20), 0.0);
     assert_eq!(bench.mode(), Mode::SmallError);
-    assert_eq!(bench.hold(-0.04, 20), 0.0);
-    let first = bench.step(0.06);
+    assert_eq!(bench.hold(-inside, 20), 0.0);
+    let first = bench.step(outside);
     assert_eq!(bench.mode(), Mode::Active);
-    assert!((first - TUNING.kp * 0.06).abs() < 1e-4);
-    bench.hold(0.06, 100);
-    let inside = bench.step(0.04);
+    assert!((first - TUNING.kp * outside).abs() < 1e-4);
+    bench.hold(outside, 100);
+    let held = bench.step(between);
     assert_eq!(bench.mode(), Mode::Active, "hysteresis");
     assert!(
-        inside > TUNING.kp * 0.04,
+        held > TUNING.kp * between,
         "with the integral built up: {}",
-        inside
+        held
     );
-    assert_eq!(bench.step(0.02), 0.0);
+    assert_eq!(bench.step(below), 0.0);
     assert_eq!(bench.mode(), Mode::SmallError);
-    let restart = bench.step(0.1);
+    let restart = bench.step(ERROR);
     assert!(
-        (restart - TUNING.kp * 0.1).abs() < 1e-4,
+        (restart - TUNING.kp * ERROR).abs() < 1e-4,
         "integral was reset: {}",
         restart
     );
@@ -206,8 +220,12 @@ pub fn control_only_when_fast_turning_and_not_braking() {
     bench.steering_deg = -5.0;
     assert_eq!(bench.step(-1.0), 0.0);
     bench.steering_deg = -20.0;
-    let split = bench.step(-1.0);
-    assert!((split + TUNING.kp).abs() < 1e-4, "fresh start: {}", split);
+    let split = bench.step(-ERROR);
+    assert!(
+        (split + TUNING.kp * ERROR).abs() < 1e-4,
+        "fresh start: {}",
+        split
+    );
     bench.brakes = [0.0, 0.0, 30.0, 0.0];
     assert_eq!(bench.step(-1.0), 0.0);
     assert_eq!(bench.mode(), Mode::Braking);
@@ -216,9 +234,10 @@ pub fn control_only_when_fast_turning_and_not_braking() {
     assert_eq!(bench.mode(), Mode::Active);
 }
 
-/// The report's figure: at −3 rad/s the P term alone asks −60 N·m, the split is clamped
-/// to −50; a long saturation does not wind the integral beyond the limit, so when the error
-/// shrinks to −0.2 rad/s the split comes back off the limit at once.
+/// The report's figure: at −3 rad/s the P term alone asks far more than −50 N·m, the split
+/// is clamped to −50; a long saturation does not wind the integral beyond the limit, so
+/// when the error shrinks to a limit manoeuvre's size the split comes back off the limit
+/// at once.
 pub fn split_is_clamped_without_windup() {
     let mut bench = Bench::new();
     assert_eq!(bench.step(-3.0), -SPLIT_LIMIT_NM);
@@ -230,9 +249,9 @@ pub fn split_is_clamped_without_windup() {
     );
     let mut bench = Bench::new();
     bench.hold(-3.0, 500);
-    let split = bench.step(-0.2);
+    let split = bench.step(-ERROR);
     assert!(split > -SPLIT_LIMIT_NM, "{}", split);
-    assert!(bench.hold(-0.2, 300) > -SPLIT_LIMIT_NM);
+    assert!(bench.hold(-ERROR, 300) > -SPLIT_LIMIT_NM);
 }
 
 /// Closed loop on a yaw-error plant (`de/dt = −e/τ − g × split`, the car recovering by
@@ -286,6 +305,57 @@ pub fn closed_loop_drives_the_yaw_error_back() {
     assert!(split_max <= 0.0, "split went positive: {}", split_max);
 }
 
+/// A car at the limit after a step steer swings about its yaw-rate reference: a lightly
+/// damped yaw mode (1.5 s period, ζ = 0.1) with the split's yaw moment acting on the yaw
+/// acceleration (`ė = −2ζω·e + s − g·split`, `ṡ = −ω²·e`, g = 0.025 rad/s² per N·m as
+/// the EVO's AYC gives). From the overshoot (−0.17 rad/s) the split damps the swings: the
+/// next peak of the error is at most a third of the uncontrolled one, and the split
+/// settles without oscillating (at most two changes of sign, 0 at the end).
+pub fn yaw_oscillation_is_damped() {
+    const OMEGA: f32 = 2.0 * core::f32::consts::PI / 1.5;
+    const ZETA: f32 = 0.1;
+    const GAIN: f32 = 0.025;
+    let run = |control: bool| -> (f32, u32, f32) {
+        let mut bench = Bench::new();
+        bench.speed_kmh = 130.0;
+        bench.steering_deg = 90.0;
+        // Starting at the overshoot's peak: ė = 0.
+        let mut error = -0.17f32;
+        let mut state = 2.0 * ZETA * OMEGA * error;
+        let (mut next_peak, mut sign_changes, mut last_sign) = (0.0f32, 0u32, 0.0f32);
+        let mut split = 0.0;
+        for _ in 0..600 {
+            split = bench.step(error);
+            let applied = if control { split } else { 0.0 };
+            let rate = -2.0 * ZETA * OMEGA * error + state - GAIN * applied;
+            state += -OMEGA * OMEGA * error * 0.01;
+            error += rate * 0.01;
+            next_peak = next_peak.max(error);
+            if split != 0.0 {
+                if last_sign != 0.0 && split.signum() != last_sign {
+                    sign_changes += 1;
+                }
+                last_sign = split.signum();
+            }
+        }
+        (next_peak, sign_changes, split)
+    };
+    let (open_peak, _, _) = run(false);
+    let (peak, sign_changes, last_split) = run(true);
+    assert!(
+        peak <= open_peak / 3.0,
+        "next peak {} with control, {} without",
+        peak,
+        open_peak
+    );
+    assert!(
+        sign_changes <= 2,
+        "split changed sign {} times",
+        sign_changes
+    );
+    assert_eq!(last_split, 0.0);
+}
+
 /// Each input lost (VehicleSpeedMsg, SteeringMsg, AbsMsg): split 0 within 3 periods, "lost
 /// communication" with its sender recorded; control resumes when it returns.
 pub fn stale_inputs_open_the_differential() {
@@ -306,9 +376,9 @@ pub fn stale_inputs_open_the_differential() {
         bench.send_speed = true;
         bench.send_steering = true;
         bench.send_abs = true;
-        let split = bench.step(1.0);
+        let split = bench.step(ERROR);
         assert!(
-            (split - TUNING.kp).abs() < 1e-4,
+            (split - TUNING.kp * ERROR).abs() < 1e-4,
             "resumes from a reset PID: {}",
             split
         );

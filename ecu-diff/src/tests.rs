@@ -14,6 +14,7 @@ shared_cases!(
     control_only_when_fast_turning_and_not_braking,
     split_is_clamped_without_windup,
     closed_loop_drives_the_yaw_error_back,
+    yaw_oscillation_is_damped,
     stale_inputs_open_the_differential,
     invalid_inputs_are_refused,
 );

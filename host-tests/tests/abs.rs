@@ -102,3 +102,36 @@ fn high_speed_stop_keeps_the_wheels_turning() {
         }
     }
 }
+
+/// Split friction (µ 1.0 left, 0.2 right), full braking from 100 km/h with the wheel held
+/// straight: with ABS the car keeps its heading; the faulty software spins it.
+#[test]
+fn split_friction_keeps_the_heading_with_abs_and_not_without() {
+    let good = run(&scenario("stop-100-split-mu"));
+    let stop = good.summary.stops.first().expect("a stop");
+    assert!(
+        stop.heading_change_deg.abs() < 10.0,
+        "heading changed {} deg",
+        stop.heading_change_deg
+    );
+    assert!(
+        stop.longest_wheel_lock_s <= 0.1,
+        "a wheel locked {} s",
+        stop.longest_wheel_lock_s
+    );
+    // The low side alone could stop the car in v²/(2·0.2·g): ABS does at least that well.
+    let v = stop.from_kmh / 3.6;
+    let low_side_limit = v * v / (2.0 * 0.2 * 9.80665);
+    assert!(
+        stop.distance_m < low_side_limit,
+        "{} m vs {low_side_limit:.1} m on µ 0.2",
+        stop.distance_m
+    );
+
+    let bad = run(&scenario("abs-faulty-split-mu"));
+    let heading = bad.trace.last().unwrap().heading_rad.to_degrees();
+    assert!(
+        heading.abs() > 45.0,
+        "faulty ABS: heading changed only {heading} deg"
+    );
+}

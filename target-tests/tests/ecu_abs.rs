@@ -96,6 +96,11 @@ mod tests {
     fn outputs_stay_within_limits() {
         test_cases::outputs_stay_within_limits();
     }
+
+    #[test]
+    fn released_wheel_teaches_the_friction_peak() {
+        test_cases::released_wheel_teaches_the_friction_peak();
+    }
 }
 
 /// Only reached by a host build with a transport feature (`--all-features`).

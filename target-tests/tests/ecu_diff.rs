@@ -46,6 +46,11 @@ mod tests {
     fn invalid_inputs_are_refused() {
         test_cases::invalid_inputs_are_refused();
     }
+
+    #[test]
+    fn yaw_oscillation_is_damped() {
+        test_cases::yaw_oscillation_is_damped();
+    }
 }
 
 /// Only reached by a host build with a transport feature (`--all-features`).

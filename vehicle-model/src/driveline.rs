@@ -17,7 +17,11 @@
 //!   ≈ 4200 rpm with the clutch slipping;
 //! - *closing*: otherwise, with the input above `clutch_lock_rpm`, the clutch closes to
 //!   full capacity within `clutch_engage_time_s` (also after every shift);
-//! - *open*: in neutral and during a shift.
+//! - *open*: in neutral, during a shift, and under hard braking (a wheel's brake command
+//!   at `declutch_brake_command` or more) until the brakes have been released for
+//!   `declutch_hold_s` or the accelerator is pressed with the brakes released, as a driver
+//!   declutches in an emergency stop and automated gearboxes do, so that engine drag and
+//!   downshifts do not brake the wheels behind the ABS's back.
 //!
 //! It is solved as a friction constraint at velocity level: the torque that would make
 //! engine and input speeds equal at the end of the step, limited to the capacity. That
@@ -33,7 +37,7 @@
 //! wheel by at most what stops it, so a braked wheel sits at exactly zero speed.
 
 use crate::engine::{rad_s_to_rpm, Engine};
-use crate::interface::{Gear, FL, FR, RL, RR};
+use crate::interface::{Actuators, Gear, FL, FR, RL, RR};
 use crate::params::{DrivelineParams, EngineParams};
 
 /// Overall signed ratio engine/wheel of a gearbox position (0 in neutral).
@@ -132,6 +136,9 @@ pub(crate) struct Driveline {
     /// True from a start (input turning slower than the release speed) until the input
     /// has caught up with the engine.
     launching: bool,
+    /// Time left before a clutch opened by hard braking may close again, s (0: not
+    /// declutched).
+    declutch_timer_s: f64,
     /// Torque-split command after the AYC's hydraulic lag, N·m.
     ayc_command_nm: f64,
     /// Wheel spin speeds, rad/s, FL FR RL RR.
@@ -146,6 +153,7 @@ impl Driveline {
             gearbox,
             clutch_engagement,
             launching: clutch_engagement < 1.0,
+            declutch_timer_s: 0.0,
             ayc_command_nm: 0.0,
             wheel_omega: [wheel_omega; 4],
             drive_torque_nm: [0.0; 4],
@@ -172,19 +180,36 @@ impl Driveline {
         x * x
     }
 
-    /// Moves the gearbox and the clutch on by `dt`.
+    /// Moves the gearbox and the clutch on by `dt` under the gear command and pedals of
+    /// `act`.
     pub(crate) fn update_gear_and_clutch(
         &mut self,
         p: &DrivelineParams,
-        command: Gear,
+        act: &Actuators,
         engine_omega: f64,
         speed: f64,
         dt: f64,
     ) {
         let mean_wheel_omega = self.mean_wheel_omega();
-        self.gearbox.update(p, command, mean_wheel_omega, speed, dt);
+        self.gearbox
+            .update(p, act.gear, mean_wheel_omega, speed, dt);
+        let hardest_brake = act.brake.iter().fold(0.0f64, |a, b| a.max(*b));
+        let accelerator = act.accelerator;
+        if hardest_brake >= p.declutch_brake_command {
+            self.declutch_timer_s = p.declutch_hold_s;
+        } else if hardest_brake < p.declutch_release_command {
+            // Brakes released: the clutch closes after the hold, or at once when the
+            // driver asks for drive again.
+            self.declutch_timer_s = if accelerator > p.declutch_release_command {
+                0.0
+            } else {
+                (self.declutch_timer_s - dt).max(0.0)
+            };
+        } else if self.declutch_timer_s > 0.0 {
+            self.declutch_timer_s = p.declutch_hold_s;
+        }
         let ratio = signed_ratio(p, self.gearbox.engaged());
-        if self.gearbox.shifting() || ratio == 0.0 {
+        if self.gearbox.shifting() || ratio == 0.0 || self.declutch_timer_s > 0.0 {
             self.clutch_engagement = 0.0;
             return;
         }

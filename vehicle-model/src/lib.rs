@@ -3,9 +3,10 @@
 //!
 //! It replaces the 2011 project's TORCS simulation with what the nine ECUs need:
 //! a planar body with load transfer, four wheels with their own spin and Pacejka tyres
-//! (combined slip, friction per wheel for split-μ), per-wheel brakes, the 4G63T engine
-//! with idle control, rev limiter and fuel, a 6-speed gearbox with an automated clutch,
-//! the AWD driveline with the Active Yaw Control rear differential, steering, a
+//! (combined slip, friction per wheel for split-μ), per-wheel brakes whose pressure
+//! follows the command with a lag, the 4G63T engine with idle control, rev limiter and
+//! fuel, a 6-speed gearbox with an automated clutch (which also declutches under hard
+//! braking), the AWD driveline with the Active Yaw Control rear differential, steering, a
 //! single-track yaw-rate reference, a cabin thermal model with a noisy sensor, and the
 //! lights.
 //!
@@ -70,6 +71,8 @@ pub struct Vehicle {
     tyre_model: TyreModel,
     cornering_stiffness_per_load: [f64; 4],
     max_brake_torque_nm: [f64; 4],
+    /// Brake torque acting on each wheel (it follows the command with a lag), N·m.
+    brake_torque_nm: [f64; 4],
     grade_sin: f64,
     grade_cos: f64,
     mean_mu: f64,
@@ -129,6 +132,7 @@ impl Vehicle {
             tyre_model,
             cornering_stiffness_per_load: [front_k, front_k, rear_k, rear_k],
             max_brake_torque_nm: [front_brake, front_brake, rear_brake, rear_brake],
+            brake_torque_nm: [0.0; 4],
             grade_sin: 0.0,
             grade_cos: 1.0,
             mean_mu: 1.0,
@@ -229,6 +233,9 @@ impl Vehicle {
             self.steer_sin_cos = road_wheel_angle.sin_cos();
         }
         let (steer_sin, steer_cos) = self.steer_sin_cos;
+        // Backward-Euler first-order lags of the brake pressure, stable for any step.
+        let apply_lag = h / (p.brakes.pressure_apply_time_constant_s + h);
+        let release_lag = h / (p.brakes.pressure_release_time_constant_s + h);
 
         // Tyres: forces from the body's motion and the wheels' spin.
         let loads = self.body.normal_loads(&self.geometry, self.grade_cos);
@@ -271,7 +278,15 @@ impl Vehicle {
             forces.tyre_y += fy;
             forces.yaw_moment += self.geometry.wheel_x[i] * fy - self.geometry.wheel_y[i] * fx;
 
-            let brake_torque = act.brake[i] * self.max_brake_torque_nm[i];
+            let brake_torque = &mut self.brake_torque_nm[i];
+            let commanded = act.brake[i] * self.max_brake_torque_nm[i];
+            let lag = if commanded > *brake_torque {
+                apply_lag
+            } else {
+                release_lag
+            };
+            *brake_torque = flush_tiny(*brake_torque + (commanded - *brake_torque) * lag);
+            let brake_torque = *brake_torque;
             wheel_loads.tyre_torque_nm[i] = -tyre.longitudinal_n * radius;
             wheel_loads.friction_torque_nm[i] = brake_torque + rolling_resistance * load * radius;
 
@@ -285,7 +300,7 @@ impl Vehicle {
         // Powertrain: gear and clutch, engine torque, then engine and wheel spin.
         self.driveline.update_gear_and_clutch(
             &p.driveline,
-            act.gear,
+            act,
             self.engine.omega,
             self.body.vx,
             h,
@@ -413,6 +428,14 @@ fn check_params(p: &VehicleParams) {
         ("final drive", p.driveline.final_drive_ratio),
         ("driveline efficiency", p.driveline.efficiency),
         ("clutch engage time", p.driveline.clutch_engage_time_s),
+        (
+            "brake pressure apply time constant",
+            p.brakes.pressure_apply_time_constant_s,
+        ),
+        (
+            "brake pressure release time constant",
+            p.brakes.pressure_release_time_constant_s,
+        ),
         ("cabin heat capacity", p.cabin.heat_capacity_j_per_k),
     ];
     for (name, value) in positive {

@@ -99,6 +99,12 @@ pub struct BrakeParams {
     pub max_torque_front_nm: f64,
     /// Brake torque of one rear wheel at full command, N·m.
     pub max_torque_rear_nm: f64,
+    /// Time constant of the brake pressure rising to a higher command (booster, master
+    /// cylinder and the ABS inlet valves feeding the calipers), s.
+    pub pressure_apply_time_constant_s: f64,
+    /// Time constant of the brake pressure falling to a lower command (ABS outlet valves
+    /// dumping into the low-pressure accumulator, or the pedal released), s.
+    pub pressure_release_time_constant_s: f64,
 }
 
 /// Steering gear.
@@ -187,6 +193,16 @@ pub struct DrivelineParams {
     /// Below this speed the AYC's effect fades out linearly to nothing at rest, m/s (its
     /// transfer clutches need the rear wheels turning).
     pub ayc_full_effect_speed_mps: f64,
+    /// Hard braking: when a wheel's brake command (0..1) reaches this, the automated clutch
+    /// opens (the engine is declutched) until the brakes are released.
+    pub declutch_brake_command: f64,
+    /// The clutch closes again once every brake command has stayed below
+    /// [`DrivelineParams::declutch_release_command`] for this long, s (or at once when the
+    /// accelerator is pressed past it with the brakes released).
+    pub declutch_hold_s: f64,
+    /// Brake (and accelerator) command (0..1) below which the pedal counts as released for
+    /// the declutch.
+    pub declutch_release_command: f64,
 }
 
 /// Aerodynamic drag.
@@ -285,6 +301,15 @@ impl VehicleParams {
                 // Either axle locks on μ = 1 (front needs ≈ 2 kN·m at 1 g); front bias 68 %.
                 max_torque_front_nm: 3000.0,
                 max_torque_rear_nm: 1400.0,
+                // Estimate: the pressure follows the command like a first-order lag. It
+                // builds through the booster, master cylinder and the ABS inlet valves
+                // (gradients of the order of 1000–1500 bar/s at the wheel: 40 ms) and
+                // falls faster through the outlet valves into the ABS's low-pressure
+                // accumulator (20 ms). A full-pedal step reaches lock pressure on dry
+                // asphalt in ≈ 40 ms instead of at once; ABS simulation studies use
+                // actuator lags of 10–50 ms, the ABS ECU's own test plant 20 ms.
+                pressure_apply_time_constant_s: 0.04,
+                pressure_release_time_constant_s: 0.02,
             },
             steering: SteeringParams {
                 // Estimate: quick rack, ≈ 2.2 turns lock to lock over ±28° road wheel.
@@ -366,15 +391,37 @@ impl VehicleParams {
                 // Estimate: EVO VI centre differential is open 50:50 with a viscous
                 // coupling; ≈ 45 N·m at the propeller shaft per 100 rpm of slip.
                 centre_viscous_nm_per_rad_s: 200.0,
-                // Estimate: the catalogue's ±50 N·m is read as the command to the AYC
-                // transfer clutches, multiplied by the AYC's speed-increasing gear set;
-                // full command moves ±300 N·m from one rear wheel to the other, a yaw
-                // moment of ≈ ±1.5 kN·m: enough to correct a slide, not enough to spin
-                // the car in a moderate corner.
-                ayc_wheel_torque_per_command: 6.0,
+                // Estimate (no published transfer figure was found for the EVO IV–VII
+                // AYC; Mitsubishi states that the Super AYC of the EVO VIII doubled it:
+                // Ushiroda, Sawase et al., "Development of Super AYC", Mitsubishi Motors
+                // Technical Review 15, 2003). The catalogue's ±50 N·m is read as the
+                // command to the AYC's transfer clutches, multiplied by its speed-
+                // increasing gear set. The clutches are sized for the rear tyres' grip: a
+                // rear wheel carries about μ·Fz·r ≈ 1.0 · 2.8 kN · 0.31 m ≈ 870 N·m, less
+                // the part its side force uses in a corner. Full command moving ±600 N·m
+                // from one rear wheel to the other (1.2 kN·m between them) uses most of
+                // that grip and gives a yaw moment of ≈ ±2.9 kN·m (the front tyres' side
+                // force gives ≈ 7.5 kN·m about the centre of gravity at the limit): enough
+                // to damp the yaw overshoot of a limit step steer or catch a lift-off
+                // oversteer, as the AYC is credited with, not enough to spin the car by
+                // itself (held on a straight road at 100 km/h it would curve it at
+                // ≈ 0.15 rad/s). The former ±300 N·m (≈ ±1.5 kN·m) hardly changed a limit
+                // manoeuvre.
+                ayc_wheel_torque_per_command: 12.0,
                 ayc_max_command_nm: 50.0,
                 ayc_time_constant_s: 0.05,
                 ayc_full_effect_speed_mps: 2.0,
+                // The automated clutch stands in for the driver's left foot: in an
+                // emergency stop a driver declutches, and automated manual gearboxes open
+                // the clutch under hard braking, so that engine drag (≈ 50–175 N·m per
+                // wheel on the overrun in 4th to 1st gear) and the clutch closing after
+                // each downshift do not brake the wheels behind the ABS's back: on μ = 0.2
+                // a wheel carries only 150–300 N·m. Half of full brake is hard braking
+                // (≈ 1 g with all four brakes at it); the hold bridges the ABS releasing
+                // all wheels at once.
+                declutch_brake_command: 0.5,
+                declutch_hold_s: 0.5,
+                declutch_release_command: 0.02,
             },
             aero: AeroParams {
                 // Estimate: boxy rally saloon with intercooler opening and wing.
