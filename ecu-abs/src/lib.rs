@@ -134,6 +134,15 @@ pub enum Variant {
     Faulty,
 }
 
+/// The variant this build runs: [`Variant::Faulty`] with the `faulty` cargo feature (the
+/// demonstration's broken firmware), [`Variant::Correct`] otherwise. The virtual car
+/// chooses per scenario instead.
+pub const BUILD_VARIANT: Variant = if cfg!(feature = "faulty") {
+    Variant::Faulty
+} else {
+    Variant::Correct
+};
+
 /// Control period. Wheel dynamics are fast (a wheel locks within ~100 ms at full brake), so
 /// the ABS runs at twice the message rate; messages still go out at their 10 ms periods
 /// (or on change, at most every 5 ms).

@@ -32,6 +32,15 @@ pub enum Variant {
     Faulty,
 }
 
+/// The variant this build runs: [`Variant::Faulty`] with the `faulty` cargo feature (the
+/// demonstration's broken firmware), [`Variant::Correct`] otherwise. The virtual car
+/// chooses per scenario instead.
+pub const BUILD_VARIANT: Variant = if cfg!(feature = "faulty") {
+    Variant::Faulty
+} else {
+    Variant::Correct
+};
+
 /// PI tuning: command in % (of full throttle or full braking) per km/h of error.
 pub const TUNING: PidConfig = PidConfig {
     kp: 10.0,
