@@ -268,10 +268,7 @@ pub const YAW_DELAY_INITIAL_MARGIN: f32 = 0.0;
 pub const YAW_DELAY_MARGIN_RATE_PER_S: f32 = 0.3;
 
 /// The ABS channel controller, built at compile time: an invalid tuning fails the build.
-const ABS_PID: Pid = match Pid::new(ABS_TUNING) {
-    Ok(pid) => pid,
-    Err(_) => panic!("invalid ABS tuning"),
-};
+const ABS_PID: Pid = Pid::from_tuning(ABS_TUNING);
 
 /// A release at least this large (0..100) counts as the ABS acting, for the timeout.
 pub const RELEASE_ACTIVE_MIN: f32 = 1.0;
@@ -313,10 +310,7 @@ pub const TC_TUNING: PidConfig = PidConfig {
 };
 
 /// The traction controller, built at compile time.
-const TC_PID: Pid = match Pid::new(TC_TUNING) {
-    Ok(pid) => pid,
-    Err(_) => panic!("invalid traction control tuning"),
-};
+const TC_PID: Pid = Pid::from_tuning(TC_TUNING);
 
 /// PedalBrake lost: the last good command is kept this long before the controlled stop
 /// (µs), so that a short gap does not change the braking.

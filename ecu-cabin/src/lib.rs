@@ -40,10 +40,7 @@ pub const TUNING: PidConfig = PidConfig {
 };
 
 /// The controller, built at compile time: an invalid `TUNING` fails the build.
-const FAN_PID: Pid = match Pid::new(TUNING) {
-    Ok(pid) => pid,
-    Err(_) => panic!("invalid cabin tuning"),
-};
+const FAN_PID: Pid = Pid::from_tuning(TUNING);
 
 /// Time constant of the low-pass filter on the cabin temperature, s: takes the ±0.2 °F
 /// sensor noise down to a few hundredths of a degree while adding a lag that is small

@@ -52,10 +52,7 @@ pub const TUNING: PidConfig = PidConfig {
 };
 
 /// The controller, built at compile time: an invalid `TUNING` fails the build.
-const SPEED_PID: Pid = match Pid::new(TUNING) {
-    Ok(pid) => pid,
-    Err(_) => panic!("invalid cruise tuning"),
-};
+const SPEED_PID: Pid = Pid::from_tuning(TUNING);
 
 /// The faulty software's dead band around the set speed, km/h.
 pub const FAULTY_DEAD_BAND_KMH: f32 = 1.0;

@@ -59,10 +59,7 @@ pub const TUNING: PidConfig = PidConfig {
 };
 
 /// The controller, built at compile time: an invalid `TUNING` fails the build.
-const YAW_PID: Pid = match Pid::new(TUNING) {
-    Ok(pid) => pid,
-    Err(_) => panic!("invalid differential tuning"),
-};
+const YAW_PID: Pid = Pid::from_tuning(TUNING);
 
 /// Largest torque split, N·m: DiffMsg's range (spec section 3).
 pub const SPLIT_LIMIT_NM: f32 = 50.0;

@@ -33,10 +33,7 @@
 //!     output_min: 0.0,
 //!     output_max: 100.0,
 //! };
-//! const CRUISE_PID: Pid = match Pid::new(CRUISE_TUNING) {
-//!     Ok(pid) => pid,
-//!     Err(_) => panic!("invalid cruise tuning"),
-//! };
+//! const CRUISE_PID: Pid = Pid::from_tuning(CRUISE_TUNING);
 //!
 //! let mut pid = CRUISE_PID;
 //! let throttle = pid.update(27.8, 25.0, 0.01);
@@ -210,6 +207,32 @@ pub struct Pid {
 }
 
 impl Pid {
+    /// A controller for a tuning known to be valid: meant for `const` items, where an
+    /// invalid tuning stops the build (the panic happens during constant evaluation, never
+    /// at run time). Use [`Pid::new`] for a configuration only known at run time.
+    ///
+    /// ```compile_fail
+    /// use autoplug_pid::{Pid, PidConfig};
+    /// // A negative gain: this does not compile.
+    /// const BAD: Pid = Pid::from_tuning(PidConfig {
+    ///     kp: -1.0,
+    ///     ki: 0.0,
+    ///     kd: 0.0,
+    ///     derivative_filter_tau_s: 0.0,
+    ///     output_min: 0.0,
+    ///     output_max: 1.0,
+    /// });
+    /// fn main() {
+    ///     let _ = BAD;
+    /// }
+    /// ```
+    pub const fn from_tuning(config: PidConfig) -> Self {
+        match Self::new(config) {
+            Ok(pid) => pid,
+            Err(_) => panic!("invalid PID tuning"),
+        }
+    }
+
     /// A controller in its reset state, or what is wrong with `config`.
     ///
     /// A `const fn`: see the crate documentation for building it in a `const`.
