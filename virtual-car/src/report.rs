@@ -547,15 +547,41 @@ pub fn plots(trace: &[TraceRow]) -> Vec<(&'static str, Plot)> {
 /// Writes trace.csv, bus.log, summary.json and the plots into `dir` (created if needed).
 pub fn write_outputs(dir: &Path, record: &RunRecord) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let mut trace = BufWriter::new(fs::File::create(dir.join("trace.csv"))?);
-    write_trace(&mut trace, &record.trace)?;
-    trace.flush()?;
     let mut log = BufWriter::new(fs::File::create(dir.join("bus.log"))?);
     write_bus_log(&mut log, &record.log)?;
     log.flush()?;
+    write_reports(dir, record)
+}
+
+/// Writes trace.csv, summary.json and the plots into `dir`: everything but the bus log,
+/// for callers that stream the bus log while the run goes ([`run_streaming`]).
+pub fn write_reports(dir: &Path, record: &RunRecord) -> io::Result<()> {
+    fs::create_dir_all(dir)?;
+    let mut trace = BufWriter::new(fs::File::create(dir.join("trace.csv"))?);
+    write_trace(&mut trace, &record.trace)?;
+    trace.flush()?;
     fs::write(dir.join("summary.json"), record.summary.to_json())?;
     for (name, plot) in plots(&record.trace) {
         fs::write(dir.join(name), plot.to_svg())?;
     }
     Ok(())
+}
+
+/// Runs a scenario, writing each tick's frames to `bus_log` as they happen (so a long run
+/// does not hold its bus log in memory) and handing them to `each_tick` with the car.
+/// The returned record has an empty `log`.
+pub fn run_streaming(
+    scenario: &Scenario,
+    bus_log: &mut impl Write,
+    mut each_tick: impl FnMut(&mut VirtualCar, &[LoggedFrame]),
+) -> io::Result<RunRecord> {
+    let mut result = Ok(());
+    let record = run_with(scenario, |car| {
+        let frames = car.take_log();
+        if result.is_ok() {
+            result = write_bus_log(bus_log, &frames);
+        }
+        each_tick(car, &frames);
+    });
+    result.map(|()| record)
 }

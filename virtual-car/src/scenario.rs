@@ -302,6 +302,9 @@ impl fmt::Display for ScenarioError {
 
 impl std::error::Error for ScenarioError {}
 
+/// Longest scenario, s.
+pub const MAX_DURATION_S: f64 = 3600.0;
+
 /// Node names a fault may name.
 const NODE_NAMES: [&str; 9] = [
     "Engine",
@@ -379,7 +382,8 @@ impl Scenario {
                 self.name
             ));
         }
-        range("duration_s", self.duration_s, 0.001, 24.0 * 3600.0)?;
+        // An hour of trace stays around 30 MB in memory; longer runs belong in pieces.
+        range("duration_s", self.duration_s, 0.001, MAX_DURATION_S)?;
         range("road.mu_left", self.road.mu_left, 0.05, 1.5)?;
         range("road.mu_right", self.road.mu_right, 0.05, 1.5)?;
         range("road.grade_percent", self.road.grade_percent, -30.0, 30.0)?;

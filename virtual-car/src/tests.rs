@@ -81,6 +81,10 @@ fn scenario_errors_name_the_field() {
             EXAMPLE.replace("name = \"cruise-hold\"", "name = \"a/b\""),
             "name \"a/b\"",
         ),
+        (
+            EXAMPLE.replace("duration_s = 40.0", "duration_s = 3601.0"),
+            "duration_s = 3601 is outside",
+        ),
     ];
     for (text, expected) in cases {
         let e = Scenario::parse(&text, "x.toml").unwrap_err();
@@ -377,5 +381,27 @@ fn plots_are_svg_with_every_series() {
     assert!(
         svg.contains(">90</text>") && svg.contains(">80</text>"),
         "y ticks"
+    );
+}
+
+#[test]
+fn the_streamed_bus_log_is_the_recorded_one() {
+    use crate::report::{run, run_streaming, write_bus_log};
+    let s = Scenario::parse(
+        "name = \"stream\"\nduration_s = 1.5\n[driver]\naccelerator = 30.0\n",
+        "stream",
+    )
+    .unwrap();
+    let mut recorded = Vec::new();
+    write_bus_log(&mut recorded, &run(&s).log).unwrap();
+    let mut streamed = Vec::new();
+    let mut frames_seen = 0;
+    let record = run_streaming(&s, &mut streamed, |_, frames| frames_seen += frames.len()).unwrap();
+    assert!(record.log.is_empty(), "streamed runs keep no log in memory");
+    assert!(recorded.len() > 1000);
+    assert_eq!(streamed, recorded);
+    assert_eq!(
+        frames_seen,
+        String::from_utf8(recorded).unwrap().lines().count()
     );
 }

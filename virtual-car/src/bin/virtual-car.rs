@@ -8,6 +8,8 @@ use autoplug_virtual_car::report::{self, RunRecord};
 use autoplug_virtual_car::scenario::Scenario;
 use autoplug_virtual_car::socketcand::SocketcandServer;
 use clap::{Parser, Subcommand};
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -119,22 +121,19 @@ fn run_one(
     server: Option<&SocketcandServer>,
 ) -> std::io::Result<()> {
     let wall = Instant::now();
-    let mut served = 0;
-    let record: RunRecord = report::run_with(scenario, |car| {
+    let dir = out.join(&scenario.name);
+    std::fs::create_dir_all(&dir)?;
+    let mut bus_log = BufWriter::new(File::create(dir.join("bus.log"))?);
+    let record: RunRecord = report::run_streaming(scenario, &mut bus_log, |car, frames| {
         if let Some(server) = server {
             while let Some(client) = server.try_recv() {
                 car.inject(client.frame);
             }
-            let log = car.log();
-            for entry in &log[served..] {
-                let from_client = (entry.sender == "External").then_some(0);
-                // Clients get every frame but their own (socketcand does not echo);
-                // frames injected by a client carry no client id here, so none are echoed.
-                if from_client.is_none() {
-                    server.broadcast(entry.t_us, &entry.frame, None);
-                }
+            // Clients get every frame but their own (socketcand does not echo); frames
+            // injected by clients go through the "External" node and are not sent back.
+            for entry in frames.iter().filter(|e| e.sender != "External") {
+                server.broadcast(entry.t_us, &entry.frame, None);
             }
-            served = log.len();
         }
         if realtime && car.time_us() % 10_000 == 0 {
             let target = Duration::from_micros(car.time_us());
@@ -142,10 +141,10 @@ fn run_one(
                 std::thread::sleep(wait);
             }
         }
-    });
+    })?;
+    bus_log.flush()?;
     let elapsed = wall.elapsed().as_secs_f64();
-    let dir = out.join(&scenario.name);
-    report::write_outputs(&dir, &record)?;
+    report::write_reports(&dir, &record)?;
     println!("{}", scenario.name);
     if !scenario.description.is_empty() {
         println!("  {}", scenario.description);
