@@ -124,15 +124,7 @@ use autoplug_ecu::{
 };
 use autoplug_pid::{Pid, PidConfig};
 
-/// Which software the ECU runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Variant {
-    /// Slip-controlled ABS.
-    Correct,
-    /// The demonstration's broken software: the ABS never releases.
-    Faulty,
-}
+pub use autoplug_ecu::Variant;
 
 /// The variant this build runs: [`Variant::Faulty`] with the `faulty` cargo feature (the
 /// demonstration's broken firmware), [`Variant::Correct`] otherwise. The virtual car

@@ -22,15 +22,7 @@ use autoplug_can::{CruiseAccelMsg, CruiseMode, CruiseModeMsg, Frame, Node, Vehic
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_pid::{Pid, PidConfig};
 
-/// Which software the ECU runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Variant {
-    /// The PI speed controller.
-    Correct,
-    /// The demonstration's broken software: bang-bang control.
-    Faulty,
-}
+pub use autoplug_ecu::Variant;
 
 /// The variant this build runs: [`Variant::Faulty`] with the `faulty` cargo feature (the
 /// demonstration's broken firmware), [`Variant::Correct`] otherwise. The virtual car

@@ -28,6 +28,18 @@ pub use tx::PeriodicTx;
 
 use autoplug_can::{CanMessage, Frame, Node};
 
+/// Which software an ECU with a demonstration fault runs (report section 5.4: the broken
+/// cruise control and the broken ABS). Each such crate documents what its `Faulty` does
+/// and selects its build's variant with its own `faulty` cargo feature.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Variant {
+    /// The working software.
+    Correct,
+    /// The demonstration's broken software.
+    Faulty,
+}
+
 /// How many different DTCs an ECU stores.
 pub const DTC_CAPACITY: usize = 16;
 
