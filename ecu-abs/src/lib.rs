@@ -364,7 +364,7 @@ struct Recovery {
 
 /// Sensor readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Linear wheel speeds ω·r, km/h, FL, FR, RL, RR.
     pub wheel_speed_kmh: [f32; 4],
@@ -372,7 +372,7 @@ pub struct Sensors {
 
 /// Actuator commands.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Actuators {
     /// Brake applied per wheel, FL, FR, RL, RR, 0..100 (% of full brake torque).
     pub brake: [f32; 4],
@@ -380,7 +380,7 @@ pub struct Actuators {
 
 /// Whether the ABS and traction control may act.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub enum Availability {
     /// Inputs good: ABS and traction control work.
     #[default]
@@ -394,7 +394,7 @@ pub enum Availability {
 
 /// Where the brake command the ECU works with comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub enum BrakeSource {
     /// PedalBrake, fresh.
     #[default]
@@ -407,7 +407,7 @@ pub enum BrakeSource {
 
 /// What the ECU decided in its last step, for logs and the virtual car's trace.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Status {
     /// Whether ABS and traction control may act.
     pub availability: Availability,
@@ -781,7 +781,9 @@ impl AbsEcu {
         };
         let mut out = release;
         if applied[high] > applied[low] + margin {
-            out[high] = (brake - (applied[low] + margin)).clamp(0.0, brake);
+            // Not `clamp(0.0, brake)`: that panics on a NaN or negative bound, and its
+            // panic message alone pulls some 10 KiB of float formatting into the firmware.
+            out[high] = (brake - (applied[low] + margin)).min(brake).max(0.0);
         }
         out
     }

@@ -63,7 +63,7 @@ pub const STEP_PERIOD_US: u64 = 100_000;
 
 /// Sensor readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Cabin temperature, °F.
     pub cabin_temp_f: f32,
@@ -73,7 +73,7 @@ pub struct Sensors {
 
 /// Actuator commands.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Actuators {
     /// Fan power, 0..=100 %.
     pub fan: f32,
@@ -81,7 +81,7 @@ pub struct Actuators {
 
 /// What the ECU works with, for logs and the virtual car's trace.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Status {
     /// Filtered cabin temperature, °F.
     pub cabin_temp_f: f32,

@@ -38,7 +38,7 @@ pub const STEP_PERIOD_US: u64 = 10_000;
 
 /// The console switches.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Headlight switch on.
     pub headlight_switch: bool,
@@ -50,7 +50,7 @@ pub struct Sensors {
 
 /// Commands to the vehicle's lamps.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Actuators {
     /// Headlights on.
     pub headlights: bool,

@@ -59,7 +59,7 @@ pub const STEP_PERIOD_US: u64 = 10_000;
 
 /// Sensor readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Vehicle speed, km/h.
     pub vehicle_speed_kmh: f32,
@@ -68,7 +68,7 @@ pub struct Sensors {
 /// The cruise ECU has no actuator of its own: its command reaches the pedals over CAN.
 /// This reports what it decided, for logs and the virtual car's trace.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Status {
     /// Cruise holding a set speed.
     pub engaged: bool,

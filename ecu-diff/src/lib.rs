@@ -95,7 +95,7 @@ const _: () = assert!(YAW_DEAD_BAND_EXIT_RAD_S < YAW_DEAD_BAND_RAD_S);
 
 /// Sensor readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Yaw-rate error, reference − actual, rad/s (positive: the car yaws less
     /// counter-clockwise than it should).
@@ -104,7 +104,7 @@ pub struct Sensors {
 
 /// Actuator commands.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Actuators {
     /// Rear torque split, −50..=50 N·m; positive moves drive torque to the right rear wheel.
     pub torque_split_nm: f32,
@@ -112,7 +112,7 @@ pub struct Actuators {
 
 /// Why the differential is (not) controlling.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub enum Mode {
     /// PID on the yaw-rate error.
     Active,
@@ -131,7 +131,7 @@ pub enum Mode {
 
 /// What the ECU decided, for logs and the virtual car's trace.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Status {
     /// Why the split is what it is.
     pub mode: Mode,

@@ -37,7 +37,7 @@ pub const STEP_PERIOD_US: u64 = 20_000;
 
 /// Engine sensor readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Engine speed, rpm.
     pub engine_rpm: f32,
@@ -47,7 +47,7 @@ pub struct Sensors {
 
 /// The engine ECU drives no actuator: this is what it reports on EngineMsg.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Status {
     /// Engine speed reported, rpm, 0..9000.
     pub engine_rpm: f32,

@@ -61,7 +61,7 @@ pub const STEP_PERIOD_US: u64 = 10_000;
 
 /// Pedal readings.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Accelerator pedal, pedal units 0..100 (100 = floored).
     pub accelerator_pedal: f32,
@@ -71,7 +71,7 @@ pub struct Sensors {
 
 /// Commands to the vehicle.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Actuators {
     /// Accelerator command, pedal units 0..100.
     pub accelerator_cmd: f32,
@@ -82,7 +82,7 @@ pub struct Actuators {
 /// The cruise cancel: CruiseModeMsg Off, sent while a cancel is in progress, at once and
 /// then never sooner than the message's minimum gap after the previous one.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 struct CancelTx {
     active: bool,
     min_gap_us: u64,

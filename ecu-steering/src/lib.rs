@@ -56,7 +56,7 @@ pub const INVALID_CANCEL_DTC: Dtc = invalid_data(Node::Pedals);
 
 /// Readings from the steering wheel.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// Steering wheel angle, degrees, positive = left (ISO 8855); clamped to ±135°.
     pub wheel_angle_deg: f32,
@@ -72,7 +72,7 @@ pub struct Sensors {
 
 /// Commands to the vehicle.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Actuators {
     /// Steering command: the wheel angle passed to the steering actuator, degrees,
     /// positive = left, within ±135°.
@@ -81,7 +81,7 @@ pub struct Actuators {
 
 /// A debounced momentary button.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 struct Button {
     pressed: bool,
     /// Consecutive steps the raw level has differed from `pressed`.

@@ -172,7 +172,7 @@ pub const fn gear_down(gear: Gear) -> Option<Gear> {
 
 /// The road speeds of an automatic shift schedule.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct ShiftSchedule {
     /// `upshift_kmh[i]`: at or above this speed, shift from gear `i + 1` to `i + 2`
     /// (index 0: 1st to 2nd, ..., 4: 5th to 6th), km/h.
@@ -273,7 +273,7 @@ pub const fn schedule(mode: EngineMode) -> &'static ShiftSchedule {
 
 /// Sensor readings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Sensors {
     /// The gear engaged, from the gearbox's gear lines.
     pub current_gear: Gear,
@@ -289,7 +289,7 @@ impl Default for Sensors {
 
 /// Actuator commands.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Actuators {
     /// The gear to engage, to the gearbox's gear command lines.
     pub gear_cmd: Gear,
@@ -305,7 +305,7 @@ impl Default for Actuators {
 
 /// What the ECU decided, for logs and the virtual car's trace.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 pub struct Status {
     /// The gear commanded.
     pub gear_cmd: Gear,
@@ -321,7 +321,7 @@ pub struct Status {
 
 /// Why a shift request was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(any(feature = "defmt", target_os = "none"), derive(defmt::Format))]
 enum Refusal {
     /// The engine would exceed the over-rev limit.
     OverRev,

@@ -1,15 +1,7 @@
-//! Firmware of the pedals ECU (node 0x04) for a Nucleo-F446RE: wires [`ecu_pedals::PedalsEcu`]
-//! to CAN1, the pedal ADC inputs and the command PWM outputs, and nothing else (every
-//! decision is the logic crate's). Build and flash: `cargo fw-pedals` (see
-//! `.cargo/config.toml`); pin map: `board.rs`.
-//!
-//! Tasks (one thread-mode executor):
-//! - the control loop (in `main`, after start-up): owns the logic. Runs `step` on a ticker
-//!   every `STEP_PERIOD_US` (reading the pedals, driving the outputs, feeding the watchdog)
-//!   and `on_frame` as soon as a frame arrives; after either, queues every frame
-//!   `poll_transmit` hands out.
-//! - `can_rx`: CAN1 → RX queue; `can_tx`: TX queue → CAN1 mailboxes.
-//! - `can_monitor`: logs CAN error counters and bus-off once a second when they change.
+//! Firmware of the pedals ECU for a Nucleo-F446RE: wires [`ecu_pedals::PedalsEcu`] to CAN1,
+//! the pedal ADC inputs and the command PWM outputs, and nothing else: every decision is
+//! the logic crate's, and the control loop, CAN and the watchdog are `autoplug-firmware`'s.
+//! Build and flash: `cargo fw-pedals`; pin map: `board.rs`.
 //!
 //! On the host this is an empty program: the firmware only builds for
 //! `--target thumbv7em-none-eabihf`.
@@ -25,13 +17,10 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod board;
-#[cfg(target_os = "none")]
-mod can_io;
-#[cfg(target_os = "none")]
-mod fault;
-#[cfg(target_os = "none")]
-mod firmware;
 
-/// Independent watchdog timeout: ten control periods. Fed by the control loop only.
 #[cfg(target_os = "none")]
-const WATCHDOG_TIMEOUT_US: u32 = 10 * ecu_pedals::STEP_PERIOD_US as u32;
+#[embassy_executor::main]
+async fn main(spawner: embassy_executor::Spawner) {
+    let (platform, board) = board::init();
+    autoplug_firmware::runtime::run(spawner, platform, board, ecu_pedals::PedalsEcu::new).await
+}

@@ -1,17 +1,29 @@
-//! CAN1 glue between the bxCAN driver and the logic's [`autoplug_can::Frame`]s: bit rate,
-//! acceptance filters from the catalogue, the RX and TX tasks, and the error monitor.
-//! Nothing here depends on the pedals: it is meant to move, unchanged, into a crate shared
-//! by the nine ECU firmwares.
+//! CAN1 glue between the bxCAN driver and the logic's [`autoplug_can::Frame`]s: the
+//! interrupt binding, bit rate, acceptance filters from the catalogue, the RX and TX tasks,
+//! and the error monitor. The pins are the board's: each board module passes its own to
+//! `Can::new` together with [`Irqs`].
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use autoplug_can::{Frame, Node};
+use embassy_stm32::bind_interrupts;
 use embassy_stm32::can::filter::ListEntry16;
 use embassy_stm32::can::{self as bxcan, Can, CanRx, CanTx, Fifo, Id, StandardId};
 use embassy_stm32::pac;
+use embassy_stm32::peripherals::CAN1;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Ticker};
+
+bind_interrupts!(
+    /// CAN1's four interrupts bound to the bxCAN driver: pass to `Can::new`.
+    pub struct Irqs {
+        CAN1_TX => bxcan::TxInterruptHandler<CAN1>;
+        CAN1_RX0 => bxcan::Rx0InterruptHandler<CAN1>;
+        CAN1_RX1 => bxcan::Rx1InterruptHandler<CAN1>;
+        CAN1_SCE => bxcan::SceInterruptHandler<CAN1>;
+    }
+);
 
 /// The AutoPlug bus bit rate.
 pub const BITRATE: u32 = 500_000;

@@ -1,0 +1,83 @@
+//! The cabin comfort ECU's board: a Nucleo-F446RE wired to the bench. The one place that
+//! names its pins.
+//!
+//! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
+//! |---|---|---|---|---|---|
+//! | D15 | CN10-3 | PB8 | CAN1 RX (AF9) from the transceiver's RXD | in | 3.3 V logic |
+//! | D14 | CN10-5 | PB9 | CAN1 TX (AF9) to the transceiver's TXD | out | 3.3 V logic |
+//! | A0 | CN7-28 | PA0 | cabin temperature (ADC1_IN0) | in | 0–3.3 V = −50–170 °F |
+//! | A1 | CN7-30 | PA1 | set-temperature knob (ADC1_IN1) | in | 0–3.3 V = 60–85 °F |
+//! | D5 | CN10-27 | PB4 | fan power (TIM3_CH1 PWM) | out | 0–100 % duty = 0–100 % fan |
+//!
+//! The temperature sensor's range is wider than the logic's plausible range (−40–160 °F):
+//! a sensor stuck at a rail (open or shorted wire) reads implausible, and the logic records
+//! its DTC. The knob is a potentiometer between 3.3 V and GND. Safe state at power-up: fan
+//! off.
+
+use autoplug_firmware::analog::{LinearInput, LinearOutput};
+use autoplug_firmware::can_io;
+use autoplug_firmware::io::{read_analog, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::runtime::{Io, Platform};
+use ecu_cabin::{Actuators, CabinEcu, Sensors, SET_TEMP_MAX_F, SET_TEMP_MIN_F};
+use embassy_stm32::adc::Adc;
+use embassy_stm32::can::Can;
+use embassy_stm32::gpio::OutputType;
+use embassy_stm32::peripherals::{ADC1, PA0, PA1, TIM3};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
+use embassy_stm32::Peri;
+
+/// The cabin temperature sensor: 0–3.3 V is −50–170 °F.
+const CABIN_TEMP: LinearInput = LinearInput::new(-50.0, 170.0);
+/// The set-temperature knob: end to end is the logic's set range.
+const SET_TEMP: LinearInput = LinearInput::new(SET_TEMP_MIN_F, SET_TEMP_MAX_F);
+/// The fan: 0–100 % duty is 0–100 % power.
+const FAN: LinearOutput = LinearOutput::new(0.0, 100.0);
+
+/// The cabin ECU's sensors and fan.
+pub struct Board {
+    adc: Adc<'static, ADC1>,
+    cabin_temp: Peri<'static, PA0>,
+    set_temp: Peri<'static, PA1>,
+    fan: PwmOutput<TIM3>,
+}
+
+/// Brings up the clocks, CAN1 and the I/O; the fan starts off.
+pub fn init() -> (Platform, Board) {
+    let p = autoplug_firmware::clocks::init();
+    let platform = Platform {
+        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
+        watchdog: p.IWDG,
+    };
+    let pwm = SimplePwm::new(
+        p.TIM3,
+        Some(PwmPin::new(p.PB4, OutputType::PushPull)),
+        None,
+        None,
+        None,
+        Hertz(PWM_FREQUENCY_HZ),
+        CountingMode::EdgeAlignedUp,
+    )
+    .split();
+    let board = Board {
+        adc: Adc::new(p.ADC1),
+        cabin_temp: p.PA0,
+        set_temp: p.PA1,
+        fan: PwmOutput::new(pwm.ch1, FAN, 0.0),
+    };
+    (platform, board)
+}
+
+impl Io<CabinEcu> for Board {
+    fn read(&mut self) -> Sensors {
+        Sensors {
+            cabin_temp_f: read_analog(&mut self.adc, &mut self.cabin_temp, &CABIN_TEMP),
+            set_temp_f: read_analog(&mut self.adc, &mut self.set_temp, &SET_TEMP),
+        }
+    }
+
+    fn write(&mut self, actuators: &Actuators) {
+        self.fan.set(actuators.fan);
+    }
+}

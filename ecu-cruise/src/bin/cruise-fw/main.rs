@@ -1,0 +1,30 @@
+//! Firmware of the cruise control ECU for a Nucleo-F446RE: wires [`ecu_cruise::CruiseEcu`]
+//! to CAN1, the vehicle-speed ADC input and the cruise lamp (the `faulty` feature builds
+//! the report's faulty software), and nothing else: every decision is the logic crate's,
+//! and the control loop, CAN and the watchdog are `autoplug-firmware`'s. Build and flash:
+//! `cargo fw-cruise`; pin map: `board.rs`.
+//!
+//! On the host this is an empty program: the firmware only builds for
+//! `--target thumbv7em-none-eabihf`.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    println!(
+        "cruise-fw is the cruise control ECU's firmware for the Nucleo-F446RE: \
+         build it with `cargo fw-cruise` (--target thumbv7em-none-eabihf)"
+    );
+}
+
+#[cfg(target_os = "none")]
+mod board;
+
+#[cfg(target_os = "none")]
+#[embassy_executor::main]
+async fn main(spawner: embassy_executor::Spawner) {
+    let (platform, board) = board::init();
+    autoplug_firmware::runtime::run(spawner, platform, board, |now| {
+        ecu_cruise::CruiseEcu::new(ecu_cruise::BUILD_VARIANT, now)
+    })
+    .await
+}

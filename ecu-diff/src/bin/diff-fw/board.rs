@@ -1,0 +1,78 @@
+//! The differential ECU's board: a Nucleo-F446RE wired to the bench. The one place that
+//! names its pins.
+//!
+//! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
+//! |---|---|---|---|---|---|
+//! | D15 | CN10-3 | PB8 | CAN1 RX (AF9) from the transceiver's RXD | in | 3.3 V logic |
+//! | D14 | CN10-5 | PB9 | CAN1 TX (AF9) to the transceiver's TXD | out | 3.3 V logic |
+//! | A0 | CN7-28 | PA0 | yaw-rate error, reference − actual (ADC1_IN0) | in | 0–3.3 V = −2.5–+2.5 rad/s, 1.65 V = 0 |
+//! | D5 | CN10-27 | PB4 | rear torque split (TIM3_CH1 PWM) | out | 0–100 % duty = −50–+50 N·m (to the right rear), 50 % = open |
+//!
+//! Safe state at power-up: 50 % duty, no torque moved (an open differential).
+
+use autoplug_firmware::analog::{LinearInput, LinearOutput};
+use autoplug_firmware::can_io;
+use autoplug_firmware::io::{read_analog, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::runtime::{Io, Platform};
+use ecu_diff::{Actuators, DiffEcu, Sensors, SPLIT_LIMIT_NM};
+use embassy_stm32::adc::Adc;
+use embassy_stm32::can::Can;
+use embassy_stm32::gpio::OutputType;
+use embassy_stm32::peripherals::{ADC1, PA0, TIM3};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
+use embassy_stm32::Peri;
+
+/// The yaw-rate error signal: 0–3.3 V is −2.5–+2.5 rad/s (YawErrorMsg's range).
+const YAW_RATE_ERROR: LinearInput = LinearInput::new(-2.5, 2.5);
+/// The torque split: 0–100 % duty spans the logic's split limits.
+const TORQUE_SPLIT: LinearOutput = LinearOutput::new(-SPLIT_LIMIT_NM, SPLIT_LIMIT_NM);
+
+/// The differential ECU's sensor and actuator.
+pub struct Board {
+    adc: Adc<'static, ADC1>,
+    yaw_rate_error: Peri<'static, PA0>,
+    torque_split: PwmOutput<TIM3>,
+}
+
+/// Brings up the clocks, CAN1 and the I/O; the split starts open.
+pub fn init() -> (Platform, Board) {
+    let p = autoplug_firmware::clocks::init();
+    let platform = Platform {
+        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
+        watchdog: p.IWDG,
+    };
+    let pwm = SimplePwm::new(
+        p.TIM3,
+        Some(PwmPin::new(p.PB4, OutputType::PushPull)),
+        None,
+        None,
+        None,
+        Hertz(PWM_FREQUENCY_HZ),
+        CountingMode::EdgeAlignedUp,
+    )
+    .split();
+    let board = Board {
+        adc: Adc::new(p.ADC1),
+        yaw_rate_error: p.PA0,
+        torque_split: PwmOutput::new(pwm.ch1, TORQUE_SPLIT, 0.0),
+    };
+    (platform, board)
+}
+
+impl Io<DiffEcu> for Board {
+    fn read(&mut self) -> Sensors {
+        Sensors {
+            yaw_rate_error_rad_s: read_analog(
+                &mut self.adc,
+                &mut self.yaw_rate_error,
+                &YAW_RATE_ERROR,
+            ),
+        }
+    }
+
+    fn write(&mut self, actuators: &Actuators) {
+        self.torque_split.set(actuators.torque_split_nm);
+    }
+}

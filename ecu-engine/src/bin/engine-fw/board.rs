@@ -1,0 +1,61 @@
+//! The engine ECU's board: a Nucleo-F446RE wired to the bench. The one place that names
+//! its pins.
+//!
+//! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
+//! |---|---|---|---|---|---|
+//! | D15 | CN10-3 | PB8 | CAN1 RX (AF9) from the transceiver's RXD | in | 3.3 V logic |
+//! | D14 | CN10-5 | PB9 | CAN1 TX (AF9) to the transceiver's TXD | out | 3.3 V logic |
+//! | A0 | CN7-28 | PA0 | engine speed (ADC1_IN0) | in | 0–3.3 V = 0–9000 rpm |
+//! | A1 | CN7-30 | PA1 | fuel level (ADC1_IN1) | in | 0–3.3 V = 0–63.75 L |
+//!
+//! The engine ECU drives nothing: it reports on EngineMsg.
+
+use autoplug_firmware::analog::LinearInput;
+use autoplug_firmware::can_io;
+use autoplug_firmware::io::read_analog;
+use autoplug_firmware::runtime::{Io, Platform};
+use ecu_engine::{EngineEcu, Sensors, Status, ENGINE_RPM_MAX, FUEL_LEVEL_MAX_L};
+use embassy_stm32::adc::Adc;
+use embassy_stm32::can::Can;
+use embassy_stm32::peripherals::{ADC1, PA0, PA1};
+use embassy_stm32::Peri;
+
+/// Engine speed: 0–3.3 V is 0–9000 rpm.
+const ENGINE_SPEED: LinearInput = LinearInput::new(0.0, ENGINE_RPM_MAX);
+/// Fuel level: 0–3.3 V is an empty to a full tank.
+const FUEL_LEVEL: LinearInput = LinearInput::new(0.0, FUEL_LEVEL_MAX_L);
+
+/// The engine ECU's sensors.
+pub struct Board {
+    adc: Adc<'static, ADC1>,
+    engine_speed: Peri<'static, PA0>,
+    fuel_level: Peri<'static, PA1>,
+}
+
+/// Brings up the clocks, CAN1 and the sensor inputs.
+pub fn init() -> (Platform, Board) {
+    let p = autoplug_firmware::clocks::init();
+    let platform = Platform {
+        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
+        watchdog: p.IWDG,
+    };
+    let board = Board {
+        adc: Adc::new(p.ADC1),
+        engine_speed: p.PA0,
+        fuel_level: p.PA1,
+    };
+    (platform, board)
+}
+
+impl Io<EngineEcu> for Board {
+    fn read(&mut self) -> Sensors {
+        Sensors {
+            engine_rpm: read_analog(&mut self.adc, &mut self.engine_speed, &ENGINE_SPEED),
+            fuel_level_l: read_analog(&mut self.adc, &mut self.fuel_level, &FUEL_LEVEL),
+        }
+    }
+
+    fn write(&mut self, _status: &Status) {
+        // Nothing to drive: the status goes out on EngineMsg.
+    }
+}

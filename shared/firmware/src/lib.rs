@@ -1,0 +1,35 @@
+//! What the nine AutoPlug ECU firmwares share on the Nucleo-F446RE, so that each ECU's
+//! binary is only its board (which pin is which sensor or actuator) and a call to
+//! [`runtime::run`]:
+//!
+//! - [`clocks`]: 168 MHz from the ST-LINK's 8 MHz clock, APB1 at 42 MHz for CAN1;
+//! - [`can_io`]: CAN1 at 500 kbit/s with acceptance filters from the catalogue, the RX and
+//!   TX tasks, the error-counter monitor and bus-off recovery;
+//! - [`runtime`]: the control loop (logic step on a ticker, frames in and out, outputs,
+//!   watchdog, DTC log) generic over [`autoplug_ecu::EcuLogic`];
+//! - [`io`]: analog inputs and PWM outputs with their scaling, for the board modules;
+//! - `fault`: panics and HardFaults logged through defmt, then a reset;
+//! - [`analog`] and [`reset`]: the pure parts (ADC and PWM scaling, the reset cause), which
+//!   also build on the host, where their unit tests run.
+//!
+//! Everything else exists for `--target thumbv7em-none-eabihf` only.
+#![no_std]
+#![deny(missing_docs)]
+
+pub mod analog;
+pub mod reset;
+
+#[cfg(target_os = "none")]
+pub mod can_io;
+#[cfg(target_os = "none")]
+pub mod clocks;
+#[cfg(target_os = "none")]
+mod fault;
+#[cfg(target_os = "none")]
+pub mod io;
+#[cfg(target_os = "none")]
+pub mod runtime;
+
+// The defmt transport: RTT, read by probe-rs.
+#[cfg(target_os = "none")]
+use defmt_rtt as _;

@@ -1,0 +1,199 @@
+//! The pin maps of the nine boards (`ecu-*/src/bin/*-fw/board.rs`): each board's table
+//! names exactly the pins its code takes, every header position agrees with the
+//! Nucleo-F446RE's connectors, no pin serves two signals, the pins the Nucleo reserves are
+//! left alone, and the README's bench tables are the boards' tables.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fs;
+use std::path::{Path, PathBuf};
+
+/// Nucleo-F446RE header positions (ST UM1724): MCU pin, Arduino name ("—" for none),
+/// Morpho position.
+const HEADERS: &[(&str, &str, &str)] = &[
+    ("PA0", "A0", "CN7-28"),
+    ("PA1", "A1", "CN7-30"),
+    ("PA4", "A2", "CN7-32"),
+    ("PB0", "A3", "CN7-34"),
+    ("PC1", "A4", "CN7-36"),
+    ("PC0", "A5", "CN7-38"),
+    ("PA10", "D2", "CN10-33"),
+    ("PB3", "D3", "CN10-31"),
+    ("PB5", "D4", "CN10-29"),
+    ("PB4", "D5", "CN10-27"),
+    ("PB10", "D6", "CN10-25"),
+    ("PA8", "D7", "CN10-23"),
+    ("PA9", "D8", "CN10-21"),
+    ("PC7", "D9", "CN10-19"),
+    ("PB6", "D10", "CN10-17"),
+    ("PA7", "D11", "CN10-15"),
+    ("PA6", "D12", "CN10-13"),
+    ("PA5", "D13 (LD2)", "CN10-11"),
+    ("PB9", "D14", "CN10-5"),
+    ("PB8", "D15", "CN10-3"),
+    ("PC8", "—", "CN10-2"),
+    ("PC9", "—", "CN10-1"),
+];
+
+/// Pins the Nucleo uses itself: a board that took one would break the probe, the log or
+/// the clock.
+const RESERVED: &[(&str, &str)] = &[
+    ("PA2", "ST-LINK virtual COM port TX"),
+    ("PA3", "ST-LINK virtual COM port RX"),
+    ("PA13", "SWDIO"),
+    ("PA14", "SWCLK"),
+    ("PH0", "HSE input (the ST-LINK's 8 MHz clock)"),
+    ("PC14", "LSE crystal"),
+    ("PC15", "LSE crystal"),
+];
+
+const ECUS: [&str; 9] = [
+    "engine", "pedals", "steering", "trans", "cabin", "console", "diff", "cruise", "abs",
+];
+
+const TABLE_HEADER: &str = "| Arduino | Morpho | MCU pin | signal | direction | electrical range |";
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn board_source(ecu: &str) -> String {
+    let path = root().join(format!("ecu-{ecu}/src/bin/{ecu}-fw/board.rs"));
+    fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// The table rows of a board module's documentation, as lines without the `//! `.
+fn table_rows(source: &str) -> Vec<String> {
+    let lines: Vec<&str> = source
+        .lines()
+        .filter_map(|l| l.strip_prefix("//! "))
+        .collect();
+    let start = lines
+        .iter()
+        .position(|l| *l == TABLE_HEADER)
+        .expect("the board documents its pins in the standard table");
+    lines[start + 2..]
+        .iter()
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| l.to_string())
+        .collect()
+}
+
+fn cells(row: &str) -> Vec<&str> {
+    row.trim_matches('|').split('|').map(str::trim).collect()
+}
+
+/// The GPIO pins the code takes from the HAL's peripherals (`p.PA0`, ...).
+fn pins_in_code(source: &str) -> BTreeSet<String> {
+    let code: String = source
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let mut pins = BTreeSet::new();
+    let mut rest = code.as_str();
+    while let Some(at) = rest.find("p.P") {
+        let name: String = rest[at + 2..]
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric())
+            .collect();
+        let is_pin = name.len() >= 3
+            && matches!(name.as_bytes()[1], b'A'..=b'H')
+            && name[2..].chars().all(|c| c.is_ascii_digit());
+        if is_pin {
+            pins.insert(name);
+        }
+        rest = &rest[at + 3..];
+    }
+    pins
+}
+
+#[test]
+fn every_board_table_names_exactly_the_pins_its_code_takes() {
+    for ecu in ECUS {
+        let source = board_source(ecu);
+        let rows = table_rows(&source);
+        let mut documented = BTreeSet::new();
+        for row in &rows {
+            let cells = cells(row);
+            assert_eq!(cells.len(), 6, "{ecu}: malformed row {row}");
+            assert!(
+                documented.insert(cells[2].to_string()),
+                "{ecu}: {} serves two signals",
+                cells[2]
+            );
+        }
+        assert_eq!(
+            documented,
+            pins_in_code(&source),
+            "{ecu}: the table and the code name different pins"
+        );
+    }
+}
+
+#[test]
+fn header_positions_agree_with_the_nucleo_connectors() {
+    let headers: BTreeMap<&str, (&str, &str)> =
+        HEADERS.iter().map(|&(pin, a, m)| (pin, (a, m))).collect();
+    for ecu in ECUS {
+        for row in table_rows(&board_source(ecu)) {
+            let cells = cells(&row);
+            let (arduino, morpho, pin) = (cells[0], cells[1], cells[2]);
+            let expected = headers
+                .get(pin)
+                .unwrap_or_else(|| panic!("{ecu}: {pin} is not a known header pin"));
+            assert_eq!(
+                (arduino, morpho),
+                *expected,
+                "{ecu}: {pin} is at {expected:?} on the Nucleo-F446RE"
+            );
+            assert!(
+                matches!(cells[4], "in" | "out"),
+                "{ecu}: {pin} direction must be in or out, not {}",
+                cells[4]
+            );
+        }
+    }
+}
+
+#[test]
+fn no_board_takes_a_pin_the_nucleo_reserves() {
+    for ecu in ECUS {
+        let pins = pins_in_code(&board_source(ecu));
+        for (pin, use_) in RESERVED {
+            assert!(!pins.contains(*pin), "{ecu} takes {pin}, the {use_}");
+        }
+    }
+}
+
+#[test]
+fn every_board_is_on_can1_at_pb8_pb9() {
+    for ecu in ECUS {
+        let source = board_source(ecu);
+        assert!(
+            source.contains("Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs)"),
+            "{ecu}: CAN1 must be on PB8 (RX) / PB9 (TX), the bench's common wiring"
+        );
+    }
+}
+
+#[test]
+fn the_readme_bench_tables_are_the_boards_tables() {
+    let readme = fs::read_to_string(root().join("README.md")).expect("README.md");
+    for ecu in ECUS {
+        let rows = table_rows(&board_source(ecu));
+        let block = format!(
+            "{TABLE_HEADER}\n|---|---|---|---|---|---|\n{}\n",
+            rows.join("\n")
+        );
+        let heading = format!("#### {ecu}-fw");
+        let section = readme
+            .split("\n#### ")
+            .find(|s| format!("#### {s}").starts_with(&heading))
+            .unwrap_or_else(|| panic!("README: no section starting with '{heading}'"));
+        assert!(
+            section.contains(&block),
+            "README, {heading}: the wiring table differs from ecu-{ecu}/src/bin/{ecu}-fw/board.rs; \
+             copy the board's table:\n{block}"
+        );
+    }
+}
