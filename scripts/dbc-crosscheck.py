@@ -33,6 +33,8 @@ def main() -> int:
 
     problems: list[str] = []
     layouts: dict[str, dict] = {}
+    diag_nodes: dict[str, dict] = {}
+    functional_id = None
     frames_checked = 0
     values_checked = 0
 
@@ -54,12 +56,17 @@ def main() -> int:
             elif entry["kind"] == "frame":
                 values_checked += check_frame(db, layouts, entry, problem)
                 frames_checked += 1
+            elif entry["kind"] == "diag":
+                diag_nodes[entry["node"]] = entry
+            elif entry["kind"] == "functional":
+                functional_id = entry["id"]
             else:
                 print(f"{vectors_path}:{line_no}: unknown kind {entry['kind']!r}", file=sys.stderr)
                 return 1
 
+    diag_checked = check_diagnostics(db, diag_nodes, functional_id, problem)
     ours = set(layouts)
-    theirs = {m.name for m in db.messages}
+    theirs = {m.name for m in db.messages if diag_kind(m) == "None"}
     for name in sorted(theirs - ours):
         problem(f"{name}: in the DBC (cantools) but not in the codec's vectors")
     for name in sorted(ours - theirs):
@@ -70,9 +77,51 @@ def main() -> int:
         return 1
     print(
         f"cantools cross-check: {len(ours)} of {len(theirs)} messages, {frames_checked} frames, "
-        f"{values_checked} signal values: codec and cantools agree"
+        f"{values_checked} signal values, {diag_checked} diagnostic identifiers: "
+        "codec and cantools agree"
     )
     return 0
+
+
+def diag_kind(message) -> str:
+    """The message attribute DiagKind as cantools reads it ("None" for application messages)."""
+    attribute = message.dbc.attributes.get("DiagKind") if message.dbc else None
+    if attribute is None:
+        return "None"
+    value = attribute.value
+    choices = attribute.definition.choices
+    return choices[value] if isinstance(value, int) else value
+
+
+def check_diagnostics(db, diag_nodes: dict, functional_id, problem) -> int:
+    """Every DiagKind message in the DBC is where the codec says it is, and vice versa."""
+    expected = {}
+    for node, entry in diag_nodes.items():
+        for field, kind in (("request", "PhysicalRequest"), ("response", "PhysicalResponse"),
+                            ("obd_response", "ObdResponse")):
+            if entry[field] is not None:
+                expected[entry[field]] = (kind, node)
+    if functional_id is not None:
+        expected[functional_id] = ("FunctionalRequest", None)
+    found = {}
+    for m in db.messages:
+        kind = diag_kind(m)
+        if kind == "None":
+            continue
+        if kind == "PhysicalRequest":
+            owner = next(iter(m.receivers), None) if len(m.receivers) == 1 else None
+        elif kind == "FunctionalRequest":
+            owner = None
+        else:
+            owner = m.senders[0] if m.senders else None
+        found[m.frame_id] = (kind, owner)
+        if m.length != 8:
+            problem(f"{m.name}: diagnostic message of {m.length} bytes, not 8")
+    for frame_id in sorted(set(expected) | set(found)):
+        if expected.get(frame_id) != found.get(frame_id):
+            problem(f"diagnostic identifier 0x{frame_id:03X}: codec says {expected.get(frame_id)}, "
+                    f"cantools reads {found.get(frame_id)}")
+    return len(found)
 
 
 def check_layout(db, entry: dict, problem) -> None:

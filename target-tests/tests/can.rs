@@ -19,6 +19,11 @@ mod tests {
     }
 
     #[test]
+    fn diagnostic_identifiers_follow_spec_section_4() {
+        test_cases::diagnostic_identifiers_follow_spec_section_4();
+    }
+
+    #[test]
     fn every_valid_raw_value_round_trips() {
         test_cases::every_valid_raw_value_round_trips();
     }

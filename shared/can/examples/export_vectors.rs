@@ -8,9 +8,12 @@
 //!   its range, beyond them (clamped), at NaN, every value-table entry, and 200
 //!   combinations from a fixed-seed generator, so every run writes the same file.
 //!
+//! - `"diag"` lines: per node, the diagnostic identifiers the codec derived (UDS request
+//!   and response, OBD-II response), and the functional request identifier.
+//!
 //!     cargo run -p autoplug-can --example export_vectors > can-vectors.jsonl
 
-use autoplug_can::{codec, Message, SignalKind, MESSAGES};
+use autoplug_can::{codec, Message, Node, SignalKind, DIAG_FUNCTIONAL_REQUEST_ID, MESSAGES};
 use serde_json::{json, Map, Value};
 
 /// xorshift64*: small, seeded, reproducible.
@@ -46,6 +49,17 @@ fn frame_line(message: &Message, why: &str) -> Value {
 }
 
 fn main() {
+    for node in Node::ALL {
+        println!(
+            "{}",
+            json!({"kind": "diag", "node": node.name(), "request": node.diag_request_id(),
+                   "response": node.diag_response_id(), "obd_response": node.obd_response_id()})
+        );
+    }
+    println!(
+        "{}",
+        json!({"kind": "functional", "id": DIAG_FUNCTIONAL_REQUEST_ID})
+    );
     let mut rng = Rng(0x00A0_7091_2011_0001);
     for (index, spec) in MESSAGES.iter().enumerate() {
         let signals: Vec<Value> = spec

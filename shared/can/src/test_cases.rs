@@ -85,6 +85,35 @@ pub fn nodes_match_the_spec() {
     assert_eq!(Node::Gateway.received_ids().len(), MESSAGES.len());
 }
 
+/// Spec section 4: UDS at 0x700 + node number, responses at 0x780 + node number, OBD-II
+/// functional requests at 0x7DF, answered by the owners of speed (cruise), RPM and fuel
+/// (engine) on ISO 15765-4 response identifiers; none of them is an application message.
+pub fn diagnostic_identifiers_follow_spec_section_4() {
+    for node in Node::ALL {
+        match node.diag_node_number() {
+            Some(number) => {
+                assert_eq!(node.diag_request_id(), Some(0x700 + u16::from(number)));
+                assert_eq!(node.diag_response_id(), Some(0x780 + u16::from(number)));
+            }
+            None => {
+                assert_eq!(node.diag_request_id(), None, "{}", node.name());
+                assert_eq!(node.diag_response_id(), None, "{}", node.name());
+            }
+        }
+        for id in [node.diag_request_id(), node.diag_response_id()]
+            .into_iter()
+            .flatten()
+        {
+            assert!(!MESSAGES.iter().any(|m| m.id == id), "0x{id:03X}");
+            assert!(!node.received_ids().contains(&id), "0x{id:03X}");
+        }
+    }
+    assert_eq!(crate::DIAG_FUNCTIONAL_REQUEST_ID, 0x7DF);
+    assert_eq!(Node::Engine.obd_response_id(), Some(0x7E8));
+    assert_eq!(Node::Cruise.obd_response_id(), Some(0x7E9));
+    assert_eq!(Node::ABS.obd_response_id(), None);
+}
+
 /// The frame of a message at its start values, with one signal's raw value replaced.
 fn frame_with(index: usize, signal: &SignalSpec, raw: i64) -> ([u8; 8], usize) {
     let mut buf = [0u8; 8];

@@ -11,6 +11,7 @@ macro_rules! shared_cases {
 shared_cases!(
     catalogue_matches_the_spec,
     nodes_match_the_spec,
+    diagnostic_identifiers_follow_spec_section_4,
     every_valid_raw_value_round_trips,
     invalid_raw_values_are_rejected,
     wrong_length_is_rejected,

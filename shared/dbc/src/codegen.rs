@@ -62,12 +62,13 @@ pub fn generate(db: &Database) -> Result<String, GenerateError> {
 
     emit_network(db, w)?;
     emit_nodes(db, w)?;
+    emit_diagnostics(db, w)?;
     for (name, entries) in &enums {
         emit_enum(name, entries, w)?;
     }
 
     let mut specs = Vec::new();
-    for m in &db.messages {
+    for m in db.messages.iter().filter(|m| is_signal_message(db, m)) {
         let fields = fields_of(db, m, &enums)?;
         emit_message(db, m, &fields, w)?;
         specs.push((m, fields));
@@ -173,7 +174,7 @@ fn enum_name_for(db: &Database, s: &Signal) -> String {
 
 fn collect_enums(db: &Database) -> Result<BTreeMap<String, Vec<(i64, String)>>, GenerateError> {
     let mut enums: BTreeMap<String, Vec<(i64, String)>> = BTreeMap::new();
-    for m in &db.messages {
+    for m in db.messages.iter().filter(|m| is_signal_message(db, m)) {
         for s in &m.signals {
             if s.value_descriptions.is_empty() {
                 continue;
@@ -277,6 +278,208 @@ fn fields_of<'a>(
         });
     }
     Ok(fields)
+}
+
+/// The message attribute `DiagKind` of the catalogue: what a diagnostic transport message
+/// (ISO-TP frames, no application signals) is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum DiagKind {
+    None,
+    PhysicalRequest,
+    PhysicalResponse,
+    FunctionalRequest,
+    ObdResponse,
+}
+
+const DIAG_KINDS: [(&str, DiagKind); 5] = [
+    ("None", DiagKind::None),
+    ("PhysicalRequest", DiagKind::PhysicalRequest),
+    ("PhysicalResponse", DiagKind::PhysicalResponse),
+    ("FunctionalRequest", DiagKind::FunctionalRequest),
+    ("ObdResponse", DiagKind::ObdResponse),
+];
+
+/// UDS physical request identifiers are this plus the node number; responses add
+/// [`DIAG_RESPONSE_BASE`] (spec section 4).
+const DIAG_REQUEST_BASE: u32 = 0x700;
+const DIAG_RESPONSE_BASE: u32 = 0x780;
+/// The OBD-II functional request identifier and the ISO 15765-4 response range.
+const OBD_FUNCTIONAL_ID: u32 = 0x7DF;
+const OBD_RESPONSE_IDS: std::ops::RangeInclusive<u32> = 0x7E8..=0x7EF;
+
+fn diag_kind(db: &Database, m: &Message) -> Result<DiagKind, GenerateError> {
+    let Some(value) = db.message_attribute(m, "DiagKind") else {
+        return Ok(DiagKind::None);
+    };
+    let found = match value {
+        AttributeValue::Int(i) => usize::try_from(*i).ok().and_then(|i| DIAG_KINDS.get(i)),
+        AttributeValue::Str(name) => DIAG_KINDS.iter().find(|(n, _)| n == name),
+        AttributeValue::Float(_) => None,
+    };
+    found.map(|(_, kind)| *kind).ok_or_else(|| {
+        gen_err(
+            m.line,
+            format!("message {}: DiagKind {value:?} is not one of None, PhysicalRequest, PhysicalResponse, FunctionalRequest, ObdResponse", m.name),
+        )
+    })
+}
+
+/// An application message: signals the codec encodes and decodes. The diagnostic
+/// transport messages (attribute `DiagKind`) carry ISO-TP frames instead.
+fn is_signal_message(db: &Database, m: &Message) -> bool {
+    matches!(diag_kind(db, m), Ok(DiagKind::None))
+}
+
+/// The one node that receives a diagnostic message's `Data` signal.
+fn sole_receiver(m: &Message) -> Option<&str> {
+    match m.signals.as_slice() {
+        [signal] if signal.receivers.len() == 1 => Some(signal.receivers[0].as_str()),
+        _ => None,
+    }
+}
+
+/// Checks the diagnostic transport messages against spec section 4 and emits their
+/// identifiers: per node, the physical request and response identifiers and the OBD-II
+/// response identifier, and the functional request identifier.
+fn emit_diagnostics(db: &Database, w: &mut String) -> Result<(), GenerateError> {
+    let mut functional = None;
+    let mut per_node: BTreeMap<&str, [Option<u32>; 3]> = BTreeMap::new();
+    for m in &db.messages {
+        let kind = diag_kind(db, m)?;
+        if kind == DiagKind::None {
+            continue;
+        }
+        let err = |what: String| gen_err(m.line, format!("diagnostic message {}: {what}", m.name));
+        let payload_ok = m.dlc == 8
+            && matches!(m.signals.as_slice(), [s] if s.start_bit == 0 && s.length == 64 && s.byte_order == ByteOrder::LittleEndian);
+        if !payload_ok {
+            return Err(err(
+                "must be 8 bytes with one 64-bit signal at bit 0 (the ISO-TP frame)".into(),
+            ));
+        }
+        let sender = m.transmitters.first().map(String::as_str).unwrap_or("");
+        let number_of = |name: &str| {
+            db.nodes
+                .iter()
+                .find(|n| n.name == name)
+                .and_then(|n| db.node_attribute(n, "DiagNodeNumber"))
+                .and_then(AttributeValue::as_int)
+                .filter(|&n| n > 0)
+                .map(|n| n as u32)
+        };
+        let (node, slot, expected) = match kind {
+            DiagKind::None => unreachable!(),
+            DiagKind::FunctionalRequest => {
+                if m.id != OBD_FUNCTIONAL_ID {
+                    return Err(err(format!("the functional request identifier is 0x{OBD_FUNCTIONAL_ID:03X}, not 0x{:03X}", m.id)));
+                }
+                if functional.replace(m.id).is_some() {
+                    return Err(err("a second functional request message".into()));
+                }
+                continue;
+            }
+            DiagKind::PhysicalRequest => {
+                let node = sole_receiver(m)
+                    .ok_or_else(|| err("a request must have exactly one receiving node".into()))?;
+                let number = number_of(node)
+                    .ok_or_else(|| err(format!("receiver {node} has no DiagNodeNumber")))?;
+                (node, 0, Some(DIAG_REQUEST_BASE + number))
+            }
+            DiagKind::PhysicalResponse => {
+                let number = number_of(sender)
+                    .ok_or_else(|| err(format!("sender {sender} has no DiagNodeNumber")))?;
+                (sender, 1, Some(DIAG_RESPONSE_BASE + number))
+            }
+            DiagKind::ObdResponse => {
+                if !OBD_RESPONSE_IDS.contains(&m.id) {
+                    return Err(err(format!(
+                        "OBD-II responses use 0x7E8..=0x7EF (ISO 15765-4), not 0x{:03X}",
+                        m.id
+                    )));
+                }
+                (sender, 2, None)
+            }
+        };
+        if let Some(expected) = expected {
+            if m.id != expected {
+                return Err(err(format!(
+                    "identifier 0x{:03X}, but {node}'s node number gives 0x{expected:03X}",
+                    m.id
+                )));
+            }
+        }
+        let ids = per_node.entry(node).or_default();
+        if ids[slot].replace(m.id).is_some() {
+            return Err(err(format!("{node} already has a message of this kind")));
+        }
+    }
+    for n in &db.nodes {
+        let numbered = db
+            .node_attribute(n, "DiagNodeNumber")
+            .and_then(AttributeValue::as_int)
+            .is_some_and(|v| v > 0);
+        let ids = per_node.get(n.name.as_str()).copied().unwrap_or_default();
+        if numbered && (ids[0].is_none() || ids[1].is_none()) {
+            return Err(gen_err(
+                0,
+                format!("node {} has a DiagNodeNumber but not both a DiagKind PhysicalRequest and PhysicalResponse message", n.name),
+            ));
+        }
+    }
+    if functional.is_none()
+        && per_node.is_empty()
+        && !db.nodes.iter().any(|n| {
+            db.node_attribute(n, "DiagNodeNumber")
+                .and_then(AttributeValue::as_int)
+                .is_some_and(|v| v > 0)
+        })
+    {
+        // A network without diagnostics: nothing to emit.
+        return Ok(());
+    }
+    let functional =
+        functional.ok_or_else(|| gen_err(0, "no DiagKind FunctionalRequest message (0x7DF)"))?;
+
+    line(
+        w,
+        "/// The functional request identifier (OBD-II, and UDS requests to every ECU at once):",
+    );
+    line(w, "/// the DBC's `DiagKind` FunctionalRequest message.");
+    line(
+        w,
+        &format!("pub const DIAG_FUNCTIONAL_REQUEST_ID: u16 = 0x{functional:03X};"),
+    );
+    line(w, "");
+    line(w, "impl Node {");
+    let methods = [
+        ("UDS physical request identifier (0x700 + node number; `DiagKind` PhysicalRequest).", "diag_request_id"),
+        ("UDS response identifier (0x780 + node number; `DiagKind` PhysicalResponse).", "diag_response_id"),
+        ("OBD-II response identifier (ISO 15765-4; `DiagKind` ObdResponse), for the ECUs that\nown an OBD-II value.", "obd_response_id"),
+    ];
+    for (slot, (docs, name)) in methods.iter().enumerate() {
+        doc(w, "    ", docs);
+        line(
+            w,
+            &format!("    pub const fn {name}(self) -> Option<u16> {{"),
+        );
+        line(w, "        match self {");
+        for n in &db.nodes {
+            let v = match per_node.get(n.name.as_str()).and_then(|ids| ids[slot]) {
+                Some(id) => format!("Some(0x{id:03X})"),
+                None => "None".to_string(),
+            };
+            line(
+                w,
+                &format!("            Node::{} => {v},", variant_ident(&n.name)),
+            );
+        }
+        line(w, "        }");
+        line(w, "    }");
+        line(w, "");
+    }
+    line(w, "}");
+    line(w, "");
+    Ok(())
 }
 
 fn emit_network(db: &Database, w: &mut String) -> Result<(), GenerateError> {
@@ -383,14 +586,14 @@ fn emit_nodes(db: &Database, w: &mut String) -> Result<(), GenerateError> {
         w,
         "Identifiers of the messages this node sends.",
         "transmitted_ids",
-        |n, m| m.transmitters.contains(&n.name),
+        |n, m| is_signal_message(db, m) && m.transmitters.contains(&n.name),
     );
     node_ids_method(
         db,
         w,
-        "Identifiers of the messages with a signal this node receives: what its\nacceptance filters must let through.",
+        "Identifiers of the messages with a signal this node receives: what its\nacceptance filters must let through for the application (the diagnostic identifiers\ncome on top: [`Node::diag_request_id`], [`DIAG_FUNCTIONAL_REQUEST_ID`]).",
         "received_ids",
-        |n, m| m.signals.iter().any(|s| s.receivers.contains(&n.name)),
+        |n, m| is_signal_message(db, m) && m.signals.iter().any(|s| s.receivers.contains(&n.name)),
     );
     line(w, "}");
     line(w, "");

@@ -70,7 +70,9 @@ fn reads_a_small_database() {
 #[test]
 fn the_catalogue_loads_and_generates() {
     let db = load(CATALOGUE).expect("catalogue is valid");
-    assert_eq!(db.messages.len(), 18);
+    // 18 application messages, 9 UDS request and 9 response identifiers, the functional
+    // request and 2 OBD-II responses.
+    assert_eq!(db.messages.len(), 18 + 9 + 9 + 1 + 2);
     let cruise_mode = db.message("CruiseModeMsg").unwrap();
     assert_eq!(cruise_mode.transmitters, vec!["Steering", "Pedals"]);
     let rpm = db
@@ -210,4 +212,49 @@ fn names_become_rust_identifiers() {
     assert_eq!(variant_ident("no request"), "NoRequest");
     assert_eq!(variant_ident("1st"), "V1st");
     assert_eq!(variant_ident("Sixth"), "Sixth");
+}
+
+/// A network with diagnostics, as the catalogue declares them; `extra` is appended.
+fn diag_network(request_id: u32, extra: &str) -> String {
+    format!(
+        "BU_: A T\nBA_DEF_ \"Baudrate\" INT 0 1000000;\nBA_DEF_ BU_ \"DiagNodeNumber\" INT 0 255;\n\
+         BA_DEF_ BO_ \"DiagKind\" ENUM \"None\",\"PhysicalRequest\",\"PhysicalResponse\",\"FunctionalRequest\",\"ObdResponse\";\n\
+         BA_DEF_DEF_ \"DiagKind\" \"None\";\nBA_ \"Baudrate\" 500000;\nBA_ \"DiagNodeNumber\" BU_ A 3;\n\
+         BO_ {request_id} ReqA: 8 T\n SG_ Data : 0|64@1+ (1,0) [0|0] \"\" A\n\
+         BO_ 1923 RespA: 8 A\n SG_ Data : 0|64@1+ (1,0) [0|0] \"\" T\n\
+         BO_ 2015 Functional: 8 T\n SG_ Data : 0|64@1+ (1,0) [0|0] \"\" A\n\
+         BA_ \"DiagKind\" BO_ {request_id} 1;\nBA_ \"DiagKind\" BO_ 1923 2;\nBA_ \"DiagKind\" BO_ 2015 3;\n{extra}"
+    )
+}
+
+#[test]
+fn diagnostic_identifiers_follow_the_node_numbers() {
+    let source = compile(&diag_network(0x703, "")).expect("a sound diagnostic network");
+    assert!(source.contains("pub const DIAG_FUNCTIONAL_REQUEST_ID: u16 = 0x7DF;"));
+    assert!(source.contains("Node::A => Some(0x703),"), "{source}");
+    assert!(source.contains("Node::A => Some(0x783),"), "{source}");
+    // Transport messages are not codec messages: no struct, not in the receive filters.
+    assert!(!source.contains("pub struct ReqA"), "{source}");
+    assert!(source.contains("Node::A => &[],"), "{source}");
+
+    match compile(&diag_network(0x704, "")) {
+        Err(Error::Generate(e)) => {
+            assert!(e.to_string().contains("0x704"), "{e}");
+            assert!(e.to_string().contains("gives 0x703"), "{e}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let obd = "BO_ 2032 ObdA: 8 A\n SG_ Data : 0|64@1+ (1,0) [0|0] \"\" T\nBA_ \"DiagKind\" BO_ 2032 4;\n";
+    match compile(&diag_network(0x703, obd)) {
+        Err(Error::Generate(e)) => assert!(e.to_string().contains("0x7E8..=0x7EF"), "{e}"),
+        other => panic!("{other:?}"),
+    }
+    let short = diag_network(0x703, "").replace(
+        "BO_ 1923 RespA: 8 A\n SG_ Data : 0|64@1+",
+        "BO_ 1923 RespA: 8 A\n SG_ Data : 0|32@1+",
+    );
+    match compile(&short) {
+        Err(Error::Generate(e)) => assert!(e.to_string().contains("64-bit"), "{e}"),
+        other => panic!("{other:?}"),
+    }
 }
