@@ -1,0 +1,1096 @@
+//! The UDS server: one per ECU, fed whole request PDUs (ISO-TP reassembles them) and
+//! answering with whole response PDUs. What the ECU itself provides (identification, live
+//! data, DTCs, the flash it programs) comes through [`Backend`]; everything a tester can
+//! see of the protocol (sessions, timing, security, the order of a download and the checks
+//! of an image) is decided here, the same on the MCU and in the virtual car.
+
+use autoplug_ecu::{status, Dtc, Dtcs, Instant};
+use autoplug_image::{
+    Expectations, ImageError, ImageHeader, StreamVerifier, HEADER_LEN, SIGNATURE_LEN,
+};
+
+use crate::nrc::{sid, Nrc};
+use crate::security::{key_for, keys_match, KEY_LEN, SEED_LEN};
+
+/// Diagnostic sessions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum Session {
+    /// 0x01: after power-up; reading only.
+    Default = 0x01,
+    /// 0x02: download and the programming routines.
+    Programming = 0x02,
+    /// 0x03: communication control, DTC setting, security access.
+    Extended = 0x03,
+}
+
+/// Timing and security parameters of a server.
+#[derive(Clone, Copy, Debug)]
+pub struct Config {
+    /// The ECU's diagnostic node number (part of the security key's MAC).
+    pub node: u8,
+    /// The secret shared with the tester for SecurityAccess.
+    pub security_secret: &'static [u8],
+    /// P2server: the longest time to the first response, announced in 0x50 (ms).
+    pub p2_ms: u16,
+    /// P2*server: the longest time after a 0x78 "response pending", announced in 0x50 (ms).
+    pub p2_star_ms: u32,
+    /// S3server: a non-default session without requests for this long ends (µs).
+    pub s3_us: u64,
+    /// Wrong keys in a row that lock security access.
+    pub max_key_attempts: u8,
+    /// How long the lock lasts (µs).
+    pub lockout_us: u64,
+}
+
+impl Config {
+    /// ISO 14229-2 default timing (P2 50 ms, P2* 5000 ms, S3 5000 ms); security locks for
+    /// 10 s after 3 wrong keys.
+    pub const fn new(node: u8, security_secret: &'static [u8]) -> Self {
+        Self {
+            node,
+            security_secret,
+            p2_ms: 50,
+            p2_star_ms: 5_000,
+            s3_us: 5_000_000,
+            max_key_attempts: 3,
+            lockout_us: 10_000_000,
+        }
+    }
+}
+
+/// Identification data of the ECU, for the F18x DIDs.
+#[derive(Clone, Copy, Debug)]
+pub struct Identification<'a> {
+    /// F187: spare part number.
+    pub part_number: &'a [u8],
+    /// F189: application software version.
+    pub software_version: &'a [u8],
+    /// F18C: ECU serial number.
+    pub serial_number: &'a [u8],
+    /// F191: hardware version.
+    pub hardware_version: &'a [u8],
+}
+
+/// A flash operation failed (the backend logs the detail).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FlashError;
+
+/// What the ECU provides to its UDS server.
+pub trait Backend {
+    /// Identification data.
+    fn identification(&self) -> Identification<'_>;
+    /// Live data: writes DID `did` into `out` and returns its length, or `None` for a DID
+    /// this ECU does not have.
+    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize>;
+    /// Vehicle speed as the ECU last received it, km/h; `None` while unknown.
+    fn vehicle_speed_kmh(&self) -> Option<f32>;
+    /// The ECU's DTCs.
+    fn dtcs(&mut self) -> &mut Dtcs;
+    /// Unpredictable bytes for a security seed.
+    fn fill_random(&mut self, out: &mut [u8]);
+    /// What an image must be to be installed here.
+    fn image_expectations(&self) -> Expectations;
+    /// The key images are signed with.
+    fn public_key(&self) -> [u8; 32];
+    /// Number of erase steps of the DFU partition (one step: one sector).
+    fn dfu_erase_steps(&self) -> u32;
+    /// Erases step `step` of the DFU partition (the core may stall for a second).
+    fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError>;
+    /// Programs `data` at `offset` in the DFU partition (erased before).
+    fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError>;
+    /// Reads the DFU partition.
+    fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError>;
+    /// Marks the verified image in the DFU partition for the swap at the next reset.
+    fn mark_updated(&mut self) -> Result<(), FlashError>;
+    /// The OBD-II mode 01 PIDs this ECU owns (not counting the support bitmaps).
+    fn obd_pids(&self) -> &'static [u8] {
+        &[]
+    }
+    /// Writes the data bytes of mode 01 PID `pid` (one of [`Backend::obd_pids`]); `None`
+    /// while the value is unknown.
+    fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
+        let _ = (pid, out);
+        None
+    }
+}
+
+/// The kinds of reset 0x11 asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum ResetKind {
+    /// 0x01: as a power cycle.
+    Hard,
+    /// 0x03: the application restarts.
+    Soft,
+}
+
+/// What to do with the response buffer after a call.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reply {
+    /// Nothing to send (suppressed positive response, or a functional request this ECU does
+    /// not answer).
+    Nothing,
+    /// Send the first `n` bytes.
+    Send(usize),
+    /// Send the first `n` bytes (a 0x78 "response pending"), then call
+    /// [`Server::resume`] until it returns something else.
+    Pending(usize),
+    /// Nothing to send yet: call [`Server::resume`] again.
+    Working,
+    /// Send the first `n` bytes, then reset the ECU.
+    SendThenReset(usize, ResetKind),
+}
+
+/// Routine identifiers (ISO 14229-1 annex F): erase memory, check programming
+/// dependencies (here: the downloaded image verifies and fits this ECU).
+pub const ROUTINE_ERASE_MEMORY: u16 = 0xFF00;
+/// See [`ROUTINE_ERASE_MEMORY`].
+pub const ROUTINE_CHECK_PROGRAMMING_DEPENDENCIES: u16 = 0xFF01;
+
+/// Identification DIDs.
+pub mod did {
+    /// Active diagnostic session (1 byte).
+    pub const ACTIVE_SESSION: u16 = 0xF186;
+    /// Spare part number.
+    pub const PART_NUMBER: u16 = 0xF187;
+    /// Application software version.
+    pub const SOFTWARE_VERSION: u16 = 0xF189;
+    /// ECU serial number.
+    pub const SERIAL_NUMBER: u16 = 0xF18C;
+    /// Hardware version.
+    pub const HARDWARE_VERSION: u16 = 0xF191;
+}
+
+/// Bytes of TransferData payload per block a tester may send: the 4095 bytes of an ISO-TP
+/// PDU less the SID and the block counter. Announced in the 0x74 response as the block
+/// length including those two bytes.
+pub const MAX_BLOCK_LEN: u16 = 4095;
+
+/// Bytes of the DFU partition read per [`Server::resume`] call while checking an image.
+const CHECK_CHUNK: usize = 1024;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Security {
+    Locked,
+    SeedSent([u8; SEED_LEN]),
+    Unlocked,
+}
+
+#[derive(Clone, Debug)]
+enum Programming {
+    /// Nothing erased since the last download (or since power-up).
+    Idle,
+    /// The DFU partition is erased: a download may start.
+    Erased,
+    /// A download is under way.
+    Downloading {
+        size: u32,
+        received: u32,
+        /// The counter of the last block written (0 before the first; it wraps 0xFF → 0x00).
+        last_counter: u8,
+        header_checked: bool,
+    },
+    /// All bytes are in: the image may be checked.
+    Downloaded { size: u32 },
+    /// The image verified and is marked for the swap.
+    Verified,
+}
+
+// One `Work` lives inside the server at a time and there is no allocator to box the
+// verifier's state into: the size difference is the point.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug)]
+enum Work {
+    Erase {
+        step: u32,
+        steps: u32,
+    },
+    Check {
+        header: ImageHeader,
+        verifier: StreamVerifier,
+        offset: u32,
+        signed_len: u32,
+    },
+}
+
+/// The UDS server of one ECU.
+#[derive(Debug)]
+pub struct Server {
+    config: Config,
+    session: Session,
+    last_request: Instant,
+    security: Security,
+    failed_keys: u8,
+    locked_until: Option<Instant>,
+    normal_rx: bool,
+    normal_tx: bool,
+    dtc_setting_on: bool,
+    programming: Programming,
+    work: Option<Work>,
+    last_image_error: Option<ImageError>,
+}
+
+impl Server {
+    /// A server in the default session, as after power-up.
+    pub fn new(config: Config, now: Instant) -> Self {
+        Self {
+            config,
+            session: Session::Default,
+            last_request: now,
+            security: Security::Locked,
+            failed_keys: 0,
+            locked_until: None,
+            normal_rx: true,
+            normal_tx: true,
+            dtc_setting_on: true,
+            programming: Programming::Idle,
+            work: None,
+            last_image_error: None,
+        }
+    }
+
+    /// The active session.
+    pub fn session(&self) -> Session {
+        self.session
+    }
+
+    /// Whether the application may send its normal messages (0x28 can switch them off).
+    pub fn normal_tx_enabled(&self) -> bool {
+        self.normal_tx
+    }
+
+    /// Whether the application should act on received normal messages.
+    pub fn normal_rx_enabled(&self) -> bool {
+        self.normal_rx
+    }
+
+    /// Whether DTCs are recorded (0x85 can switch it off).
+    pub fn dtc_setting_on(&self) -> bool {
+        self.dtc_setting_on
+    }
+
+    /// Whether security access is granted.
+    pub fn unlocked(&self) -> bool {
+        self.security == Security::Unlocked
+    }
+
+    /// Why the last image was refused, for logs and the tester's report.
+    pub fn last_image_error(&self) -> Option<&ImageError> {
+        self.last_image_error.as_ref()
+    }
+
+    /// Whether a long operation is under way ([`Server::resume`] has work to do).
+    pub fn busy(&self) -> bool {
+        self.work.is_some()
+    }
+
+    /// Ends a non-default session after S3 without requests: back to the default session,
+    /// security locked, communication and DTC setting restored, a download abandoned.
+    pub fn poll(&mut self, now: Instant, backend: &mut impl Backend) {
+        if self.session != Session::Default
+            && self.work.is_none()
+            && now.micros_since(self.last_request) > self.config.s3_us
+        {
+            self.enter_default_session(backend);
+        }
+        self.lockout_active(now);
+    }
+
+    /// Handles one request PDU; writes the response into `out` (at least 4095 bytes
+    /// always suffice). `functional`: the request came on the functional identifier, where
+    /// a negative response for an unknown service, sub-function or identifier is not sent.
+    pub fn handle(
+        &mut self,
+        now: Instant,
+        request: &[u8],
+        functional: bool,
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Reply {
+        let Some(&service) = request.first() else {
+            return Reply::Nothing;
+        };
+        self.last_request = now;
+        if self.work.is_some() {
+            // One request at a time: the tester waits for the final response.
+            return negative(service, Nrc::ConditionsNotCorrect, out);
+        }
+        let result = self.dispatch(now, service, request, backend, out);
+        match result {
+            Ok(reply) => reply,
+            Err(nrc) if functional && suppressed_when_functional(nrc) => Reply::Nothing,
+            Err(nrc) => negative(service, nrc, out),
+        }
+    }
+
+    /// Continues a long operation (erase, image check) by one step; sends "response
+    /// pending" before each step that may stall the core, and the final response at the
+    /// end.
+    pub fn resume(&mut self, now: Instant, backend: &mut impl Backend, out: &mut [u8]) -> Reply {
+        self.last_request = now;
+        let Some(work) = self.work.take() else {
+            return Reply::Nothing;
+        };
+        match work {
+            Work::Erase { step, steps } => {
+                if backend.dfu_erase(step).is_err() {
+                    self.programming = Programming::Idle;
+                    return negative(sid::ROUTINE_CONTROL, Nrc::GeneralProgrammingFailure, out);
+                }
+                if step + 1 < steps {
+                    self.work = Some(Work::Erase {
+                        step: step + 1,
+                        steps,
+                    });
+                    // The next sector stalls the core again: keep the tester waiting.
+                    return pending(sid::ROUTINE_CONTROL, out);
+                }
+                self.programming = Programming::Erased;
+                Reply::Send(routine_ok(ROUTINE_ERASE_MEMORY, out))
+            }
+            Work::Check {
+                header,
+                mut verifier,
+                offset,
+                signed_len,
+            } => {
+                let mut chunk = [0u8; CHECK_CHUNK];
+                let len = (signed_len - offset).min(CHECK_CHUNK as u32) as usize;
+                if backend.dfu_read(offset, &mut chunk[..len]).is_err() {
+                    self.programming = Programming::Idle;
+                    return negative(sid::ROUTINE_CONTROL, Nrc::GeneralProgrammingFailure, out);
+                }
+                verifier.update(&chunk[..len]);
+                let offset = offset + len as u32;
+                if offset < signed_len {
+                    self.work = Some(Work::Check {
+                        header,
+                        verifier,
+                        offset,
+                        signed_len,
+                    });
+                    return Reply::Working;
+                }
+                let mut signature = [0u8; SIGNATURE_LEN];
+                let verdict = match backend.dfu_read(signed_len, &mut signature) {
+                    Ok(()) => verifier.finish(&signature, &backend.public_key()),
+                    Err(FlashError) => Err(ImageError::BadSignature),
+                };
+                match verdict.map(|()| backend.mark_updated()) {
+                    Ok(Ok(())) => {
+                        self.programming = Programming::Verified;
+                        self.last_image_error = None;
+                        Reply::Send(routine_ok(ROUTINE_CHECK_PROGRAMMING_DEPENDENCIES, out))
+                    }
+                    Ok(Err(FlashError)) => {
+                        self.programming = Programming::Idle;
+                        negative(sid::ROUTINE_CONTROL, Nrc::GeneralProgrammingFailure, out)
+                    }
+                    Err(error) => {
+                        self.refuse_image(error);
+                        negative(sid::ROUTINE_CONTROL, Nrc::GeneralProgrammingFailure, out)
+                    }
+                }
+            }
+        }
+    }
+
+    fn dispatch(
+        &mut self,
+        now: Instant,
+        service: u8,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        match service {
+            sid::SESSION_CONTROL => self.session_control(request, backend, out),
+            sid::ECU_RESET => self.ecu_reset(request, out),
+            sid::TESTER_PRESENT => {
+                let sub = sub_function(request, Length::Exactly(2))?;
+                if sub & 0x7F != 0 {
+                    return Err(Nrc::SubFunctionNotSupported);
+                }
+                Ok(positive(request, &[sub & 0x7F], out))
+            }
+            sid::READ_DID => self.read_data(request, backend, out),
+            sid::SECURITY_ACCESS => self.security_access(now, request, backend, out),
+            sid::COMMUNICATION_CONTROL => self.communication_control(request, out),
+            sid::CONTROL_DTC_SETTING => self.control_dtc_setting(request, backend, out),
+            sid::READ_DTC => read_dtc_information(request, backend.dtcs(), out),
+            sid::CLEAR_DTC => {
+                if request.len() != 4 {
+                    return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+                }
+                let group = u32::from_be_bytes([0, request[1], request[2], request[3]]);
+                if group != 0xFF_FFFF {
+                    // Only "all groups": the ECUs keep few codes, and a tester clears them all.
+                    return Err(Nrc::RequestOutOfRange);
+                }
+                backend.dtcs().clear();
+                Ok(Reply::Send(write(
+                    out,
+                    &[sid::CLEAR_DTC + sid::POSITIVE_OFFSET],
+                )))
+            }
+            sid::ROUTINE_CONTROL => self.routine_control(request, backend, out),
+            sid::REQUEST_DOWNLOAD => self.request_download(request, backend, out),
+            sid::TRANSFER_DATA => self.transfer_data(request, backend, out),
+            sid::REQUEST_TRANSFER_EXIT => self.request_transfer_exit(request, out),
+            _ => Err(Nrc::ServiceNotSupported),
+        }
+    }
+
+    fn session_control(
+        &mut self,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        let sub = sub_function(request, Length::Exactly(2))?;
+        let session = match sub & 0x7F {
+            0x01 => Session::Default,
+            0x02 => Session::Programming,
+            0x03 => Session::Extended,
+            _ => return Err(Nrc::SubFunctionNotSupported),
+        };
+        if session == Session::Programming && !vehicle_stationary(backend) {
+            return Err(Nrc::ConditionsNotCorrect);
+        }
+        if session == Session::Default {
+            self.enter_default_session(backend);
+        } else if session != self.session {
+            // A change of session relocks security (ISO 14229-1 9.2).
+            self.security = Security::Locked;
+            self.session = session;
+        }
+        let p2 = self.config.p2_ms.to_be_bytes();
+        let p2_star = ((self.config.p2_star_ms / 10) as u16).to_be_bytes();
+        if sub & 0x80 != 0 {
+            return Ok(Reply::Nothing);
+        }
+        Ok(Reply::Send(write(
+            out,
+            &[
+                sid::SESSION_CONTROL + sid::POSITIVE_OFFSET,
+                sub,
+                p2[0],
+                p2[1],
+                p2_star[0],
+                p2_star[1],
+            ],
+        )))
+    }
+
+    fn enter_default_session(&mut self, backend: &mut impl Backend) {
+        self.session = Session::Default;
+        self.security = Security::Locked;
+        self.normal_rx = true;
+        self.normal_tx = true;
+        self.dtc_setting_on = true;
+        backend.dtcs().set_recording(true);
+        if !matches!(self.programming, Programming::Verified) {
+            self.programming = Programming::Idle;
+        }
+    }
+
+    fn ecu_reset(&mut self, request: &[u8], out: &mut [u8]) -> Result<Reply, Nrc> {
+        let sub = sub_function(request, Length::Exactly(2))?;
+        let kind = match sub & 0x7F {
+            0x01 => ResetKind::Hard,
+            0x03 => ResetKind::Soft,
+            _ => return Err(Nrc::SubFunctionNotSupported),
+        };
+        if self.work.is_some() {
+            return Err(Nrc::ConditionsNotCorrect);
+        }
+        let len = if sub & 0x80 != 0 {
+            0
+        } else {
+            write(out, &[sid::ECU_RESET + sid::POSITIVE_OFFSET, sub])
+        };
+        Ok(Reply::SendThenReset(len, kind))
+    }
+
+    fn read_data(
+        &mut self,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        let dids = &request[1..];
+        if dids.is_empty() || dids.len() % 2 != 0 {
+            return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+        }
+        out[0] = sid::READ_DID + sid::POSITIVE_OFFSET;
+        let mut len = 1;
+        let mut found = 0;
+        for pair in dids.chunks_exact(2) {
+            let did = u16::from_be_bytes([pair[0], pair[1]]);
+            let room = out.len().checked_sub(len + 2).ok_or(Nrc::ResponseTooLong)?;
+            let data = &mut out[len + 2..];
+            let ident = backend.identification();
+            let fixed: Option<&[u8]> = match did {
+                did::PART_NUMBER => Some(ident.part_number),
+                did::SOFTWARE_VERSION => Some(ident.software_version),
+                did::SERIAL_NUMBER => Some(ident.serial_number),
+                did::HARDWARE_VERSION => Some(ident.hardware_version),
+                did::ACTIVE_SESSION => Some(match self.session {
+                    Session::Default => &[0x01],
+                    Session::Programming => &[0x02],
+                    Session::Extended => &[0x03],
+                }),
+                _ => None,
+            };
+            let written = match fixed {
+                Some(bytes) if bytes.len() > room => return Err(Nrc::ResponseTooLong),
+                Some(bytes) => {
+                    data[..bytes.len()].copy_from_slice(bytes);
+                    Some(bytes.len())
+                }
+                None => backend.read_live_data(did, data),
+            };
+            if let Some(n) = written {
+                out[len..len + 2].copy_from_slice(&did.to_be_bytes());
+                len += 2 + n;
+                found += 1;
+            }
+        }
+        if found == 0 {
+            return Err(Nrc::RequestOutOfRange);
+        }
+        Ok(Reply::Send(len))
+    }
+
+    fn security_access(
+        &mut self,
+        now: Instant,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        let sub = sub_function(request, Length::AtLeastSubFunction)?;
+        if self.session == Session::Default {
+            return Err(Nrc::ServiceNotSupportedInActiveSession);
+        }
+        match sub & 0x7F {
+            0x01 => {
+                if request.len() != 2 {
+                    return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+                }
+                if self.lockout_active(now) {
+                    return Err(Nrc::RequiredTimeDelayNotExpired);
+                }
+                let mut seed = [0u8; SEED_LEN];
+                if self.security != Security::Unlocked {
+                    // An all-zero seed means "already unlocked": never hand one out otherwise.
+                    while seed.iter().all(|&b| b == 0) {
+                        backend.fill_random(&mut seed);
+                    }
+                    self.security = Security::SeedSent(seed);
+                }
+                let mut response = [0u8; 2 + SEED_LEN];
+                response[0] = sid::SECURITY_ACCESS + sid::POSITIVE_OFFSET;
+                response[1] = sub;
+                response[2..].copy_from_slice(&seed);
+                Ok(Reply::Send(write(out, &response)))
+            }
+            0x02 => {
+                let Security::SeedSent(seed) = self.security else {
+                    return Err(Nrc::RequestSequenceError);
+                };
+                if request.len() != 2 + KEY_LEN {
+                    return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+                }
+                let expected = key_for(self.config.security_secret, self.config.node, &seed);
+                if keys_match(&request[2..], &expected) {
+                    self.security = Security::Unlocked;
+                    self.failed_keys = 0;
+                    return Ok(positive(request, &[sub], out));
+                }
+                // A seed is good for one try.
+                self.security = Security::Locked;
+                self.failed_keys = self.failed_keys.saturating_add(1);
+                if self.failed_keys >= self.config.max_key_attempts {
+                    self.locked_until = Some(now.plus_micros(self.config.lockout_us));
+                    return Err(Nrc::ExceededNumberOfAttempts);
+                }
+                Err(Nrc::InvalidKey)
+            }
+            _ => Err(Nrc::SubFunctionNotSupported),
+        }
+    }
+
+    fn lockout_active(&mut self, now: Instant) -> bool {
+        match self.locked_until {
+            Some(until) if now.as_micros() < until.as_micros() => true,
+            Some(_) => {
+                self.locked_until = None;
+                self.failed_keys = 0;
+                false
+            }
+            None => false,
+        }
+    }
+
+    fn communication_control(&mut self, request: &[u8], out: &mut [u8]) -> Result<Reply, Nrc> {
+        let sub = sub_function(request, Length::Exactly(3))?;
+        if request.len() != 3 {
+            return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+        }
+        if self.session == Session::Default {
+            return Err(Nrc::ServiceNotSupportedInActiveSession);
+        }
+        let (rx, tx) = match sub & 0x7F {
+            0x00 => (true, true),
+            0x01 => (true, false),
+            0x02 => (false, true),
+            0x03 => (false, false),
+            _ => return Err(Nrc::SubFunctionNotSupported),
+        };
+        // Communication type: bits 0..1 select normal (1) and network management (2)
+        // messages; this network has no network management, so only normal ones matter.
+        let comm_type = request[2] & 0x03;
+        if comm_type == 0 {
+            return Err(Nrc::RequestOutOfRange);
+        }
+        if comm_type & 0x01 != 0 {
+            self.normal_rx = rx;
+            self.normal_tx = tx;
+        }
+        Ok(positive(request, &[sub & 0x7F], out))
+    }
+
+    fn control_dtc_setting(
+        &mut self,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        let sub = sub_function(request, Length::Exactly(2))?;
+        if self.session == Session::Default {
+            return Err(Nrc::ServiceNotSupportedInActiveSession);
+        }
+        let on = match sub & 0x7F {
+            0x01 => true,
+            0x02 => false,
+            _ => return Err(Nrc::SubFunctionNotSupported),
+        };
+        self.dtc_setting_on = on;
+        backend.dtcs().set_recording(on);
+        Ok(positive(request, &[sub & 0x7F], out))
+    }
+
+    fn routine_control(
+        &mut self,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        if request.len() < 4 {
+            return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+        }
+        let sub = request[1] & 0x7F;
+        let routine = u16::from_be_bytes([request[2], request[3]]);
+        if routine != ROUTINE_ERASE_MEMORY && routine != ROUTINE_CHECK_PROGRAMMING_DEPENDENCIES {
+            return Err(Nrc::RequestOutOfRange);
+        }
+        if sub != 0x01 {
+            return Err(Nrc::SubFunctionNotSupported);
+        }
+        if self.session != Session::Programming {
+            return Err(Nrc::ServiceNotSupportedInActiveSession);
+        }
+        if !self.unlocked() {
+            return Err(Nrc::SecurityAccessDenied);
+        }
+        if routine == ROUTINE_ERASE_MEMORY {
+            self.check_erase_option(&request[4..], backend)?;
+            if !vehicle_stationary(backend) {
+                return Err(Nrc::ConditionsNotCorrect);
+            }
+            self.programming = Programming::Idle;
+            self.work = Some(Work::Erase {
+                step: 0,
+                steps: backend.dfu_erase_steps(),
+            });
+            return Ok(pending(sid::ROUTINE_CONTROL, out));
+        }
+        if request.len() != 4 {
+            return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+        }
+        let Programming::Downloaded { size } = self.programming else {
+            return Err(Nrc::RequestSequenceError);
+        };
+        let mut bytes = [0u8; HEADER_LEN];
+        if size < (HEADER_LEN + SIGNATURE_LEN) as u32 || backend.dfu_read(0, &mut bytes).is_err() {
+            self.refuse_image(ImageError::Truncated {
+                expected: (HEADER_LEN + SIGNATURE_LEN) as u64,
+                found: u64::from(size),
+            });
+            return Err(Nrc::GeneralProgrammingFailure);
+        }
+        // The header was checked when it arrived; parse it again from flash, which is what
+        // the signature will be checked over.
+        let header = match ImageHeader::parse(&bytes) {
+            Ok(header) => header,
+            Err(error) => {
+                self.refuse_image(error);
+                return Err(Nrc::GeneralProgrammingFailure);
+            }
+        };
+        if let Err(error) = header.check(&backend.image_expectations()) {
+            self.refuse_image(error);
+            return Err(Nrc::GeneralProgrammingFailure);
+        }
+        if header.image_len() != u64::from(size) {
+            self.refuse_image(ImageError::Truncated {
+                expected: header.image_len(),
+                found: u64::from(size),
+            });
+            return Err(Nrc::GeneralProgrammingFailure);
+        }
+        self.work = Some(Work::Check {
+            signed_len: header.signed_len() as u32,
+            header,
+            verifier: StreamVerifier::new(),
+            offset: 0,
+        });
+        Ok(pending(sid::ROUTINE_CONTROL, out))
+    }
+
+    /// The erase routine's option record: empty (the whole slot), or
+    /// addressAndLengthFormatIdentifier 0x44, the slot's address and a size within it.
+    fn check_erase_option(&self, option: &[u8], backend: &impl Backend) -> Result<(), Nrc> {
+        if option.is_empty() {
+            return Ok(());
+        }
+        let (address, size) = address_and_size(option)?;
+        let expected = backend.image_expectations();
+        if address != slot_address(&expected) || size == 0 || size > expected.max_image_len {
+            return Err(Nrc::RequestOutOfRange);
+        }
+        Ok(())
+    }
+
+    fn request_download(
+        &mut self,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        if request.len() < 3 {
+            return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+        }
+        if self.session != Session::Programming {
+            return Err(Nrc::ServiceNotSupportedInActiveSession);
+        }
+        if !self.unlocked() {
+            return Err(Nrc::SecurityAccessDenied);
+        }
+        if request[1] != 0x00 {
+            // Neither compression nor encryption is supported.
+            return Err(Nrc::RequestOutOfRange);
+        }
+        let (address, size) = address_and_size(&request[2..])?;
+        let expected = backend.image_expectations();
+        if address != slot_address(&expected) {
+            return Err(Nrc::RequestOutOfRange);
+        }
+        if size == 0 || size > expected.max_image_len {
+            self.refuse_image(ImageError::Oversized {
+                max: u64::from(expected.max_image_len),
+                found: u64::from(size),
+            });
+            return Err(Nrc::UploadDownloadNotAccepted);
+        }
+        if !matches!(self.programming, Programming::Erased) {
+            return Err(Nrc::ConditionsNotCorrect);
+        }
+        self.programming = Programming::Downloading {
+            size,
+            received: 0,
+            last_counter: 0,
+            header_checked: false,
+        };
+        let block = MAX_BLOCK_LEN.to_be_bytes();
+        // lengthFormatIdentifier 0x20: maxNumberOfBlockLength in two bytes.
+        Ok(Reply::Send(write(
+            out,
+            &[
+                sid::REQUEST_DOWNLOAD + sid::POSITIVE_OFFSET,
+                0x20,
+                block[0],
+                block[1],
+            ],
+        )))
+    }
+
+    fn transfer_data(
+        &mut self,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
+        if request.len() < 2 || request.len() > usize::from(MAX_BLOCK_LEN) {
+            return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+        }
+        let Programming::Downloading {
+            size,
+            received,
+            last_counter,
+            header_checked,
+        } = self.programming
+        else {
+            return Err(Nrc::RequestSequenceError);
+        };
+        let counter = request[1];
+        let data = &request[2..];
+        if counter == last_counter && received > 0 {
+            // The tester repeated the last block (our response was lost): it is already
+            // written, acknowledge it again.
+            return Ok(positive(request, &[counter], out));
+        }
+        if counter != last_counter.wrapping_add(1) {
+            return Err(Nrc::WrongBlockSequenceCounter);
+        }
+        if data.is_empty() {
+            return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+        }
+        let end = received + data.len() as u32;
+        if end > size {
+            self.programming = Programming::Idle;
+            return Err(Nrc::TransferDataSuspended);
+        }
+        if backend.dfu_write(received, data).is_err() {
+            self.programming = Programming::Idle;
+            return Err(Nrc::GeneralProgrammingFailure);
+        }
+        let mut header_checked = header_checked;
+        if !header_checked && end as usize >= HEADER_LEN {
+            // The header is complete: refuse an image that can never be installed here
+            // before the rest of it crosses the bus.
+            let mut bytes = [0u8; HEADER_LEN];
+            if backend.dfu_read(0, &mut bytes).is_err() {
+                self.programming = Programming::Idle;
+                return Err(Nrc::GeneralProgrammingFailure);
+            }
+            let verdict = ImageHeader::parse(&bytes).and_then(|header| {
+                header.check(&backend.image_expectations())?;
+                if header.image_len() != u64::from(size) {
+                    return Err(ImageError::Truncated {
+                        expected: header.image_len(),
+                        found: u64::from(size),
+                    });
+                }
+                Ok(())
+            });
+            if let Err(error) = verdict {
+                let nrc = image_refusal_nrc(&error);
+                self.refuse_image(error);
+                return Err(nrc);
+            }
+            header_checked = true;
+        }
+        self.programming = Programming::Downloading {
+            size,
+            received: end,
+            last_counter: counter,
+            header_checked,
+        };
+        Ok(positive(request, &[counter], out))
+    }
+
+    fn request_transfer_exit(&mut self, request: &[u8], out: &mut [u8]) -> Result<Reply, Nrc> {
+        let Programming::Downloading { size, received, .. } = self.programming else {
+            return Err(Nrc::RequestSequenceError);
+        };
+        if received != size {
+            return Err(Nrc::RequestSequenceError);
+        }
+        let _ = request;
+        self.programming = Programming::Downloaded { size };
+        Ok(Reply::Send(write(
+            out,
+            &[sid::REQUEST_TRANSFER_EXIT + sid::POSITIVE_OFFSET],
+        )))
+    }
+
+    fn refuse_image(&mut self, error: ImageError) {
+        self.programming = Programming::Idle;
+        self.last_image_error = Some(error);
+    }
+}
+
+/// The NRC that tells a tester why an image header is refused: the image can never be
+/// installed on this ECU (another ECU, other hardware, an older version than the floor,
+/// another load address) → request out of range; the download itself is not what the
+/// header describes (length, format) → upload/download not accepted.
+fn image_refusal_nrc(error: &ImageError) -> Nrc {
+    match error {
+        ImageError::WrongEcu { .. }
+        | ImageError::WrongHardware { .. }
+        | ImageError::Downgrade { .. }
+        | ImageError::WrongLoadAddress { .. } => Nrc::RequestOutOfRange,
+        _ => Nrc::UploadDownloadNotAccepted,
+    }
+}
+
+/// The address a download names: the start of the active slot, where the image will run
+/// after the swap (the DFU partition it is written to is the ECU's business).
+fn slot_address(expected: &Expectations) -> u32 {
+    expected.load_address - HEADER_LEN as u32
+}
+
+/// addressAndLengthFormatIdentifier (only 0x44: four bytes each), address, size.
+fn address_and_size(bytes: &[u8]) -> Result<(u32, u32), Nrc> {
+    match bytes {
+        [0x44, a0, a1, a2, a3, s0, s1, s2, s3] => Ok((
+            u32::from_be_bytes([*a0, *a1, *a2, *a3]),
+            u32::from_be_bytes([*s0, *s1, *s2, *s3]),
+        )),
+        [0x44, ..] => Err(Nrc::IncorrectMessageLengthOrInvalidFormat),
+        _ => Err(Nrc::RequestOutOfRange),
+    }
+}
+
+fn vehicle_stationary(backend: &impl Backend) -> bool {
+    // Unknown speed counts as moving: programming needs proof that the car stands.
+    backend.vehicle_speed_kmh().is_some_and(|v| v < 1.0)
+}
+
+/// How long a request with a sub-function must be.
+#[derive(Clone, Copy)]
+enum Length {
+    /// Exactly this many bytes.
+    Exactly(usize),
+    /// The service checks the rest.
+    AtLeastSubFunction,
+}
+
+/// The sub-function byte of a request, after a check of its length.
+fn sub_function(request: &[u8], length: Length) -> Result<u8, Nrc> {
+    let ok = match length {
+        Length::Exactly(n) => request.len() == n,
+        Length::AtLeastSubFunction => request.len() >= 2,
+    };
+    if !ok {
+        return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+    }
+    Ok(request[1])
+}
+
+/// ISO 14229-1 7.5: a functionally addressed request gets no negative response that only
+/// says "not here" (this ECU does not support the service, sub-function or identifier).
+fn suppressed_when_functional(nrc: Nrc) -> bool {
+    matches!(
+        nrc,
+        Nrc::ServiceNotSupported
+            | Nrc::SubFunctionNotSupported
+            | Nrc::RequestOutOfRange
+            | Nrc::SubFunctionNotSupportedInActiveSession
+            | Nrc::ServiceNotSupportedInActiveSession
+    )
+}
+
+fn write(out: &mut [u8], bytes: &[u8]) -> usize {
+    out[..bytes.len()].copy_from_slice(bytes);
+    bytes.len()
+}
+
+/// A positive response echoing `echo` after the SID, or nothing when the request's
+/// sub-function asks to suppress it (bit 7).
+fn positive(request: &[u8], echo: &[u8], out: &mut [u8]) -> Reply {
+    if request.get(1).is_some_and(|sub| sub & 0x80 != 0) && request[0] != sid::TRANSFER_DATA {
+        return Reply::Nothing;
+    }
+    out[0] = request[0] + sid::POSITIVE_OFFSET;
+    out[1..1 + echo.len()].copy_from_slice(echo);
+    Reply::Send(1 + echo.len())
+}
+
+fn negative(service: u8, nrc: Nrc, out: &mut [u8]) -> Reply {
+    Reply::Send(write(out, &[sid::NEGATIVE_RESPONSE, service, nrc.code()]))
+}
+
+fn pending(service: u8, out: &mut [u8]) -> Reply {
+    Reply::Pending(write(
+        out,
+        &[sid::NEGATIVE_RESPONSE, service, Nrc::ResponsePending.code()],
+    ))
+}
+
+fn routine_ok(routine: u16, out: &mut [u8]) -> usize {
+    let id = routine.to_be_bytes();
+    // routineStatusRecord 0x00: the routine completed correctly.
+    write(
+        out,
+        &[
+            sid::ROUTINE_CONTROL + sid::POSITIVE_OFFSET,
+            0x01,
+            id[0],
+            id[1],
+            0x00,
+        ],
+    )
+}
+
+/// ReadDTCInformation: 0x01 number of DTCs by status mask, 0x02 DTCs by status mask,
+/// 0x0A every supported (stored) DTC.
+fn read_dtc_information(request: &[u8], dtcs: &Dtcs, out: &mut [u8]) -> Result<Reply, Nrc> {
+    let sub = *request
+        .get(1)
+        .ok_or(Nrc::IncorrectMessageLengthOrInvalidFormat)?;
+    let positive_sid = sid::READ_DTC + sid::POSITIVE_OFFSET;
+    match sub {
+        0x01 | 0x02 => {
+            if request.len() != 3 {
+                return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+            }
+            let mask = request[2] & status::AVAILABILITY_MASK;
+            let matching = dtcs.records().filter(|r| r.status & mask != 0);
+            if sub == 0x01 {
+                let count = (matching.count() as u16).to_be_bytes();
+                // DTCFormatIdentifier 0x01: ISO 14229-1 DTC format.
+                return Ok(Reply::Send(write(
+                    out,
+                    &[
+                        positive_sid,
+                        sub,
+                        status::AVAILABILITY_MASK,
+                        0x01,
+                        count[0],
+                        count[1],
+                    ],
+                )));
+            }
+            let mut len = write(out, &[positive_sid, sub, status::AVAILABILITY_MASK]);
+            for record in matching {
+                len = push_dtc(out, len, record.dtc, record.status)?;
+            }
+            Ok(Reply::Send(len))
+        }
+        0x0A => {
+            if request.len() != 2 {
+                return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
+            }
+            let mut len = write(out, &[positive_sid, sub, status::AVAILABILITY_MASK]);
+            for record in dtcs.records() {
+                len = push_dtc(out, len, record.dtc, record.status)?;
+            }
+            Ok(Reply::Send(len))
+        }
+        _ => Err(Nrc::SubFunctionNotSupported),
+    }
+}
+
+fn push_dtc(out: &mut [u8], len: usize, dtc: Dtc, status: u8) -> Result<usize, Nrc> {
+    let bytes = dtc.to_bytes();
+    let end = len + 4;
+    if end > out.len() {
+        return Err(Nrc::ResponseTooLong);
+    }
+    out[len..end].copy_from_slice(&[bytes[0], bytes[1], bytes[2], status]);
+    Ok(end)
+}

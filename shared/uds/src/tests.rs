@@ -1,0 +1,629 @@
+//! The server against an ECU backend with an in-memory DFU partition, driven the way a
+//! tester drives it: request, then `resume` while it answers "pending".
+
+extern crate std;
+
+use std::vec;
+use std::vec::Vec;
+
+use autoplug_ecu::{Dtc, DtcSystem, Dtcs, Instant};
+use autoplug_image::{
+    Expectations, ImageBuilder, SigningKey, Version, F446RE_ACTIVE_SLOT, F446RE_LOAD_ADDRESS,
+    NUCLEO_F446RE,
+};
+use proptest::prelude::*;
+
+use crate::obd::answer_mode01;
+use crate::security::key_for;
+use crate::server::did;
+use crate::*;
+
+const NODE: u8 = 0x0D;
+const SECRET: &[u8] = b"autoplug test security secret";
+const SLOT: usize = 128 * 1024;
+const SECTOR: usize = 128 * 1024;
+
+struct TestEcu {
+    dfu: Vec<u8>,
+    speed: Option<f32>,
+    dtcs: Dtcs,
+    random: u8,
+    marked: bool,
+    writes: usize,
+    key: SigningKey,
+    floor: Version,
+}
+
+impl TestEcu {
+    fn new() -> Self {
+        Self {
+            dfu: vec![0x00; 2 * SECTOR],
+            speed: Some(0.0),
+            dtcs: Dtcs::new(),
+            random: 0,
+            marked: false,
+            writes: 0,
+            key: SigningKey::from_seed([7; 32]),
+            floor: Version::new(1, 0, 0),
+        }
+    }
+}
+
+impl Backend for TestEcu {
+    fn identification(&self) -> Identification<'_> {
+        Identification {
+            part_number: b"AP-CRUISE-0001",
+            software_version: b"1.2.0",
+            serial_number: b"0D0000000042",
+            hardware_version: b"NUCLEO-F446RE",
+        }
+    }
+    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
+        (did == 0x0100).then(|| {
+            out[0] = 90;
+            1
+        })
+    }
+    fn vehicle_speed_kmh(&self) -> Option<f32> {
+        self.speed
+    }
+    fn dtcs(&mut self) -> &mut Dtcs {
+        &mut self.dtcs
+    }
+    fn fill_random(&mut self, out: &mut [u8]) {
+        for b in out {
+            self.random = self.random.wrapping_add(37);
+            *b = self.random;
+        }
+    }
+    fn image_expectations(&self) -> Expectations {
+        Expectations {
+            node: NODE,
+            hardware_id: NUCLEO_F446RE,
+            version_floor: self.floor,
+            max_image_len: SLOT as u32,
+            load_address: F446RE_LOAD_ADDRESS,
+        }
+    }
+    fn public_key(&self) -> [u8; 32] {
+        self.key.public_key()
+    }
+    fn dfu_erase_steps(&self) -> u32 {
+        2
+    }
+    fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
+        let start = step as usize * SECTOR;
+        self.dfu[start..start + SECTOR].fill(0xFF);
+        Ok(())
+    }
+    fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
+        let range = offset as usize..offset as usize + data.len();
+        if self.dfu[range.clone()].iter().any(|&b| b != 0xFF) {
+            return Err(FlashError); // NOR: programming needs an erased cell
+        }
+        self.dfu[range].copy_from_slice(data);
+        self.writes += 1;
+        Ok(())
+    }
+    fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError> {
+        let start = offset as usize;
+        out.copy_from_slice(self.dfu.get(start..start + out.len()).ok_or(FlashError)?);
+        Ok(())
+    }
+    fn mark_updated(&mut self) -> Result<(), FlashError> {
+        self.marked = true;
+        Ok(())
+    }
+    fn obd_pids(&self) -> &'static [u8] {
+        &[0x0D]
+    }
+    fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
+        (pid == 0x0D).then(|| {
+            out[0] = self.speed? as u8;
+            Some(1)
+        })?
+    }
+}
+
+/// A tester on the other end: sends a request, follows "pending" to the final response.
+struct Bench {
+    server: Server,
+    ecu: TestEcu,
+    now: Instant,
+    pending_seen: usize,
+    reset: Option<ResetKind>,
+}
+
+impl Bench {
+    fn new() -> Self {
+        Self {
+            server: Server::new(Config::new(NODE, SECRET), Instant::from_micros(0)),
+            ecu: TestEcu::new(),
+            now: Instant::from_micros(0),
+            pending_seen: 0,
+            reset: None,
+        }
+    }
+
+    fn advance_ms(&mut self, ms: u64) {
+        self.now = self.now.plus_micros(ms * 1000);
+        self.server.poll(self.now, &mut self.ecu);
+    }
+
+    fn request_as(&mut self, request: &[u8], functional: bool) -> Option<Vec<u8>> {
+        let mut out = vec![0u8; 4095];
+        let mut reply = self
+            .server
+            .handle(self.now, request, functional, &mut self.ecu, &mut out);
+        loop {
+            match reply {
+                Reply::Nothing => return None,
+                Reply::Send(n) => return Some(out[..n].to_vec()),
+                Reply::SendThenReset(n, kind) => {
+                    self.reset = Some(kind);
+                    return (n > 0).then(|| out[..n].to_vec());
+                }
+                Reply::Pending(n) => {
+                    assert_eq!(&out[..n], &[0x7F, request[0], 0x78]);
+                    self.pending_seen += 1;
+                }
+                Reply::Working => {}
+            }
+            reply = self.server.resume(self.now, &mut self.ecu, &mut out);
+        }
+    }
+
+    fn request(&mut self, request: &[u8]) -> Vec<u8> {
+        self.request_as(request, false)
+            .expect("a physical request gets a response")
+    }
+
+    fn unlock(&mut self) {
+        let response = self.request(&[0x27, 0x01]);
+        assert_eq!(&response[..2], &[0x67, 0x01]);
+        let seed: [u8; 16] = response[2..].try_into().unwrap();
+        let key = key_for(SECRET, NODE, &seed);
+        let mut send = vec![0x27, 0x02];
+        send.extend_from_slice(&key);
+        assert_eq!(self.request(&send), [0x67, 0x02]);
+    }
+
+    fn enter_programming(&mut self) {
+        assert_eq!(self.request(&[0x10, 0x03])[..2], [0x50, 0x03]);
+        assert_eq!(self.request(&[0x10, 0x02])[..2], [0x50, 0x02]);
+        self.unlock();
+    }
+
+    fn erase(&mut self) {
+        assert_eq!(
+            self.request(&[0x31, 0x01, 0xFF, 0x00]),
+            [0x71, 0x01, 0xFF, 0x00, 0x00]
+        );
+    }
+
+    /// RequestDownload, TransferData in 4093-byte blocks and RequestTransferExit; returns
+    /// the first negative response, if any.
+    fn download(&mut self, image: &[u8]) -> Result<(), Vec<u8>> {
+        let mut request = vec![0x34, 0x00, 0x44];
+        request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+        request.extend_from_slice(&(image.len() as u32).to_be_bytes());
+        let response = self.request(&request);
+        if response[0] == 0x7F {
+            return Err(response);
+        }
+        assert_eq!(response, [0x74, 0x20, 0x0F, 0xFF]);
+        for (i, block) in image.chunks(4093).enumerate() {
+            let counter = (i + 1) as u8;
+            let mut request = vec![0x36, counter];
+            request.extend_from_slice(block);
+            let response = self.request(&request);
+            if response[0] == 0x7F {
+                return Err(response);
+            }
+            assert_eq!(response, [0x76, counter]);
+        }
+        let response = self.request(&[0x37]);
+        if response[0] == 0x7F {
+            return Err(response);
+        }
+        assert_eq!(response, [0x77]);
+        Ok(())
+    }
+
+    fn check(&mut self) -> Vec<u8> {
+        self.request(&[0x31, 0x01, 0xFF, 0x01])
+    }
+}
+
+fn image_with(node: u8, version: Version, key: &SigningKey, len: usize) -> Vec<u8> {
+    let payload: Vec<u8> = (0..len).map(|i| (i * 7 + 3) as u8).collect();
+    let mut builder = ImageBuilder::new(node, version, payload);
+    builder.build_id = [0xB1; 16];
+    builder.sign(key).expect("a valid image")
+}
+
+fn good_image() -> Vec<u8> {
+    image_with(
+        NODE,
+        Version::new(1, 3, 0),
+        &SigningKey::from_seed([7; 32]),
+        20_000,
+    )
+}
+
+#[test]
+fn sessions_and_their_timing_parameters() {
+    let mut bench = Bench::new();
+    // P2 50 ms, P2* 5000 ms in units of 10 ms.
+    assert_eq!(
+        bench.request(&[0x10, 0x03]),
+        [0x50, 0x03, 0x00, 0x32, 0x01, 0xF4]
+    );
+    assert_eq!(bench.server.session(), Session::Extended);
+    assert_eq!(bench.request(&[0x22, 0xF1, 0x86]), [0x62, 0xF1, 0x86, 0x03]);
+    assert_eq!(bench.request(&[0x10, 0x04]), [0x7F, 0x10, 0x12]);
+    assert_eq!(bench.request(&[0x10]), [0x7F, 0x10, 0x13]);
+    assert_eq!(bench.request_as(&[0x10, 0x81], false), None);
+    assert_eq!(bench.server.session(), Session::Default);
+}
+
+#[test]
+fn no_programming_session_while_the_car_moves_or_its_speed_is_unknown() {
+    let mut bench = Bench::new();
+    bench.ecu.speed = Some(12.0);
+    assert_eq!(bench.request(&[0x10, 0x02]), [0x7F, 0x10, 0x22]);
+    bench.ecu.speed = None;
+    assert_eq!(bench.request(&[0x10, 0x02]), [0x7F, 0x10, 0x22]);
+    bench.ecu.speed = Some(0.0);
+    assert_eq!(bench.request(&[0x10, 0x02])[..2], [0x50, 0x02]);
+    // Nor an erase, should the car start moving once in the session.
+    bench.unlock();
+    bench.ecu.speed = Some(30.0);
+    assert_eq!(bench.request(&[0x31, 0x01, 0xFF, 0x00]), [0x7F, 0x31, 0x22]);
+}
+
+#[test]
+fn s3_ends_a_session_unless_the_tester_is_present() {
+    let mut bench = Bench::new();
+    bench.request(&[0x10, 0x03]);
+    bench.unlock();
+    for _ in 0..4 {
+        bench.advance_ms(4_000);
+        assert_eq!(bench.request(&[0x3E, 0x00]), [0x7E, 0x00]);
+    }
+    assert_eq!(bench.server.session(), Session::Extended);
+    assert_eq!(bench.request_as(&[0x3E, 0x80], false), None);
+    bench.advance_ms(5_001);
+    assert_eq!(bench.server.session(), Session::Default);
+    assert!(!bench.server.unlocked());
+}
+
+#[test]
+fn identification_and_live_data() {
+    let mut bench = Bench::new();
+    let mut expected = vec![0x62, 0xF1, 0x87];
+    expected.extend_from_slice(b"AP-CRUISE-0001");
+    assert_eq!(bench.request(&[0x22, 0xF1, 0x87]), expected);
+    let response = bench.request(&[0x22, 0xF1, 0x89, 0xF1, 0x8C, 0xF1, 0x91, 0x01, 0x00]);
+    let mut expected = vec![0x62, 0xF1, 0x89];
+    expected.extend_from_slice(b"1.2.0");
+    expected.extend_from_slice(&[0xF1, 0x8C]);
+    expected.extend_from_slice(b"0D0000000042");
+    expected.extend_from_slice(&[0xF1, 0x91]);
+    expected.extend_from_slice(b"NUCLEO-F446RE");
+    expected.extend_from_slice(&[0x01, 0x00, 90]);
+    assert_eq!(response, expected);
+    // Unknown identifiers are left out; none known at all is out of range.
+    assert_eq!(
+        bench.request(&[0x22, 0x12, 0x34, 0x01, 0x00]),
+        [0x62, 0x01, 0x00, 90]
+    );
+    assert_eq!(bench.request(&[0x22, 0x12, 0x34]), [0x7F, 0x22, 0x31]);
+    assert_eq!(bench.request(&[0x22, 0xF1]), [0x7F, 0x22, 0x13]);
+    let _ = did::PART_NUMBER;
+}
+
+#[test]
+fn security_access_seed_key_and_lockout() {
+    let mut bench = Bench::new();
+    assert_eq!(bench.request(&[0x27, 0x01]), [0x7F, 0x27, 0x7F]);
+    bench.request(&[0x10, 0x03]);
+    assert_eq!(bench.request(&[0x27, 0x02, 0, 0]), [0x7F, 0x27, 0x24]);
+    // Two wrong keys: invalid key; the third locks.
+    for attempt in 1..=3 {
+        let seed = bench.request(&[0x27, 0x01]);
+        assert!(seed[2..].iter().any(|&b| b != 0));
+        let mut send = vec![0x27, 0x02];
+        send.extend_from_slice(&[0xAA; 16]);
+        let expected = if attempt < 3 { 0x35 } else { 0x36 };
+        assert_eq!(bench.request(&send), [0x7F, 0x27, expected]);
+    }
+    assert_eq!(bench.request(&[0x27, 0x01]), [0x7F, 0x27, 0x37]);
+    bench.advance_ms(3_000);
+    bench.request(&[0x3E, 0x00]);
+    bench.advance_ms(3_000);
+    bench.request(&[0x3E, 0x00]);
+    bench.advance_ms(3_000);
+    assert_eq!(bench.request(&[0x27, 0x01]), [0x7F, 0x27, 0x37]);
+    bench.advance_ms(1_001);
+    bench.unlock();
+    assert!(bench.server.unlocked());
+    // Unlocked: the seed is all zeros.
+    assert_eq!(
+        bench.request(&[0x27, 0x01]),
+        [vec![0x67, 0x01], vec![0; 16]].concat()
+    );
+    // A key from another ECU's MAC does not open this one.
+    bench.request(&[0x10, 0x01]);
+    bench.request(&[0x10, 0x03]);
+    let seed: [u8; 16] = bench.request(&[0x27, 0x01])[2..].try_into().unwrap();
+    let mut send = vec![0x27, 0x02];
+    send.extend_from_slice(&key_for(SECRET, NODE + 1, &seed));
+    assert_eq!(bench.request(&send), [0x7F, 0x27, 0x35]);
+}
+
+#[test]
+fn a_complete_download_is_verified_marked_and_reset_into() {
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    assert!(bench.pending_seen >= 2, "one 0x78 per sector erased");
+    let image = good_image();
+    bench.download(&image).expect("accepted");
+    assert_eq!(&bench.ecu.dfu[..image.len()], &image[..]);
+    assert!(!bench.ecu.marked);
+    assert_eq!(bench.check(), [0x71, 0x01, 0xFF, 0x01, 0x00]);
+    assert!(bench.ecu.marked);
+    assert_eq!(bench.request(&[0x11, 0x01]), [0x51, 0x01]);
+    assert_eq!(bench.reset, Some(ResetKind::Hard));
+}
+
+#[test]
+fn programming_needs_the_session_security_and_an_erase() {
+    let mut bench = Bench::new();
+    let image = good_image();
+    bench.request(&[0x10, 0x03]);
+    assert_eq!(bench.download(&image), Err(vec![0x7F, 0x34, 0x7F]));
+    assert_eq!(bench.request(&[0x31, 0x01, 0xFF, 0x00]), [0x7F, 0x31, 0x7F]);
+    bench.request(&[0x10, 0x02]);
+    assert_eq!(bench.download(&image), Err(vec![0x7F, 0x34, 0x33]));
+    assert_eq!(bench.request(&[0x31, 0x01, 0xFF, 0x00]), [0x7F, 0x31, 0x33]);
+    bench.unlock();
+    assert_eq!(bench.download(&image), Err(vec![0x7F, 0x34, 0x22]));
+    assert_eq!(bench.check(), [0x7F, 0x31, 0x24]);
+    assert_eq!(bench.request(&[0x36, 0x01, 0x00]), [0x7F, 0x36, 0x24]);
+    assert_eq!(bench.request(&[0x37]), [0x7F, 0x37, 0x24]);
+    assert!(!bench.ecu.marked);
+}
+
+/// Runs a download of `image` after a fresh erase; returns the refusal (the negative
+/// response) and checks that nothing was marked for the swap.
+fn refusal_of(image: &[u8]) -> Vec<u8> {
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    let refusal = match bench.download(image) {
+        Err(response) => response,
+        Ok(()) => bench.check(),
+    };
+    assert!(!bench.ecu.marked, "a refused image must never be marked");
+    assert!(bench.server.last_image_error().is_some());
+    refusal
+}
+
+#[test]
+fn bad_images_are_refused_with_the_right_negative_response() {
+    let key = SigningKey::from_seed([7; 32]);
+    let good = good_image();
+
+    let mut flipped = good.clone();
+    flipped[600] ^= 0x01;
+    assert_eq!(
+        refusal_of(&flipped),
+        [0x7F, 0x31, 0x72],
+        "a flipped payload byte"
+    );
+
+    let mut flipped_signature = good.clone();
+    let last = flipped_signature.len() - 1;
+    flipped_signature[last] ^= 0x80;
+    assert_eq!(refusal_of(&flipped_signature), [0x7F, 0x31, 0x72]);
+
+    let foreign_key = image_with(
+        NODE,
+        Version::new(1, 3, 0),
+        &SigningKey::from_seed([8; 32]),
+        20_000,
+    );
+    assert_eq!(
+        refusal_of(&foreign_key),
+        [0x7F, 0x31, 0x72],
+        "signed with another key"
+    );
+
+    let mut unsigned = good.clone();
+    unsigned[good.len() - 64..].fill(0);
+    assert_eq!(refusal_of(&unsigned), [0x7F, 0x31, 0x72], "unsigned");
+
+    let other_ecu = image_with(0x0E, Version::new(1, 3, 0), &key, 20_000);
+    assert_eq!(refusal_of(&other_ecu), [0x7F, 0x36, 0x31], "the ABS image");
+
+    let downgrade = image_with(NODE, Version::new(0, 9, 9), &key, 20_000);
+    assert_eq!(
+        refusal_of(&downgrade),
+        [0x7F, 0x36, 0x31],
+        "below the version floor"
+    );
+
+    let truncated = &good[..good.len() - 100];
+    assert_eq!(refusal_of(truncated), [0x7F, 0x36, 0x70], "truncated");
+
+    let too_short = &good[..300];
+    assert_eq!(
+        refusal_of(too_short),
+        [0x7F, 0x31, 0x72],
+        "shorter than a header"
+    );
+
+    let oversized = image_with(NODE, Version::new(1, 3, 0), &key, SLOT);
+    assert_eq!(
+        refusal_of(&oversized),
+        [0x7F, 0x34, 0x70],
+        "larger than the slot"
+    );
+}
+
+#[test]
+fn a_refused_image_leaves_a_good_one_installable() {
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    let mut flipped = good_image();
+    flipped[1000] ^= 0x40;
+    bench.download(&flipped).unwrap();
+    assert_eq!(bench.check(), [0x7F, 0x31, 0x72]);
+    // The check cannot be repeated on the refused image, a new download needs an erase.
+    assert_eq!(bench.check(), [0x7F, 0x31, 0x24]);
+    bench.erase();
+    bench.download(&good_image()).unwrap();
+    assert_eq!(bench.check(), [0x71, 0x01, 0xFF, 0x01, 0x00]);
+    assert!(bench.ecu.marked);
+}
+
+#[test]
+fn transfer_blocks_are_counted() {
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    let image = good_image();
+    let mut request = vec![0x34, 0x00, 0x44];
+    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&(image.len() as u32).to_be_bytes());
+    bench.request(&request);
+    let block = |counter: u8, data: &[u8]| [&[0x36, counter][..], data].concat();
+    assert_eq!(bench.request(&block(2, &image[..100])), [0x7F, 0x36, 0x73]);
+    assert_eq!(bench.request(&block(1, &image[..1000])), [0x76, 0x01]);
+    // The same block again (the response was lost): acknowledged, not written twice.
+    let writes = bench.ecu.writes;
+    assert_eq!(bench.request(&block(1, &image[..1000])), [0x76, 0x01]);
+    assert_eq!(bench.ecu.writes, writes);
+    assert_eq!(bench.request(&block(2, &image[1000..2000])), [0x76, 0x02]);
+    // Exit before the last byte: out of sequence.
+    assert_eq!(bench.request(&[0x37]), [0x7F, 0x37, 0x24]);
+    // Blocks up to 10 bytes short of the end, then one of 20: more than announced.
+    let mut offset = 2000;
+    let mut counter = 2u8;
+    while offset + 10 < image.len() {
+        let end = (offset + 4093).min(image.len() - 10);
+        counter = counter.wrapping_add(1);
+        assert_eq!(
+            bench.request(&block(counter, &image[offset..end])),
+            [0x76, counter]
+        );
+        offset = end;
+    }
+    let too_much = block(counter.wrapping_add(1), &[0xEE; 20]);
+    assert_eq!(bench.request(&too_much), [0x7F, 0x36, 0x71]);
+    // And a block longer than announced in 0x74 is malformed.
+    assert_eq!(bench.request(&block(1, &vec![0; 4094])), [0x7F, 0x36, 0x13]);
+}
+
+#[test]
+fn communication_control_and_dtc_setting_end_with_the_session() {
+    let mut bench = Bench::new();
+    assert_eq!(bench.request(&[0x28, 0x03, 0x01]), [0x7F, 0x28, 0x7F]);
+    bench.request(&[0x10, 0x03]);
+    assert_eq!(bench.request(&[0x28, 0x03, 0x01]), [0x68, 0x03]);
+    assert!(!bench.server.normal_tx_enabled() && !bench.server.normal_rx_enabled());
+    assert_eq!(bench.request(&[0x28, 0x01, 0x01]), [0x68, 0x01]);
+    assert!(!bench.server.normal_tx_enabled() && bench.server.normal_rx_enabled());
+    assert_eq!(bench.request(&[0x28, 0x05, 0x01]), [0x7F, 0x28, 0x12]);
+    assert_eq!(bench.request(&[0x85, 0x02]), [0xC5, 0x02]);
+    let dtc = Dtc::new(DtcSystem::U, 0x0100, 0x87);
+    bench.ecu.dtcs.report_failed(dtc, bench.now);
+    assert_eq!(bench.ecu.dtcs.records().count(), 0, "DTC setting off");
+    bench.request(&[0x10, 0x01]);
+    assert!(bench.server.normal_tx_enabled() && bench.server.dtc_setting_on());
+    bench.ecu.dtcs.report_failed(dtc, bench.now);
+    assert_eq!(bench.ecu.dtcs.records().count(), 1);
+}
+
+#[test]
+fn dtcs_are_read_and_cleared() {
+    let mut bench = Bench::new();
+    let lost = Dtc::new(DtcSystem::U, 0x0100, 0x87);
+    bench.ecu.dtcs.report_failed(lost, bench.now);
+    assert_eq!(
+        bench.request(&[0x19, 0x01, 0xFF]),
+        [0x59, 0x01, 0x2F, 0x01, 0x00, 0x01]
+    );
+    let response = bench.request(&[0x19, 0x02, 0x01]);
+    let bytes = lost.to_bytes();
+    assert_eq!(response[..3], [0x59, 0x02, 0x2F]);
+    assert_eq!(response[3..6], bytes);
+    assert!(response[6] & 0x01 != 0, "test failed");
+    bench.ecu.dtcs.report_passed(lost);
+    assert_eq!(bench.request(&[0x19, 0x02, 0x01]), [0x59, 0x02, 0x2F]);
+    assert_eq!(bench.request(&[0x19, 0x0A]).len(), 3 + 4);
+    assert_eq!(bench.request(&[0x14, 0x12, 0x34, 0x56]), [0x7F, 0x14, 0x31]);
+    assert_eq!(bench.request(&[0x14, 0xFF, 0xFF, 0xFF]), [0x54]);
+    assert_eq!(bench.request(&[0x19, 0x0A]), [0x59, 0x0A, 0x2F]);
+    assert_eq!(bench.request(&[0x19, 0x42]), [0x7F, 0x19, 0x12]);
+}
+
+#[test]
+fn functional_requests_get_no_not_here_negative_responses() {
+    let mut bench = Bench::new();
+    assert_eq!(bench.request_as(&[0x23, 0x00], true), None);
+    assert_eq!(bench.request(&[0x23, 0x00]), [0x7F, 0x23, 0x11]);
+    assert_eq!(bench.request_as(&[0x3E, 0x80], true), None);
+    assert_eq!(
+        bench.request_as(&[0x3E, 0x00], true),
+        Some(vec![0x7E, 0x00])
+    );
+    // But a real refusal is still reported.
+    bench.ecu.speed = Some(50.0);
+    assert_eq!(
+        bench.request_as(&[0x10, 0x02], true),
+        Some(vec![0x7F, 0x10, 0x22])
+    );
+}
+
+#[test]
+fn obd_mode01_answers_only_what_the_ecu_owns() {
+    let mut ecu = TestEcu::new();
+    ecu.speed = Some(87.0);
+    let mut out = [0u8; 8];
+    assert_eq!(answer_mode01(&[0x01, 0x0D], &mut ecu, &mut out), Some(3));
+    assert_eq!(out[..3], [0x41, 0x0D, 87]);
+    assert_eq!(answer_mode01(&[0x01, 0x00], &mut ecu, &mut out), Some(6));
+    assert_eq!(out[..6], [0x41, 0x00, 0x00, 0x08, 0x00, 0x00]);
+    assert_eq!(answer_mode01(&[0x01, 0x0C], &mut ecu, &mut out), None);
+    assert_eq!(answer_mode01(&[0x02, 0x0D], &mut ecu, &mut out), None);
+    ecu.speed = None;
+    assert_eq!(answer_mode01(&[0x01, 0x0D], &mut ecu, &mut out), None);
+}
+
+proptest! {
+    /// Whatever arrives, the server neither panics nor answers with anything but a positive
+    /// response to that service or a negative response naming it.
+    #[test]
+    fn arbitrary_requests_get_well_formed_answers(
+        requests in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..40), 1..30),
+        functional in any::<bool>(),
+    ) {
+        let mut bench = Bench::new();
+        bench.request(&[0x10, 0x02]);
+        bench.unlock();
+        for request in requests {
+            if request.is_empty() {
+                continue;
+            }
+            if let Some(response) = bench.request_as(&request, functional) {
+                let ok = response[0] == request[0].wrapping_add(0x40)
+                    || (response.len() == 3 && response[0] == 0x7F && response[1] == request[0]);
+                prop_assert!(ok, "{request:02X?} -> {response:02X?}");
+            }
+        }
+    }
+}
