@@ -100,10 +100,14 @@ pub const MAX_PAYLOAD_LEN: u32 = u32::MAX - OVERHEAD_LEN as u32;
 /// around that chip (1 = NUCLEO-F446RE).
 pub const NUCLEO_F446RE: u32 = 0x0421_0001;
 
-/// Start of the active slot on the F446RE, where the header lands after the A/B swap.
-pub const F446RE_ACTIVE_SLOT: u32 = 0x0802_0000;
+/// Start of the active slot on the F446RE, where the header lands after the A/B swap (the
+/// flash map, `autoplug-flash`, is where it is written).
+pub const F446RE_ACTIVE_SLOT: u32 = autoplug_flash::ACTIVE.start;
 /// Where an F446RE application's vector table is: the active slot plus the header.
-pub const F446RE_LOAD_ADDRESS: u32 = F446RE_ACTIVE_SLOT + HEADER_LEN as u32;
+pub const F446RE_LOAD_ADDRESS: u32 = autoplug_flash::APP_VECTOR_TABLE;
+
+// The flash map reserves room for exactly this format's header in front of the vector table.
+const _: () = assert!(autoplug_flash::IMAGE_HEADER_SIZE as usize == HEADER_LEN);
 
 /// Byte offsets of the header fields (see the table in the crate documentation).
 pub mod offsets {

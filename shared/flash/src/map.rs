@@ -1,0 +1,505 @@
+//! The STM32F446RE flash map of an AutoPlug ECU.
+//!
+//! This module is the one place the partition addresses are written: the bootloader, the
+//! application's linker script, the updater and the simulation all take them from here.
+//!
+//! | sectors | address       | size    | use                                               |
+//! |---------|---------------|---------|---------------------------------------------------|
+//! | 0–1     | `0x0800_0000` | 32 KiB  | bootloader ([`BOOTLOADER`])                       |
+//! | 2       | `0x0800_8000` | 16 KiB  | embassy-boot's STATE partition ([`BOOT_STATE`])   |
+//! | 3       | `0x0800_C000` | 16 KiB  | ECU data: serial number, version floor ([`ECU_DATA`]) |
+//! | 4       | `0x0801_0000` | 64 KiB  | spare ([`SPARE`])                                 |
+//! | 5       | `0x0802_0000` | 128 KiB | active slot ([`ACTIVE`])                          |
+//! | 6–7     | `0x0804_0000` | 256 KiB | DFU slot ([`DFU`])                                |
+//!
+//! The invariants embassy-boot 0.7 checks at run time (`assert_partitions` and the asserts of
+//! `BootLoader::prepare_boot`) are checked here at compile time, so a map that would make the
+//! bootloader panic at the first reset does not build.
+
+/// First address of the main flash memory (RM0390, "Embedded flash memory").
+pub const FLASH_BASE: u32 = 0x0800_0000;
+
+/// Size of the STM32F446RE's main flash memory: 512 KiB.
+pub const FLASH_SIZE: u32 = 512 * 1024;
+
+/// Size of sectors 0–3.
+pub const SMALL_SECTOR_SIZE: u32 = 16 * 1024;
+/// Size of sector 4.
+pub const MEDIUM_SECTOR_SIZE: u32 = 64 * 1024;
+/// Size of sectors 5–7.
+pub const LARGE_SECTOR_SIZE: u32 = 128 * 1024;
+
+/// Programming unit in bytes, as embassy-stm32 0.6 uses it on the F4 (`WRITE_SIZE = 4`,
+/// from stm32-metapac's `write_size: 4` for the F446): it programs with x32 parallelism
+/// (`PSIZE = 32`), one 32-bit word per flash operation. The simulation uses the same value so
+/// code that runs against it runs unchanged against `embassy_stm32::flash`.
+pub const WRITE_SIZE: usize = 4;
+
+/// Value of an erased byte (stm32-metapac: `erase_value: 255` for the F446; the NOR cells
+/// erase to all ones). embassy-boot's `STATE_ERASE_VALUE` is 0xFF unless its
+/// `flash-erase-zero` feature is on, which this part must not enable.
+pub const ERASE_VALUE: u8 = 0xFF;
+
+/// One erase sector of the flash.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Sector {
+    /// Sector number, as written to `FLASH_CR.SNB` to erase it.
+    pub index: u8,
+    /// First address.
+    pub start: u32,
+    /// Size in bytes; erasing the sector erases all of them.
+    pub size: u32,
+}
+
+impl Sector {
+    /// One past the last address.
+    pub const fn end(&self) -> u32 {
+        self.start + self.size
+    }
+
+    /// Whether `address` lies in this sector.
+    pub const fn contains(&self, address: u32) -> bool {
+        address >= self.start && address < self.end()
+    }
+}
+
+/// The eight sectors of the STM32F446RE (RM0390, table "Flash module organization").
+pub const SECTORS: [Sector; 8] = [
+    Sector {
+        index: 0,
+        start: 0x0800_0000,
+        size: SMALL_SECTOR_SIZE,
+    },
+    Sector {
+        index: 1,
+        start: 0x0800_4000,
+        size: SMALL_SECTOR_SIZE,
+    },
+    Sector {
+        index: 2,
+        start: 0x0800_8000,
+        size: SMALL_SECTOR_SIZE,
+    },
+    Sector {
+        index: 3,
+        start: 0x0800_C000,
+        size: SMALL_SECTOR_SIZE,
+    },
+    Sector {
+        index: 4,
+        start: 0x0801_0000,
+        size: MEDIUM_SECTOR_SIZE,
+    },
+    Sector {
+        index: 5,
+        start: 0x0802_0000,
+        size: LARGE_SECTOR_SIZE,
+    },
+    Sector {
+        index: 6,
+        start: 0x0804_0000,
+        size: LARGE_SECTOR_SIZE,
+    },
+    Sector {
+        index: 7,
+        start: 0x0806_0000,
+        size: LARGE_SECTOR_SIZE,
+    },
+];
+
+/// The sector holding `address`, or `None` if it is outside the main flash.
+pub const fn sector_of(address: u32) -> Option<Sector> {
+    let mut i = 0;
+    while i < SECTORS.len() {
+        if SECTORS[i].contains(address) {
+            return Some(SECTORS[i]);
+        }
+        i += 1;
+    }
+    None
+}
+
+/// A contiguous range of flash, made of whole sectors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Region {
+    /// First address.
+    pub start: u32,
+    /// Size in bytes.
+    pub size: u32,
+}
+
+impl Region {
+    /// One past the last address.
+    pub const fn end(&self) -> u32 {
+        self.start + self.size
+    }
+
+    /// Whether `address` lies in this region.
+    pub const fn contains(&self, address: u32) -> bool {
+        address >= self.start && address < self.end()
+    }
+
+    /// Offset of `address` from the region's start, if it lies in the region.
+    pub const fn offset_of(&self, address: u32) -> Option<u32> {
+        if self.contains(address) {
+            Some(address - self.start)
+        } else {
+            None
+        }
+    }
+
+    /// Whether this region and `other` share at least one byte.
+    pub const fn overlaps(&self, other: &Region) -> bool {
+        self.start < other.end() && other.start < self.end()
+    }
+
+    /// The sectors of this region, in address order (empty if the region does not start and
+    /// end on sector boundaries inside the flash).
+    pub fn sectors(&self) -> &'static [Sector] {
+        match (self.first_sector_index(), self.end_sector_index()) {
+            (Some(first), Some(end)) if first < end => &SECTORS[first..end],
+            _ => &[],
+        }
+    }
+
+    /// Index in [`SECTORS`] of the sector starting at this region's start.
+    const fn first_sector_index(&self) -> Option<usize> {
+        let mut i = 0;
+        while i < SECTORS.len() {
+            if SECTORS[i].start == self.start {
+                return Some(i);
+            }
+            i += 1;
+        }
+        None
+    }
+
+    /// One past the index in [`SECTORS`] of the sector ending at this region's end.
+    const fn end_sector_index(&self) -> Option<usize> {
+        let mut i = 0;
+        while i < SECTORS.len() {
+            if SECTORS[i].end() == self.end() {
+                return Some(i + 1);
+            }
+            i += 1;
+        }
+        None
+    }
+
+    /// Whether the region starts and ends on sector boundaries of the flash.
+    pub const fn is_sector_aligned(&self) -> bool {
+        match (self.first_sector_index(), self.end_sector_index()) {
+            (Some(first), Some(end)) => first < end,
+            _ => false,
+        }
+    }
+
+    /// The erase size of the region if all its sectors have the same size (what a
+    /// `NorFlash::ERASE_SIZE` over it has to be), `None` if they differ or the region is not
+    /// sector aligned.
+    pub const fn uniform_erase_size(&self) -> Option<u32> {
+        let (first, end) = match (self.first_sector_index(), self.end_sector_index()) {
+            (Some(first), Some(end)) if first < end => (first, end),
+            _ => return None,
+        };
+        let size = SECTORS[first].size;
+        let mut i = first;
+        while i < end {
+            if SECTORS[i].size != size {
+                return None;
+            }
+            i += 1;
+        }
+        Some(size)
+    }
+}
+
+/// The whole main flash.
+pub const FLASH: Region = Region {
+    start: FLASH_BASE,
+    size: FLASH_SIZE,
+};
+
+/// The bootloader: sectors 0–1. The reset vector at 0x0800_0000 runs it.
+pub const BOOTLOADER: Region = Region {
+    start: 0x0800_0000,
+    size: 2 * SMALL_SECTOR_SIZE,
+};
+
+/// embassy-boot's STATE partition (swap magic and copy progress): sector 2.
+pub const BOOT_STATE: Region = Region {
+    start: 0x0800_8000,
+    size: SMALL_SECTOR_SIZE,
+};
+
+/// ECU data (serial number, anti-rollback version floor and such, written rarely): sector 3.
+/// A sector of its own so that erasing it never touches the bootloader state.
+pub const ECU_DATA: Region = Region {
+    start: 0x0800_C000,
+    size: SMALL_SECTOR_SIZE,
+};
+
+/// Sector 4, unused (64 KiB: its size does not fit the 128 KiB slot pages).
+pub const SPARE: Region = Region {
+    start: 0x0801_0000,
+    size: MEDIUM_SECTOR_SIZE,
+};
+
+/// The active slot: sector 5. A signed image starts here with its header.
+pub const ACTIVE: Region = Region {
+    start: 0x0802_0000,
+    size: LARGE_SECTOR_SIZE,
+};
+
+/// The DFU slot: sectors 6–7. The updater writes the new image here; embassy-boot's swap
+/// needs one page more than the active slot.
+pub const DFU: Region = Region {
+    start: 0x0804_0000,
+    size: 2 * LARGE_SECTOR_SIZE,
+};
+
+/// Every partition of the map with a name for messages, in address order.
+pub const PARTITIONS: [(&str, Region); 6] = [
+    ("bootloader", BOOTLOADER),
+    ("boot state", BOOT_STATE),
+    ("ECU data", ECU_DATA),
+    ("spare", SPARE),
+    ("active slot", ACTIVE),
+    ("DFU slot", DFU),
+];
+
+/// The named partition holding `address`, if any.
+pub const fn partition_of(address: u32) -> Option<(&'static str, Region)> {
+    let mut i = 0;
+    while i < PARTITIONS.len() {
+        if PARTITIONS[i].1.contains(address) {
+            return Some(PARTITIONS[i]);
+        }
+        i += 1;
+    }
+    None
+}
+
+/// Size of the signed image's header at the start of a slot.
+pub const IMAGE_HEADER_SIZE: u32 = 512;
+
+/// The application's vector table: right after the image header in the active slot. The
+/// application's linker script puts its FLASH origin here and the bootloader jumps here.
+pub const APP_VECTOR_TABLE: u32 = ACTIVE.start + IMAGE_HEADER_SIZE;
+
+/// Erase size of the slot partitions ([`ACTIVE`], [`DFU`]): the 128 KiB sectors.
+pub const SLOT_ERASE_SIZE: u32 = LARGE_SECTOR_SIZE;
+
+/// Erase size of [`BOOT_STATE`] and [`ECU_DATA`]: the 16 KiB sectors.
+pub const SMALL_ERASE_SIZE: u32 = SMALL_SECTOR_SIZE;
+
+/// embassy-boot's page, its unit of swapping: the larger of the active and DFU partitions'
+/// erase sizes (`BootLoader::PAGE_SIZE`).
+pub const BOOT_PAGE_SIZE: u32 = if ACTIVE_ERASE > DFU_ERASE {
+    ACTIVE_ERASE
+} else {
+    DFU_ERASE
+};
+
+/// Write size of the state partition (embassy-boot's `STATE::WRITE_SIZE`): one magic or
+/// progress word.
+pub const STATE_WRITE_SIZE: u32 = WRITE_SIZE as u32;
+
+/// Size of the RAM buffer the bootloader hands to `BootLoader::prepare_boot` (the
+/// `BUFFER_SIZE` of `embassy_boot_stm32::BootLoader::prepare`). Every copy during a swap goes
+/// through it, one write per buffer, so it sets how many flash writes a 128 KiB page copy
+/// takes (32). embassy-boot asserts that it divides the page, is a multiple of the write sizes
+/// and holds a state word; 4 KiB of the F446's 128 KiB SRAM is cheap for a bootloader.
+pub const BOOT_SWAP_BUFFER_SIZE: usize = 4096;
+
+/// How many state words embassy-boot 0.7 needs for an active slot of `active_size` bytes
+/// with pages of `page_size` bytes: magic, progress validity, and a swap and a revert
+/// progress word for each of the two copies per page (`assert_partitions`).
+pub const fn state_words_needed(active_size: u32, page_size: u32) -> u32 {
+    2 + 4 * (active_size / page_size)
+}
+
+// The erase sizes of the slots, for the page computation (None is a build error below).
+const ACTIVE_ERASE: u32 = unwrap_size(ACTIVE.uniform_erase_size());
+const DFU_ERASE: u32 = unwrap_size(DFU.uniform_erase_size());
+
+const fn unwrap_size(size: Option<u32>) -> u32 {
+    match size {
+        Some(size) => size,
+        None => panic!("a slot must be made of sectors of one size"),
+    }
+}
+
+// The sector table tiles the flash exactly, in order.
+const _: () = {
+    assert!(SECTORS[0].start == FLASH_BASE);
+    let mut i = 0;
+    while i < SECTORS.len() {
+        assert!(
+            SECTORS[i].index as usize == i,
+            "sector numbers are their table index"
+        );
+        if i + 1 < SECTORS.len() {
+            assert!(
+                SECTORS[i].end() == SECTORS[i + 1].start,
+                "sectors are contiguous"
+            );
+        }
+        i += 1;
+    }
+    assert!(SECTORS[SECTORS.len() - 1].end() == FLASH_BASE + FLASH_SIZE);
+};
+
+// Every partition is made of whole sectors, and no two share one: erasing one partition
+// must never erase a byte of another.
+const _: () = {
+    let mut i = 0;
+    while i < PARTITIONS.len() {
+        let part = PARTITIONS[i].1;
+        assert!(part.is_sector_aligned(), "partitions are whole sectors");
+        assert!(part.end() <= FLASH_BASE + FLASH_SIZE);
+        let mut j = i + 1;
+        while j < PARTITIONS.len() {
+            assert!(
+                !part.overlaps(&PARTITIONS[j].1),
+                "partitions do not overlap"
+            );
+            j += 1;
+        }
+        i += 1;
+    }
+    // The bootloader must hold the reset vector.
+    assert!(BOOTLOADER.start == FLASH_BASE);
+};
+
+// What embassy-boot 0.7 asserts at run time, at compile time.
+const _: () = {
+    // Each partition has one erase size (its `NorFlash::ERASE_SIZE`).
+    assert!(ACTIVE_ERASE == SLOT_ERASE_SIZE && DFU_ERASE == SLOT_ERASE_SIZE);
+    assert!(matches!(
+        BOOT_STATE.uniform_erase_size(),
+        Some(SMALL_ERASE_SIZE)
+    ));
+    assert!(matches!(
+        ECU_DATA.uniform_erase_size(),
+        Some(SMALL_ERASE_SIZE)
+    ));
+    // Page size is a multiple of the slots' write and erase sizes.
+    assert!(BOOT_PAGE_SIZE % WRITE_SIZE as u32 == 0);
+    assert!(BOOT_PAGE_SIZE % SLOT_ERASE_SIZE == 0);
+    // Slots are whole pages, and the DFU slot is at least one page bigger than the active.
+    assert!(ACTIVE.size % BOOT_PAGE_SIZE == 0 && DFU.size % BOOT_PAGE_SIZE == 0);
+    assert!(DFU.size >= ACTIVE.size + BOOT_PAGE_SIZE);
+    // The state partition holds the magic, the validity word and all progress words.
+    assert!(state_words_needed(ACTIVE.size, BOOT_PAGE_SIZE) <= BOOT_STATE.size / STATE_WRITE_SIZE);
+    // The swap buffer divides the page, holds a state word, and is whole write units.
+    assert!(BOOT_PAGE_SIZE % BOOT_SWAP_BUFFER_SIZE as u32 == 0);
+    assert!(BOOT_SWAP_BUFFER_SIZE >= STATE_WRITE_SIZE as usize);
+    assert!(BOOT_SWAP_BUFFER_SIZE % WRITE_SIZE == 0);
+};
+
+// The image layout: the vector table follows the header, and is aligned as VTOR needs. The
+// F446 has 16 system + 97 interrupt vectors (452 bytes), so VTOR wants 512-byte alignment.
+const _: () = {
+    assert!(APP_VECTOR_TABLE == ACTIVE.start + IMAGE_HEADER_SIZE);
+    assert!(APP_VECTOR_TABLE % 512 == 0);
+    assert!(IMAGE_HEADER_SIZE % WRITE_SIZE as u32 == 0);
+};
+
+#[cfg(test)]
+mod tests {
+    // The crate is no_std; its tests run on the host and may allocate.
+    extern crate std;
+    use std::vec::Vec;
+
+    use super::*;
+
+    #[test]
+    fn sector_of_finds_the_sector_at_both_ends() {
+        let cases = [
+            (0x0800_0000, 0),
+            (0x0800_3FFF, 0),
+            (0x0800_4000, 1),
+            (0x0800_8000, 2),
+            (0x0800_C000, 3),
+            (0x0800_FFFF, 3),
+            (0x0801_0000, 4),
+            (0x0801_FFFF, 4),
+            (0x0802_0000, 5),
+            (0x0803_FFFF, 5),
+            (0x0804_0000, 6),
+            (0x0806_0000, 7),
+            (0x0807_FFFF, 7),
+        ];
+        for (address, index) in cases {
+            assert_eq!(
+                sector_of(address).map(|s| s.index),
+                Some(index),
+                "{address:#x}"
+            );
+        }
+        assert_eq!(sector_of(0x07FF_FFFF), None);
+        assert_eq!(sector_of(0x0808_0000), None);
+    }
+
+    #[test]
+    fn partitions_are_the_documented_sectors() {
+        let indices = |region: Region| region.sectors().iter().map(|s| s.index).collect::<Vec<_>>();
+        assert_eq!(indices(BOOTLOADER), [0, 1]);
+        assert_eq!(indices(BOOT_STATE), [2]);
+        assert_eq!(indices(ECU_DATA), [3]);
+        assert_eq!(indices(SPARE), [4]);
+        assert_eq!(indices(ACTIVE), [5]);
+        assert_eq!(indices(DFU), [6, 7]);
+        assert_eq!(APP_VECTOR_TABLE, 0x0802_0200);
+        assert_eq!(BOOT_PAGE_SIZE, 128 * 1024);
+    }
+
+    #[test]
+    fn partitions_tile_the_flash_in_order() {
+        let mut next = FLASH_BASE;
+        for (name, region) in PARTITIONS {
+            assert_eq!(
+                region.start, next,
+                "{name} starts where the previous partition ends"
+            );
+            assert_eq!(partition_of(region.start).map(|p| p.0), Some(name));
+            assert_eq!(partition_of(region.end() - 1).map(|p| p.0), Some(name));
+            next = region.end();
+        }
+        assert_eq!(next, FLASH.end());
+        assert_eq!(partition_of(FLASH.end()), None);
+    }
+
+    #[test]
+    fn region_helpers() {
+        assert_eq!(ACTIVE.offset_of(APP_VECTOR_TABLE), Some(IMAGE_HEADER_SIZE));
+        assert_eq!(ACTIVE.offset_of(DFU.start), None);
+        assert!(DFU.overlaps(&Region {
+            start: 0x0805_0000,
+            size: 4
+        }));
+        assert!(!DFU.overlaps(&ACTIVE));
+        // Sectors 3 and 4 differ in size: no single erase size, as embassy-boot would need.
+        let mixed = Region {
+            start: 0x0800_C000,
+            size: SMALL_SECTOR_SIZE + MEDIUM_SECTOR_SIZE,
+        };
+        assert!(mixed.is_sector_aligned());
+        assert_eq!(mixed.uniform_erase_size(), None);
+        let unaligned = Region {
+            start: 0x0800_0100,
+            size: SMALL_SECTOR_SIZE,
+        };
+        assert!(!unaligned.is_sector_aligned());
+        assert!(unaligned.sectors().is_empty());
+        assert_eq!(DFU.uniform_erase_size(), Some(SLOT_ERASE_SIZE));
+    }
+
+    #[test]
+    fn state_partition_has_room_to_spare() {
+        // Magic, validity, 2 swap + 2 revert progress words for the one-page active slot.
+        assert_eq!(state_words_needed(ACTIVE.size, BOOT_PAGE_SIZE), 6);
+        assert_eq!(BOOT_STATE.size / STATE_WRITE_SIZE, 4096);
+    }
+}
