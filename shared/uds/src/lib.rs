@@ -34,11 +34,13 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod node;
 pub mod nrc;
 pub mod obd;
 pub mod security;
 pub mod server;
 
+pub use node::DiagNode;
 pub use nrc::Nrc;
 pub use server::{
     Backend, Config, FlashError, Identification, Reply, ResetKind, Server, Session, MAX_BLOCK_LEN,

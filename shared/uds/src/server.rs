@@ -170,6 +170,10 @@ pub const MAX_BLOCK_LEN: u16 = 4095;
 /// Bytes of the DFU partition read per [`Server::resume`] call while checking an image.
 const CHECK_CHUNK: usize = 1024;
 
+/// Programming granularity: slices of a block end on this many bytes (the F4 programs
+/// 32-bit words).
+const PROGRAM_ALIGN: usize = 4;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Security {
     Locked,
@@ -229,6 +233,40 @@ pub struct Server {
     programming: Programming,
     work: Option<Work>,
     last_image_error: Option<ImageError>,
+    /// The last TransferData block, acknowledged but not yet (completely) programmed: it
+    /// is written in slices while the next block crosses the bus ([`Server::program_step`]),
+    /// so that programming, which stalls the core, never holds up the transfer.
+    unwritten: Unwritten,
+}
+
+/// Data of a TransferData block waiting to be programmed.
+#[derive(Debug)]
+struct Unwritten {
+    data: [u8; MAX_BLOCK_LEN as usize],
+    /// DFU offset of `data[0]`.
+    offset: u32,
+    /// Bytes of `data` held.
+    len: usize,
+    /// Bytes of `data` already programmed.
+    written: usize,
+    /// A slice failed: the download is lost, reported at the next request.
+    failed: bool,
+}
+
+impl Unwritten {
+    const fn new() -> Self {
+        Self {
+            data: [0; MAX_BLOCK_LEN as usize],
+            offset: 0,
+            len: 0,
+            written: 0,
+            failed: false,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.written == self.len
+    }
 }
 
 impl Server {
@@ -247,7 +285,55 @@ impl Server {
             programming: Programming::Idle,
             work: None,
             last_image_error: None,
+            unwritten: Unwritten::new(),
         }
+    }
+
+    /// Whether acknowledged download data still waits to be programmed.
+    pub fn programming_pending(&self) -> bool {
+        !self.unwritten.is_empty()
+    }
+
+    /// Programs up to `max_bytes` of the acknowledged download data (whole flash words;
+    /// the caller picks a slice short enough for the ECU to keep up with the bus while the
+    /// core stalls). Returns whether data is left.
+    pub fn program_step(&mut self, backend: &mut impl Backend, max_bytes: usize) -> bool {
+        let pending = &mut self.unwritten;
+        if pending.is_empty() {
+            return false;
+        }
+        let end = pending
+            .written
+            .saturating_add(max_bytes.max(PROGRAM_ALIGN))
+            .min(pending.len);
+        // Slices end on a flash word, except the block's last.
+        let end = if end < pending.len {
+            end - (end - pending.written) % PROGRAM_ALIGN
+        } else {
+            end
+        };
+        let offset = pending.offset + pending.written as u32;
+        if backend
+            .dfu_write(offset, &pending.data[pending.written..end])
+            .is_err()
+        {
+            pending.failed = true;
+            pending.written = pending.len;
+            return false;
+        }
+        pending.written = end;
+        !pending.is_empty()
+    }
+
+    /// Programs everything acknowledged; `Err` when a write failed (now or in an earlier
+    /// slice), which loses the download.
+    fn finish_programming(&mut self, backend: &mut impl Backend) -> Result<(), Nrc> {
+        while self.program_step(backend, usize::MAX) {}
+        if core::mem::take(&mut self.unwritten.failed) {
+            self.programming = Programming::Idle;
+            return Err(Nrc::GeneralProgrammingFailure);
+        }
+        Ok(())
     }
 
     /// The active session.
@@ -297,9 +383,11 @@ impl Server {
         self.lockout_active(now);
     }
 
-    /// Handles one request PDU; writes the response into `out` (at least 4095 bytes
-    /// always suffice). `functional`: the request came on the functional identifier, where
-    /// a negative response for an unknown service, sub-function or identifier is not sent.
+    /// Handles one request PDU; writes the response into `out`, which must hold at least
+    /// [`MIN_RESPONSE_BUFFER`] bytes (longer lists than `out` holds are refused with
+    /// "response too long"). `functional`: the request came on the functional identifier,
+    /// where a negative response for an unknown service, sub-function or identifier is
+    /// not sent.
     pub fn handle(
         &mut self,
         now: Instant,
@@ -311,6 +399,10 @@ impl Server {
         let Some(&service) = request.first() else {
             return Reply::Nothing;
         };
+        assert!(
+            out.len() >= MIN_RESPONSE_BUFFER,
+            "response buffer too small"
+        );
         self.last_request = now;
         if self.work.is_some() {
             // One request at a time: the tester waits for the final response.
@@ -437,7 +529,7 @@ impl Server {
             sid::ROUTINE_CONTROL => self.routine_control(request, backend, out),
             sid::REQUEST_DOWNLOAD => self.request_download(request, backend, out),
             sid::TRANSFER_DATA => self.transfer_data(request, backend, out),
-            sid::REQUEST_TRANSFER_EXIT => self.request_transfer_exit(request, out),
+            sid::REQUEST_TRANSFER_EXIT => self.request_transfer_exit(request, backend, out),
             _ => Err(Nrc::ServiceNotSupported),
         }
     }
@@ -492,6 +584,7 @@ impl Server {
         backend.dtcs().set_recording(true);
         if !matches!(self.programming, Programming::Verified) {
             self.programming = Programming::Idle;
+            self.unwritten = Unwritten::new();
         }
     }
 
@@ -711,6 +804,7 @@ impl Server {
                 return Err(Nrc::ConditionsNotCorrect);
             }
             self.programming = Programming::Idle;
+            self.unwritten = Unwritten::new();
             self.work = Some(Work::Erase {
                 step: 0,
                 steps: backend.dfu_erase_steps(),
@@ -863,19 +957,21 @@ impl Server {
             self.programming = Programming::Idle;
             return Err(Nrc::TransferDataSuspended);
         }
-        if backend.dfu_write(received, data).is_err() {
-            self.programming = Programming::Idle;
-            return Err(Nrc::GeneralProgrammingFailure);
-        }
+        // The previous block must be in flash before this one takes the buffer (normally it
+        // is: it was programmed while this block crossed the bus).
+        self.finish_programming(backend)?;
         let mut header_checked = header_checked;
         if !header_checked && end as usize >= HEADER_LEN {
             // The header is complete: refuse an image that can never be installed here
-            // before the rest of it crosses the bus.
+            // before the rest of it crosses the bus. Its first bytes may already be in
+            // flash (blocks shorter than a header).
             let mut bytes = [0u8; HEADER_LEN];
-            if backend.dfu_read(0, &mut bytes).is_err() {
+            let in_flash = (received as usize).min(HEADER_LEN);
+            if backend.dfu_read(0, &mut bytes[..in_flash]).is_err() {
                 self.programming = Programming::Idle;
                 return Err(Nrc::GeneralProgrammingFailure);
             }
+            bytes[in_flash..].copy_from_slice(&data[..HEADER_LEN - in_flash]);
             let verdict = ImageHeader::parse(&bytes).and_then(|header| {
                 header.check(&backend.image_expectations())?;
                 if header.image_len() != u64::from(size) {
@@ -893,6 +989,11 @@ impl Server {
             }
             header_checked = true;
         }
+        let pending = &mut self.unwritten;
+        pending.data[..data.len()].copy_from_slice(data);
+        pending.offset = received;
+        pending.len = data.len();
+        pending.written = 0;
         self.programming = Programming::Downloading {
             size,
             received: end,
@@ -902,7 +1003,12 @@ impl Server {
         Ok(positive(request, &[counter], out))
     }
 
-    fn request_transfer_exit(&mut self, request: &[u8], out: &mut [u8]) -> Result<Reply, Nrc> {
+    fn request_transfer_exit(
+        &mut self,
+        request: &[u8],
+        backend: &mut impl Backend,
+        out: &mut [u8],
+    ) -> Result<Reply, Nrc> {
         let Programming::Downloading { size, received, .. } = self.programming else {
             return Err(Nrc::RequestSequenceError);
         };
@@ -910,6 +1016,7 @@ impl Server {
             return Err(Nrc::RequestSequenceError);
         }
         let _ = request;
+        self.finish_programming(backend)?;
         self.programming = Programming::Downloaded { size };
         Ok(Reply::Send(write(
             out,
@@ -918,6 +1025,7 @@ impl Server {
     }
 
     fn refuse_image(&mut self, error: ImageError) {
+        self.unwritten = Unwritten::new();
         self.programming = Programming::Idle;
         self.last_image_error = Some(error);
     }
@@ -994,10 +1102,17 @@ fn suppressed_when_functional(nrc: Nrc) -> bool {
     )
 }
 
+/// Writes a short response (every caller's is at most 18 bytes; [`Server::handle`] asks
+/// for a buffer of at least [`MIN_RESPONSE_BUFFER`]).
 fn write(out: &mut [u8], bytes: &[u8]) -> usize {
     out[..bytes.len()].copy_from_slice(bytes);
     bytes.len()
 }
+
+/// The smallest response buffer [`Server::handle`] works with: room for every fixed-size
+/// response (the longest, a security seed, is 18 bytes); DID and DTC lists that do not fit
+/// are refused with "response too long".
+pub const MIN_RESPONSE_BUFFER: usize = 32;
 
 /// A positive response echoing `echo` after the SID, or nothing when the request's
 /// sub-function asks to suppress it (bit 7).

@@ -529,6 +529,32 @@ fn transfer_blocks_are_counted() {
 }
 
 #[test]
+fn blocks_are_programmed_in_slices_while_the_next_one_arrives() {
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    let image = good_image();
+    let mut request = vec![0x34, 0x00, 0x44];
+    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&(image.len() as u32).to_be_bytes());
+    bench.request(&request);
+    let mut block = vec![0x36, 0x01];
+    block.extend_from_slice(&image[..4093]);
+    assert_eq!(bench.request(&block), [0x76, 0x01]);
+    // Acknowledged at once, programmed afterwards: 64 bytes (16 words) per slice.
+    assert_eq!(bench.ecu.writes, 0);
+    assert!(bench.server.programming_pending());
+    let mut slices = 0;
+    while bench.server.program_step(&mut bench.ecu, 64) {
+        slices += 1;
+    }
+    assert_eq!(slices + 1, 4093usize.div_ceil(64));
+    assert_eq!(bench.ecu.writes, 4093usize.div_ceil(64));
+    assert_eq!(&bench.ecu.dfu[..4093], &image[..4093]);
+    assert!(!bench.server.programming_pending());
+}
+
+#[test]
 fn communication_control_and_dtc_setting_end_with_the_session() {
     let mut bench = Bench::new();
     assert_eq!(bench.request(&[0x28, 0x03, 0x01]), [0x7F, 0x28, 0x7F]);
@@ -626,4 +652,126 @@ proptest! {
             }
         }
     }
+}
+
+/// A tester's ISO-TP channel and the ECU's [`DiagNode`] on one simulated bus, frames
+/// taking 250 µs each.
+struct Wire {
+    ecu_node: DiagNode,
+    ecu: TestEcu,
+    tester: autoplug_isotp::Channel<4095>,
+    now: Instant,
+    frames: usize,
+}
+
+impl Wire {
+    fn new() -> Self {
+        let node = autoplug_can::Node::Cruise;
+        let config = autoplug_isotp::Config::default_for(
+            node.diag_request_id().unwrap(),
+            node.diag_response_id().unwrap(),
+        );
+        Self {
+            ecu_node: DiagNode::new(node, SECRET, Instant::from_micros(0)).unwrap(),
+            ecu: TestEcu::new(),
+            tester: autoplug_isotp::Channel::new(config),
+            now: Instant::from_micros(0),
+            frames: 0,
+        }
+    }
+
+    /// Moves frames both ways until the tester has a response (not a 0x78) or `limit_ms`
+    /// passes; returns it.
+    fn exchange(&mut self, request: &[u8], limit_ms: u64) -> Option<Vec<u8>> {
+        self.tester.send(self.now, request).unwrap();
+        let end = self.now.plus_micros(limit_ms * 1000);
+        while self.now.as_micros() < end.as_micros() {
+            self.now = self.now.plus_micros(250);
+            self.ecu_node.poll(self.now, &mut self.ecu);
+            if let Some(frame) = self.tester.poll_transmit(self.now) {
+                self.tester.confirm_transmit(self.now);
+                self.frames += 1;
+                self.ecu_node.on_frame(self.now, &frame, &mut self.ecu);
+            } else if let Some(frame) = self.ecu_node.poll_transmit(self.now) {
+                self.ecu_node.confirm_transmit(self.now);
+                self.frames += 1;
+                if let Some(autoplug_isotp::Event::Received { len, .. }) =
+                    self.tester.on_frame(self.now, &frame)
+                {
+                    let response = self.tester.received()[..len].to_vec();
+                    self.tester.release();
+                    if response.len() == 3 && response[0] == 0x7F && response[2] == 0x78 {
+                        continue;
+                    }
+                    return Some(response);
+                }
+            }
+            while self.tester.poll(self.now).is_some() {}
+        }
+        None
+    }
+}
+
+#[test]
+fn a_download_over_iso_tp_frames_reaches_the_dfu_partition() {
+    let mut wire = Wire::new();
+    let ask = |wire: &mut Wire, request: &[u8]| wire.exchange(request, 10_000).expect("an answer");
+    assert_eq!(ask(&mut wire, &[0x10, 0x03])[..2], [0x50, 0x03]);
+    assert_eq!(ask(&mut wire, &[0x10, 0x02])[..2], [0x50, 0x02]);
+    let seed: [u8; 16] = ask(&mut wire, &[0x27, 0x01])[2..].try_into().unwrap();
+    let mut send = vec![0x27, 0x02];
+    send.extend_from_slice(&key_for(SECRET, NODE, &seed));
+    assert_eq!(ask(&mut wire, &send), [0x67, 0x02]);
+    assert_eq!(
+        ask(&mut wire, &[0x31, 0x01, 0xFF, 0x00]),
+        [0x71, 0x01, 0xFF, 0x00, 0x00]
+    );
+    let image = good_image();
+    let mut request = vec![0x34, 0x00, 0x44];
+    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&(image.len() as u32).to_be_bytes());
+    assert_eq!(ask(&mut wire, &request), [0x74, 0x20, 0x0F, 0xFF]);
+    for (i, block) in image.chunks(4093).enumerate() {
+        let counter = (i + 1) as u8;
+        let request = [&[0x36, counter][..], block].concat();
+        assert_eq!(ask(&mut wire, &request), [0x76, counter]);
+    }
+    assert_eq!(ask(&mut wire, &[0x37]), [0x77]);
+    assert_eq!(&wire.ecu.dfu[..image.len()], &image[..]);
+    assert_eq!(
+        ask(&mut wire, &[0x31, 0x01, 0xFF, 0x01]),
+        [0x71, 0x01, 0xFF, 0x01, 0x00]
+    );
+    assert!(wire.ecu.marked);
+    assert_eq!(ask(&mut wire, &[0x11, 0x01]), [0x51, 0x01]);
+    // The reset comes once the response is out, not before.
+    wire.ecu_node.poll(wire.now, &mut wire.ecu);
+    assert_eq!(wire.ecu_node.take_reset(), Some(ResetKind::Hard));
+}
+
+#[test]
+fn obd_requests_on_0x7df_are_answered_on_the_iso_15765_4_identifier() {
+    let mut node =
+        DiagNode::new(autoplug_can::Node::Cruise, SECRET, Instant::from_micros(0)).unwrap();
+    let mut ecu = TestEcu::new();
+    ecu.speed = Some(87.0);
+    let now = Instant::from_micros(1000);
+    let request = autoplug_can::Frame::new(0x7DF, &[0x02, 0x01, 0x0D, 0, 0, 0, 0, 0]).unwrap();
+    node.on_frame(now, &request, &mut ecu);
+    let response = node.poll_transmit(now).expect("an OBD-II response");
+    assert_eq!(response.id(), 0x7E9);
+    assert_eq!(
+        response.data(),
+        [0x03, 0x41, 0x0D, 87, 0xCC, 0xCC, 0xCC, 0xCC]
+    );
+    // An ECU without OBD-II values stays silent; UDS on 0x7DF still works.
+    let mut abs = DiagNode::new(autoplug_can::Node::ABS, SECRET, Instant::from_micros(0)).unwrap();
+    abs.on_frame(now, &request, &mut ecu);
+    assert!(abs.poll_transmit(now).is_none());
+    let present = autoplug_can::Frame::new(0x7DF, &[0x02, 0x3E, 0x00, 0, 0, 0, 0, 0]).unwrap();
+    abs.on_frame(now, &present, &mut ecu);
+    abs.poll(now, &mut ecu);
+    let response = abs.poll_transmit(now).expect("tester present answered");
+    assert_eq!(response.id(), 0x78E);
+    assert_eq!(response.data()[..3], [0x02, 0x7E, 0x00]);
 }

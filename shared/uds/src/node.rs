@@ -1,0 +1,226 @@
+//! One ECU's diagnostic stack on the bus: ISO-TP on its physical identifiers (requests at
+//! 0x700 + node number, responses at 0x780 + node number) and the functional identifier
+//! 0x7DF, the UDS [`Server`], and OBD-II mode 01 answered on the ECU's ISO 15765-4
+//! response identifier. The firmware and the virtual car feed it frames and time the same
+//! way they feed the ECU's logic.
+
+use autoplug_can::{Frame, Node, DIAG_FUNCTIONAL_REQUEST_ID};
+use autoplug_ecu::Instant;
+use autoplug_isotp::{Channel, Config as IsoTpConfig, Event, StMin};
+
+use crate::obd::answer_mode01;
+use crate::server::{Backend, Config, Reply, ResetKind, Server};
+
+/// Byte that pads every frame the ECU sends to 8 bytes (ISO 15765-4 requires DLC 8).
+pub const PADDING: u8 = 0xCC;
+
+/// Bytes programmed per [`DiagNode::poll`] while a download is under way: 16 flash words,
+/// about 0.26 ms of stall on the F446, shorter than the 3 frames (about 0.7 ms) the bxCAN
+/// receive FIFO holds at full bus load.
+pub const PROGRAM_SLICE: usize = 64;
+
+/// The ISO-TP parameters of an ECU: block size 0 and STmin 0 (the tester may send a whole
+/// TransferData block back to back: the ECU buffers it in RAM and programs it while the
+/// next one arrives), padding, ISO 15765-2 default timeouts.
+pub const fn isotp_config(node: Node) -> Option<IsoTpConfig> {
+    let (Some(rx_id), Some(tx_id)) = (node.diag_request_id(), node.diag_response_id()) else {
+        return None;
+    };
+    let mut config = IsoTpConfig::default_for(tx_id, rx_id);
+    config.functional_rx_id = Some(DIAG_FUNCTIONAL_REQUEST_ID);
+    config.padding = Some(PADDING);
+    config.block_size = 0;
+    config.st_min = StMin::Millis(0);
+    Some(config)
+}
+
+/// Which source the frame last handed out came from, for its confirmation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Handed {
+    Nothing,
+    Channel,
+    Obd,
+}
+
+/// The longest response an ECU sends: identification strings and DTC lists are short, and
+/// a smaller transmit buffer keeps the stack within the firmware's RAM budget.
+pub const MAX_RESPONSE_LEN: usize = 256;
+
+/// An ECU's diagnostic stack.
+pub struct DiagNode {
+    node: Node,
+    channel: Channel<4095, MAX_RESPONSE_LEN>,
+    server: Server,
+    response: [u8; MAX_RESPONSE_LEN],
+    /// A response the channel could not take yet (it was still sending).
+    queued: Option<usize>,
+    /// A reset to perform once the response before it is out.
+    reset_after_send: Option<ResetKind>,
+    reset_due: Option<ResetKind>,
+    /// Waiting for the 0x78 to be out before the next step of a long operation.
+    resume_after_send: bool,
+    obd_frame: Option<Frame>,
+    handed: Handed,
+}
+
+impl DiagNode {
+    /// The stack of `node` (an ECU with a diagnostic node number; `None` for another node).
+    pub fn new(node: Node, security_secret: &'static [u8], now: Instant) -> Option<Self> {
+        let config = isotp_config(node)?;
+        let number = node.diag_node_number()?;
+        Some(Self {
+            node,
+            channel: Channel::new(config),
+            server: Server::new(Config::new(number, security_secret), now),
+            response: [0; MAX_RESPONSE_LEN],
+            queued: None,
+            reset_after_send: None,
+            reset_due: None,
+            resume_after_send: false,
+            obd_frame: None,
+            handed: Handed::Nothing,
+        })
+    }
+
+    /// The UDS server (session, communication control, DTC setting...).
+    pub fn server(&self) -> &Server {
+        &self.server
+    }
+
+    /// Whether `id` is one of the diagnostic identifiers this ECU listens to.
+    pub fn accepts(&self, id: u16) -> bool {
+        Some(id) == self.node.diag_request_id() || id == DIAG_FUNCTIONAL_REQUEST_ID
+    }
+
+    /// A frame received on one of [`DiagNode::accepts`]' identifiers (others are ignored).
+    pub fn on_frame(&mut self, now: Instant, frame: &Frame, backend: &mut impl Backend) {
+        if !self.accepts(frame.id()) {
+            return;
+        }
+        if frame.id() == DIAG_FUNCTIONAL_REQUEST_ID && self.answer_obd(frame, backend) {
+            return;
+        }
+        if let Some(event) = self.channel.on_frame(now, frame) {
+            self.on_event(now, event, backend);
+        }
+    }
+
+    /// Timeouts, the session timer, a slice of programming, the next step of a long
+    /// operation. Call often (every millisecond in the virtual car, every loop on the MCU).
+    pub fn poll(&mut self, now: Instant, backend: &mut impl Backend) {
+        while let Some(event) = self.channel.poll(now) {
+            self.on_event(now, event, backend);
+        }
+        self.server.poll(now, backend);
+        self.server.program_step(backend, PROGRAM_SLICE);
+        if self.resume_after_send && self.channel.is_idle() && self.queued.is_none() {
+            self.resume_after_send = false;
+            let reply = self.server.resume(now, backend, &mut self.response);
+            self.on_reply(now, reply);
+        }
+        self.flush_queued(now);
+    }
+
+    /// The next frame to send, if any.
+    pub fn poll_transmit(&mut self, now: Instant) -> Option<Frame> {
+        if self.handed != Handed::Nothing {
+            return None;
+        }
+        if let Some(frame) = self.obd_frame.take() {
+            self.handed = Handed::Obd;
+            return Some(frame);
+        }
+        let frame = self.channel.poll_transmit(now)?;
+        self.handed = Handed::Channel;
+        Some(frame)
+    }
+
+    /// The frame last handed out by [`DiagNode::poll_transmit`] is on the bus.
+    pub fn confirm_transmit(&mut self, now: Instant) {
+        if self.handed == Handed::Channel {
+            self.channel.confirm_transmit(now);
+        }
+        self.handed = Handed::Nothing;
+    }
+
+    /// A reset the tester asked for, once its response is out: the ECU performs it (on
+    /// the MCU a system reset into the bootloader; in the virtual car the same).
+    pub fn take_reset(&mut self) -> Option<ResetKind> {
+        self.reset_due.take()
+    }
+
+    fn on_event(&mut self, now: Instant, event: Event, backend: &mut impl Backend) {
+        match event {
+            Event::Received { len, functional } => {
+                let request = &self.channel.received()[..len];
+                let reply =
+                    self.server
+                        .handle(now, request, functional, backend, &mut self.response);
+                self.channel.release();
+                self.on_reply(now, reply);
+            }
+            Event::Sent => {
+                if let Some(kind) = self.reset_after_send.take() {
+                    self.reset_due = Some(kind);
+                }
+            }
+            // A lost PDU: the tester repeats its request after its own timeout.
+            Event::Error(_) => {}
+        }
+    }
+
+    fn on_reply(&mut self, now: Instant, reply: Reply) {
+        match reply {
+            Reply::Nothing => {}
+            Reply::Send(len) => self.send(now, len),
+            Reply::Pending(len) => {
+                self.send(now, len);
+                self.resume_after_send = true;
+            }
+            Reply::Working => self.resume_after_send = true,
+            Reply::SendThenReset(0, kind) => self.reset_due = Some(kind),
+            Reply::SendThenReset(len, kind) => {
+                self.reset_after_send = Some(kind);
+                self.send(now, len);
+            }
+        }
+    }
+
+    fn send(&mut self, now: Instant, len: usize) {
+        if self.channel.send(now, &self.response[..len]).is_err() {
+            self.queued = Some(len);
+        }
+    }
+
+    fn flush_queued(&mut self, now: Instant) {
+        if let Some(len) = self.queued {
+            if self.channel.send(now, &self.response[..len]).is_ok() {
+                self.queued = None;
+            }
+        }
+    }
+
+    /// OBD-II mode 01 on the functional identifier, for the ECUs with an OBD response
+    /// identifier. Returns whether the frame was an OBD-II request (answered or not).
+    fn answer_obd(&mut self, frame: &Frame, backend: &mut impl Backend) -> bool {
+        let data = frame.data();
+        // A single frame (PCI 0x0L) whose service is mode 01.
+        let Some(&pci) = data.first() else {
+            return false;
+        };
+        let len = usize::from(pci & 0x0F);
+        if pci >> 4 != 0 || len == 0 || len + 1 > data.len() || data[1] != 0x01 {
+            return false;
+        }
+        let Some(response_id) = self.node.obd_response_id() else {
+            return true; // not an OBD-II ECU: silent, as OBD-II wants
+        };
+        let mut out = [0u8; 8];
+        if let Some(n) = answer_mode01(&data[1..1 + len], backend, &mut out[1..]) {
+            out[0] = n as u8;
+            out[1 + n..].fill(PADDING);
+            self.obd_frame = Frame::new(u32::from(response_id), &out).ok();
+        }
+        true
+    }
+}
