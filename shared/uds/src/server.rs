@@ -97,7 +97,8 @@ pub trait Backend {
     fn dfu_erase_steps(&self) -> u32;
     /// Erases step `step` of the DFU partition (the core may stall for a second).
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError>;
-    /// Programs `data` at `offset` in the DFU partition (erased before).
+    /// Programs `data` at `offset` in the DFU partition (erased before). Both are whole
+    /// 32-bit flash words: multiples of 4.
     fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError>;
     /// Reads the DFU partition.
     fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError>;
@@ -242,13 +243,18 @@ pub struct Server {
 /// Data of a TransferData block waiting to be programmed.
 #[derive(Debug)]
 struct Unwritten {
-    data: [u8; MAX_BLOCK_LEN as usize],
-    /// DFU offset of `data[0]`.
+    /// The last block's bytes of whole flash words (the previous block's partial word in
+    /// front); a final partial word is padded with the erased value.
+    data: [u8; MAX_BLOCK_LEN as usize + PROGRAM_ALIGN],
+    /// DFU offset of `data[0]` (a multiple of [`PROGRAM_ALIGN`]).
     offset: u32,
-    /// Bytes of `data` held.
+    /// Bytes of `data` to program (a multiple of [`PROGRAM_ALIGN`]).
     len: usize,
     /// Bytes of `data` already programmed.
     written: usize,
+    /// The bytes of a word the block ended in, programmed with the next block.
+    carry: [u8; PROGRAM_ALIGN],
+    carry_len: usize,
     /// A slice failed: the download is lost, reported at the next request.
     failed: bool,
 }
@@ -256,16 +262,42 @@ struct Unwritten {
 impl Unwritten {
     const fn new() -> Self {
         Self {
-            data: [0; MAX_BLOCK_LEN as usize],
+            data: [0; MAX_BLOCK_LEN as usize + PROGRAM_ALIGN],
             offset: 0,
             len: 0,
             written: 0,
+            carry: [0; PROGRAM_ALIGN],
+            carry_len: 0,
             failed: false,
         }
     }
 
     fn is_empty(&self) -> bool {
         self.written == self.len
+    }
+
+    /// Takes a block received at DFU offset `at` (right after the previous one): the
+    /// carried partial word and the block's whole words become the data to program, its
+    /// last partial word is carried, or padded with 0xFF (the erased value, which
+    /// programming leaves as it is) when `last` ends the download.
+    fn take_block(&mut self, at: u32, block: &[u8], last: bool) {
+        let carried = self.carry_len;
+        self.data[..carried].copy_from_slice(&self.carry[..carried]);
+        self.data[carried..carried + block.len()].copy_from_slice(block);
+        let total = carried + block.len();
+        let whole = total - total % PROGRAM_ALIGN;
+        self.offset = at - carried as u32;
+        self.written = 0;
+        if last {
+            let padded = total.div_ceil(PROGRAM_ALIGN) * PROGRAM_ALIGN;
+            self.data[total..padded].fill(0xFF);
+            self.len = padded;
+            self.carry_len = 0;
+        } else {
+            self.len = whole;
+            self.carry_len = total - whole;
+            self.carry[..self.carry_len].copy_from_slice(&self.data[whole..total]);
+        }
     }
 }
 
@@ -302,16 +334,9 @@ impl Server {
         if pending.is_empty() {
             return false;
         }
-        let end = pending
-            .written
-            .saturating_add(max_bytes.max(PROGRAM_ALIGN))
-            .min(pending.len);
-        // Slices end on a flash word, except the block's last.
-        let end = if end < pending.len {
-            end - (end - pending.written) % PROGRAM_ALIGN
-        } else {
-            end
-        };
+        // Whole flash words: the data starts and ends on a word.
+        let slice = max_bytes.max(PROGRAM_ALIGN) / PROGRAM_ALIGN * PROGRAM_ALIGN;
+        let end = pending.written.saturating_add(slice).min(pending.len);
         let offset = pending.offset + pending.written as u32;
         if backend
             .dfu_write(offset, &pending.data[pending.written..end])
@@ -965,13 +990,17 @@ impl Server {
             // The header is complete: refuse an image that can never be installed here
             // before the rest of it crosses the bus. Its first bytes may already be in
             // flash (blocks shorter than a header).
+            // Earlier blocks are in flash, but for the partial word carried to this block.
             let mut bytes = [0u8; HEADER_LEN];
-            let in_flash = (received as usize).min(HEADER_LEN);
+            let before = (received as usize).min(HEADER_LEN);
+            let carried = self.unwritten.carry_len;
+            let in_flash = (received as usize - carried).min(HEADER_LEN);
             if backend.dfu_read(0, &mut bytes[..in_flash]).is_err() {
                 self.programming = Programming::Idle;
                 return Err(Nrc::GeneralProgrammingFailure);
             }
-            bytes[in_flash..].copy_from_slice(&data[..HEADER_LEN - in_flash]);
+            bytes[in_flash..before].copy_from_slice(&self.unwritten.carry[..before - in_flash]);
+            bytes[before..].copy_from_slice(&data[..HEADER_LEN - before]);
             let verdict = ImageHeader::parse(&bytes).and_then(|header| {
                 header.check(&backend.image_expectations())?;
                 if header.image_len() != u64::from(size) {
@@ -989,11 +1018,7 @@ impl Server {
             }
             header_checked = true;
         }
-        let pending = &mut self.unwritten;
-        pending.data[..data.len()].copy_from_slice(data);
-        pending.offset = received;
-        pending.len = data.len();
-        pending.written = 0;
+        self.unwritten.take_block(received, data, end == size);
         self.programming = Programming::Downloading {
             size,
             received: end,

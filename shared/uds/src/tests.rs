@@ -97,6 +97,8 @@ impl Backend for TestEcu {
         Ok(())
     }
     fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
+        // The F446 programs 32-bit words: the server must hand out whole ones.
+        assert_eq!((offset % 4, data.len() % 4), (0, 0), "unaligned write");
         let range = offset as usize..offset as usize + data.len();
         if self.dfu[range.clone()].iter().any(|&b| b != 0xFF) {
             return Err(FlashError); // NOR: programming needs an erased cell
@@ -491,6 +493,36 @@ fn a_refused_image_leaves_a_good_one_installable() {
 }
 
 #[test]
+fn blocks_of_any_length_are_programmed_as_whole_words() {
+    // 301, 7, 1000... bytes: the header straddles blocks and partial words carry over.
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    let image = good_image();
+    let mut request = vec![0x34, 0x00, 0x44];
+    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&(image.len() as u32).to_be_bytes());
+    bench.request(&request);
+    let sizes = [301usize, 7, 1, 203, 1000, 3333];
+    let mut offset = 0;
+    let mut counter = 0u8;
+    let mut i = 0;
+    while offset < image.len() {
+        let end = (offset + sizes[i % sizes.len()]).min(image.len());
+        counter = counter.wrapping_add(1);
+        let request = [&[0x36, counter][..], &image[offset..end]].concat();
+        assert_eq!(bench.request(&request), [0x76, counter], "block {counter}");
+        // Programming in small slices between blocks, as the diagnostic node does.
+        while bench.server.program_step(&mut bench.ecu, 64) {}
+        offset = end;
+        i += 1;
+    }
+    assert_eq!(bench.request(&[0x37]), [0x77]);
+    assert_eq!(&bench.ecu.dfu[..image.len()], &image[..]);
+    assert_eq!(bench.check(), [0x71, 0x01, 0xFF, 0x01, 0x00]);
+}
+
+#[test]
 fn transfer_blocks_are_counted() {
     let mut bench = Bench::new();
     bench.enter_programming();
@@ -548,9 +580,11 @@ fn blocks_are_programmed_in_slices_while_the_next_one_arrives() {
     while bench.server.program_step(&mut bench.ecu, 64) {
         slices += 1;
     }
-    assert_eq!(slices + 1, 4093usize.div_ceil(64));
-    assert_eq!(bench.ecu.writes, 4093usize.div_ceil(64));
-    assert_eq!(&bench.ecu.dfu[..4093], &image[..4093]);
+    // 4092 bytes are whole words; the block's last byte waits for the next block.
+    assert_eq!(slices + 1, 4092usize.div_ceil(64));
+    assert_eq!(bench.ecu.writes, 4092usize.div_ceil(64));
+    assert_eq!(&bench.ecu.dfu[..4092], &image[..4092]);
+    assert_eq!(bench.ecu.dfu[4092], 0xFF);
     assert!(!bench.server.programming_pending());
 }
 
