@@ -923,6 +923,10 @@ impl EcuLogic for AbsEcu {
     fn dtcs(&self) -> &Dtcs {
         &self.dtcs
     }
+
+    fn dtcs_mut(&mut self) -> &mut Dtcs {
+        &mut self.dtcs
+    }
 }
 
 /// `x` limited to `[lo, hi]`, NaN to `lo`; never panics (unlike `f32::clamp`).

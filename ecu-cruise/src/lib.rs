@@ -222,6 +222,10 @@ impl EcuLogic for CruiseEcu {
     fn dtcs(&self) -> &Dtcs {
         &self.dtcs
     }
+
+    fn dtcs_mut(&mut self) -> &mut Dtcs {
+        &mut self.dtcs
+    }
 }
 
 /// Test cases shared by the host and on-target suites.

@@ -124,6 +124,10 @@ impl EcuLogic for EngineEcu {
     fn dtcs(&self) -> &Dtcs {
         &self.dtcs
     }
+
+    fn dtcs_mut(&mut self) -> &mut Dtcs {
+        &mut self.dtcs
+    }
 }
 
 /// Test cases shared by the host and on-target suites.

@@ -257,6 +257,10 @@ impl EcuLogic for PedalsEcu {
     fn dtcs(&self) -> &Dtcs {
         &self.dtcs
     }
+
+    fn dtcs_mut(&mut self) -> &mut Dtcs {
+        &mut self.dtcs
+    }
 }
 
 /// Test cases shared by the host and on-target suites.

@@ -607,6 +607,10 @@ impl EcuLogic for TransEcu {
     fn dtcs(&self) -> &Dtcs {
         &self.dtcs
     }
+
+    fn dtcs_mut(&mut self) -> &mut Dtcs {
+        &mut self.dtcs
+    }
 }
 
 /// Test cases shared by the host and on-target suites.

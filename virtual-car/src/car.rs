@@ -6,10 +6,12 @@
 //! Time advances in 1 ms ticks of simulated time. The ECUs are not synchronised: each has
 //! a fixed phase offset, as independent boards would, which also spreads the bus traffic.
 
+use crate::diag::{LiveValues, VirtualDiag};
 use crate::driver::{DriverControls, Timeline};
 use crate::scenario::{Activation, Event, GearName, Scenario, Software};
 use autoplug_can::{Frame, Gear as CanGear, Node};
-use autoplug_ecu::{Dtcs, EcuLogic, Instant};
+use autoplug_ecu::{Dtcs, EcuLogic, Instant, Variant};
+use autoplug_image::SoftwareVariant;
 use autoplug_scaling::units::{celsius_to_fahrenheit, fahrenheit_to_celsius};
 use autoplug_vehicle::{
     Actuators as VehicleActuators, Environment, Gear as VehicleGear, InitialState, Vehicle,
@@ -31,51 +33,161 @@ pub struct LoggedFrame {
     pub sender: &'static str,
 }
 
-/// One ECU on the bus.
+/// One ECU on the bus: its logic, and its diagnostic half (UDS, flash, bootloader).
 struct Slot<E: EcuLogic> {
     ecu: E,
+    diag: VirtualDiag,
+    /// Builds the logic for the software variant the installed image names.
+    make: fn(SoftwareVariant, Instant) -> E,
     node: NodeId,
+    phase_us: u64,
     next_step_us: u64,
     outputs: Option<E::Actuators>,
+    /// Steps run and frames sent since the application started: its self-test.
+    steps_since_boot: u32,
+    sent_since_boot: u32,
+    resets: u32,
 }
 
 impl<E: EcuLogic> Slot<E>
 where
     E::Actuators: Copy,
 {
-    fn new(ecu: E, bus: &mut VirtualBus, phase_us: u64) -> Self {
-        let filter = AcceptanceFilter::ids(E::NODE.received_ids());
-        let node = bus.attach(E::NODE.name(), filter);
+    fn new(
+        make: fn(SoftwareVariant, Instant) -> E,
+        variant: SoftwareVariant,
+        seed: u64,
+        bus: &mut VirtualBus,
+        phase_us: u64,
+    ) -> Self {
+        let mut ids = E::NODE.received_ids().to_vec();
+        ids.extend(VirtualDiag::received_ids(E::NODE));
+        ids.sort_unstable();
+        ids.dedup();
+        let node = bus.attach(E::NODE.name(), AcceptanceFilter::ids(&ids));
+        let diag = VirtualDiag::new(E::NODE, variant, seed);
+        let ecu = make(diag.installed().variant, Instant::ZERO);
         Self {
             ecu,
+            diag,
+            make,
             node,
+            phase_us,
             next_step_us: phase_us % E::STEP_PERIOD_US,
             outputs: None,
+            steps_since_boot: 0,
+            sent_since_boot: 0,
+            resets: 0,
         }
     }
 
-    fn deliver(&mut self, bus: &mut VirtualBus) {
+    fn deliver(&mut self, bus: &mut VirtualBus, live: LiveValues) {
         while let Some(delivered) = bus.recv(self.node) {
-            let at = Instant::from_micros(delivered.t_ns / 1000);
-            self.ecu.on_frame(at, &delivered.frame);
+            let t_us = delivered.t_ns / 1000;
+            // A stalled core (flash busy) loses what its receive FIFO cannot hold.
+            if !self.diag.admit(t_us) {
+                continue;
+            }
+            let dtcs = self.ecu.dtcs_mut();
+            if self.diag.on_frame(t_us, &delivered.frame, dtcs, live) {
+                continue;
+            }
+            if self.diag.normal_rx_enabled() {
+                self.ecu
+                    .on_frame(Instant::from_micros(t_us), &delivered.frame);
+            }
         }
     }
 
     fn step_if_due(&mut self, t_us: u64, sensors: impl FnOnce() -> E::Sensors) {
-        if t_us >= self.next_step_us {
+        // A stalled core runs no step; the ticker catches up afterwards, one step per tick.
+        if t_us >= self.next_step_us && !self.diag.stalled(t_us) {
             let outputs = self.ecu.step(Instant::from_micros(t_us), &sensors());
             self.outputs = Some(outputs);
             self.next_step_us += E::STEP_PERIOD_US;
+            self.steps_since_boot = self.steps_since_boot.saturating_add(1);
         }
     }
 
-    fn transmit(&mut self, bus: &mut VirtualBus, t_us: u64) {
+    fn transmit(&mut self, bus: &mut VirtualBus, t_us: u64, live: LiveValues) {
+        if self.diag.stalled(t_us) {
+            return;
+        }
         let now = Instant::from_micros(t_us);
+        let tx_enabled = self.diag.normal_tx_enabled();
         while let Some(frame) = self.ecu.poll_transmit(now) {
+            if !tx_enabled {
+                continue; // UDS 0x28: normal messages off
+            }
             // A full transmit queue is counted by the bus; the ECU's next period resends.
+            if bus.send(self.node, frame, t_us * 1000).is_ok() {
+                self.diag.note_sent(&frame);
+                self.sent_since_boot = self.sent_since_boot.saturating_add(1);
+            }
+        }
+        let reset = self.diag.poll(t_us, self.ecu.dtcs_mut(), live);
+        for frame in self.diag.poll_transmit(t_us) {
             let _ = bus.send(self.node, frame, t_us * 1000);
         }
+        if self.steps_since_boot > 0 && self.sent_since_boot > 0 {
+            self.diag.self_test_passed(t_us);
+        }
+        if reset {
+            self.reset(t_us);
+        }
     }
+
+    /// The tester asked for a reset: the bootloader runs (swapping or reverting images
+    /// as the flash says), then the application starts afresh with the installed
+    /// software: its logic rebuilt, RAM (DTCs included) cleared, outputs at rest.
+    fn reset(&mut self, t_us: u64) {
+        let boot = self.diag.boot(t_us);
+        let started = self.diag.booted_at_us();
+        self.ecu = (self.make)(boot.header.variant, Instant::from_micros(started));
+        self.outputs = None;
+        self.next_step_us = started + self.phase_us % E::STEP_PERIOD_US;
+        self.steps_since_boot = 0;
+        self.sent_since_boot = 0;
+        self.resets += 1;
+    }
+}
+
+/// The demonstration variant the image's header names (the faulty software exists for
+/// cruise and ABS; another ECU ignores it).
+fn variant(software: SoftwareVariant) -> Variant {
+    match software {
+        SoftwareVariant::Standard => Variant::Correct,
+        SoftwareVariant::Faulty => Variant::Faulty,
+    }
+}
+
+// How each ECU's logic is built for the software its image carries.
+fn make_pedals(_: SoftwareVariant, now: Instant) -> ecu_pedals::PedalsEcu {
+    ecu_pedals::PedalsEcu::new(now)
+}
+fn make_steering(_: SoftwareVariant, now: Instant) -> ecu_steering::SteeringEcu {
+    ecu_steering::SteeringEcu::new(now)
+}
+fn make_console(_: SoftwareVariant, now: Instant) -> ecu_console::ConsoleEcu {
+    ecu_console::ConsoleEcu::new(now)
+}
+fn make_engine(_: SoftwareVariant, now: Instant) -> ecu_engine::EngineEcu {
+    ecu_engine::EngineEcu::new(now)
+}
+fn make_trans(_: SoftwareVariant, now: Instant) -> ecu_trans::TransEcu {
+    ecu_trans::TransEcu::new(now)
+}
+fn make_cabin(_: SoftwareVariant, _: Instant) -> ecu_cabin::CabinEcu {
+    ecu_cabin::CabinEcu::new()
+}
+fn make_diff(_: SoftwareVariant, now: Instant) -> ecu_diff::DiffEcu {
+    ecu_diff::DiffEcu::new(now)
+}
+fn make_cruise(software: SoftwareVariant, now: Instant) -> ecu_cruise::CruiseEcu {
+    ecu_cruise::CruiseEcu::new(variant(software), now)
+}
+fn make_abs(software: SoftwareVariant, now: Instant) -> ecu_abs::AbsEcu {
+    ecu_abs::AbsEcu::new(variant(software), now)
 }
 
 /// The nine ECUs.
@@ -174,6 +286,8 @@ pub struct VirtualCar {
     t_us: u64,
     log: Vec<LoggedFrame>,
     node_names: Vec<&'static str>,
+    /// Frames the external node (a tester in the process, a socketcand client) received.
+    external_rx: Vec<Frame>,
 }
 
 fn vehicle_gear(gear: GearName) -> VehicleGear {
@@ -253,34 +367,31 @@ impl VirtualCar {
             event_log_capacity: 1024,
             ..BusConfig::default()
         });
-        let start = Instant::ZERO;
-        let cruise_variant = match scenario.ecus.cruise {
-            Software::Correct => ecu_cruise::Variant::Correct,
-            Software::Faulty => ecu_cruise::Variant::Faulty,
+        let software = |s: Software| match s {
+            Software::Correct => SoftwareVariant::Standard,
+            Software::Faulty => SoftwareVariant::Faulty,
         };
-        let abs_variant = match scenario.ecus.abs {
-            Software::Correct => ecu_abs::Variant::Correct,
-            Software::Faulty => ecu_abs::Variant::Faulty,
-        };
+        let standard = SoftwareVariant::Standard;
+        let seed = scenario.seed;
         let ecus = Ecus {
-            pedals: Slot::new(ecu_pedals::PedalsEcu::new(start), &mut bus, PHASES_US[0]),
-            steering: Slot::new(
-                ecu_steering::SteeringEcu::new(start),
-                &mut bus,
-                PHASES_US[1],
-            ),
-            console: Slot::new(ecu_console::ConsoleEcu::new(start), &mut bus, PHASES_US[2]),
-            engine: Slot::new(ecu_engine::EngineEcu::new(start), &mut bus, PHASES_US[3]),
-            trans: Slot::new(ecu_trans::TransEcu::new(start), &mut bus, PHASES_US[4]),
-            cabin: Slot::new(ecu_cabin::CabinEcu::new(), &mut bus, PHASES_US[5]),
-            diff: Slot::new(ecu_diff::DiffEcu::new(start), &mut bus, PHASES_US[6]),
+            pedals: Slot::new(make_pedals, standard, seed, &mut bus, PHASES_US[0]),
+            steering: Slot::new(make_steering, standard, seed, &mut bus, PHASES_US[1]),
+            console: Slot::new(make_console, standard, seed, &mut bus, PHASES_US[2]),
+            engine: Slot::new(make_engine, standard, seed, &mut bus, PHASES_US[3]),
+            trans: Slot::new(make_trans, standard, seed, &mut bus, PHASES_US[4]),
+            cabin: Slot::new(make_cabin, standard, seed, &mut bus, PHASES_US[5]),
+            diff: Slot::new(make_diff, standard, seed, &mut bus, PHASES_US[6]),
             cruise: Slot::new(
-                ecu_cruise::CruiseEcu::new(cruise_variant, start),
+                make_cruise,
+                software(scenario.ecus.cruise),
+                seed,
                 &mut bus,
                 PHASES_US[7],
             ),
             abs: Slot::new(
-                ecu_abs::AbsEcu::new(abs_variant, start),
+                make_abs,
+                software(scenario.ecus.abs),
+                seed,
                 &mut bus,
                 PHASES_US[8],
             ),
@@ -302,6 +413,7 @@ impl VirtualCar {
             t_us: 0,
             log: Vec::with_capacity(1 << 16),
             node_names,
+            external_rx: Vec::new(),
         };
         car.controls = car.timeline.advance(0.0, |_| {});
         car
@@ -378,9 +490,34 @@ impl VirtualCar {
         ]
     }
 
-    /// Puts a frame from an outside tool (socketcand client) on the bus.
-    pub fn inject(&mut self, frame: Frame) {
-        let _ = self.bus.send(self.external, frame, self.t_us * 1000);
+    /// Puts a frame from an outside tool (socketcand client, tester) on the bus; `false`
+    /// when the external node's transmit queue is full.
+    pub fn inject(&mut self, frame: Frame) -> bool {
+        self.bus
+            .send(self.external, frame, self.t_us * 1000)
+            .is_ok()
+    }
+
+    /// The frames the external node (a tester) received since the last call.
+    pub fn take_external_rx(&mut self) -> Vec<Frame> {
+        std::mem::take(&mut self.external_rx)
+    }
+
+    /// The diagnostic half of an ECU: what it runs, whether it is stalled...
+    pub fn ecu_diag(&self, node: Node) -> Option<&VirtualDiag> {
+        let e = &self.ecus;
+        Some(match node {
+            Node::Pedals => &e.pedals.diag,
+            Node::Steering => &e.steering.diag,
+            Node::Console => &e.console.diag,
+            Node::Engine => &e.engine.diag,
+            Node::Transmission => &e.trans.diag,
+            Node::Cabin => &e.cabin.diag,
+            Node::Differential => &e.diff.diag,
+            Node::Cruise => &e.cruise.diag,
+            Node::ABS => &e.abs.diag,
+            Node::Gateway => return None,
+        })
     }
 
     /// Stops or resumes a node's transmissions (fault injection).
@@ -475,20 +612,34 @@ impl VirtualCar {
         // Frames that completed by now reach their receivers.
         self.bus.run_until(t_us * 1000);
         self.collect_log();
+        // What the engine and cruise ECUs read from their own sensors, for the OBD-II
+        // values their diagnostic servers report.
+        let s = self.vehicle.state();
+        let quiet = LiveValues::default();
+        let engine_live = LiveValues {
+            engine_rpm: Some(s.engine_rpm as f32),
+            fuel_l: Some(s.fuel_l as f32),
+            ..quiet
+        };
+        let cruise_live = LiveValues {
+            speed_kmh: Some(s.speed_kmh()),
+            ..quiet
+        };
         let e = &mut self.ecus;
-        e.pedals.deliver(&mut self.bus);
-        e.steering.deliver(&mut self.bus);
-        e.console.deliver(&mut self.bus);
-        e.engine.deliver(&mut self.bus);
-        e.trans.deliver(&mut self.bus);
-        e.cabin.deliver(&mut self.bus);
-        e.diff.deliver(&mut self.bus);
-        e.cruise.deliver(&mut self.bus);
-        e.abs.deliver(&mut self.bus);
-        while self.bus.recv(self.external).is_some() {}
+        e.pedals.deliver(&mut self.bus, quiet);
+        e.steering.deliver(&mut self.bus, quiet);
+        e.console.deliver(&mut self.bus, quiet);
+        e.engine.deliver(&mut self.bus, engine_live);
+        e.trans.deliver(&mut self.bus, quiet);
+        e.cabin.deliver(&mut self.bus, quiet);
+        e.diff.deliver(&mut self.bus, quiet);
+        e.cruise.deliver(&mut self.bus, cruise_live);
+        e.abs.deliver(&mut self.bus, quiet);
+        while let Some(delivered) = self.bus.recv(self.external) {
+            self.external_rx.push(delivered.frame);
+        }
 
         // Each ECU's control step, when due, on its own sensors.
-        let s = self.vehicle.state();
         let c = self.controls;
         e.pedals.step_if_due(t_us, || ecu_pedals::Sensors {
             accelerator_pedal: c.accelerator as f32,
@@ -528,15 +679,15 @@ impl VirtualCar {
         });
 
         // Frames due now go to the ECUs' transmit queues.
-        e.pedals.transmit(&mut self.bus, t_us);
-        e.steering.transmit(&mut self.bus, t_us);
-        e.console.transmit(&mut self.bus, t_us);
-        e.engine.transmit(&mut self.bus, t_us);
-        e.trans.transmit(&mut self.bus, t_us);
-        e.cabin.transmit(&mut self.bus, t_us);
-        e.diff.transmit(&mut self.bus, t_us);
-        e.cruise.transmit(&mut self.bus, t_us);
-        e.abs.transmit(&mut self.bus, t_us);
+        e.pedals.transmit(&mut self.bus, t_us, quiet);
+        e.steering.transmit(&mut self.bus, t_us, quiet);
+        e.console.transmit(&mut self.bus, t_us, quiet);
+        e.engine.transmit(&mut self.bus, t_us, engine_live);
+        e.trans.transmit(&mut self.bus, t_us, quiet);
+        e.cabin.transmit(&mut self.bus, t_us, quiet);
+        e.diff.transmit(&mut self.bus, t_us, quiet);
+        e.cruise.transmit(&mut self.bus, t_us, cruise_live);
+        e.abs.transmit(&mut self.bus, t_us, quiet);
 
         // The actuators drive the car for the next tick.
         let actuators = self.actuators();

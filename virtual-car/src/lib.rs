@@ -4,6 +4,7 @@
 
 pub mod candump;
 pub mod car;
+pub mod diag;
 pub mod driver;
 pub mod plot;
 pub mod report;

@@ -71,6 +71,9 @@ pub trait EcuLogic {
 
     /// The DTCs recorded so far.
     fn dtcs(&self) -> &Dtcs;
+
+    /// The DTCs, for the diagnostic server: cleared by 0x14, paused by 0x85.
+    fn dtcs_mut(&mut self) -> &mut Dtcs;
 }
 
 /// Offers a frame to an input. A refused frame records "invalid data" against the

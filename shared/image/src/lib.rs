@@ -109,6 +109,20 @@ pub const F446RE_LOAD_ADDRESS: u32 = autoplug_flash::APP_VECTOR_TABLE;
 // The flash map reserves room for exactly this format's header in front of the vector table.
 const _: () = assert!(autoplug_flash::IMAGE_HEADER_SIZE as usize == HEADER_LEN);
 
+/// The development signing key: what the virtual car, the tests and a bench without its
+/// own keys use. Its secret is in this source code, so an image signed with it proves
+/// nothing: a production bench generates its own pair (`autoplug keygen`) and builds its
+/// ECUs with that public key.
+pub mod dev {
+    /// Seed of the development signing key (its secret; deliberately public).
+    pub const SIGNING_SEED: [u8; 32] = *b"AutoPlug dev key: secret public!";
+    /// Public key of [`SIGNING_SEED`] (a test checks the pair).
+    pub const PUBLIC_KEY: [u8; 32] = [
+        23, 149, 166, 247, 112, 140, 109, 188, 112, 73, 251, 179, 221, 220, 155, 196, 50, 225, 228,
+        190, 104, 161, 232, 9, 132, 160, 252, 203, 32, 48, 232, 56,
+    ];
+}
+
 /// Byte offsets of the header fields (see the table in the crate documentation).
 pub mod offsets {
     /// `[u8; 8]`, [`MAGIC`](crate::MAGIC).

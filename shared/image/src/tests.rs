@@ -841,3 +841,9 @@ fn generate_gives_distinct_working_keys() {
         Err(ImageError::BadSignature)
     );
 }
+
+#[test]
+fn the_development_key_pair_matches() {
+    let key = SigningKey::from_seed(crate::dev::SIGNING_SEED);
+    assert_eq!(key.public_key(), crate::dev::PUBLIC_KEY);
+}

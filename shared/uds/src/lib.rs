@@ -41,6 +41,11 @@ pub mod security;
 pub mod server;
 
 pub use node::DiagNode;
+
+/// The SecurityAccess secret of the development setup (virtual car, tests, a bench
+/// without its own): it is in this source code, so it keeps out only the careless. A
+/// production bench builds its ECUs and its tester with its own secret.
+pub const DEV_SECURITY_SECRET: &[u8] = b"AutoPlug development security secret";
 pub use nrc::Nrc;
 pub use server::{
     Backend, Config, FlashError, Identification, Reply, ResetKind, Server, Session, MAX_BLOCK_LEN,

@@ -1,0 +1,640 @@
+//! The diagnostic half of a virtual ECU: the same UDS stack (`autoplug_uds::DiagNode`) and
+//! update logic as the firmware, over a simulated F446 flash (`autoplug_flash::SimFlash`)
+//! with the datasheet's erase and program times, and embassy-boot's own bootloader logic at
+//! every reset.
+//!
+//! A host cannot execute the ARM code of an image, so a virtual ECU takes its behaviour
+//! after an update from the signed image's header: the software variant (standard or the
+//! faulty demonstration software) picks the logic it runs, the version and part number
+//! are what it reports. Everything else — the download, the checks, the swap, the revert
+//! of an image that does not confirm itself, the time all of it takes — is what the board
+//! does.
+//!
+//! Flash operations stall the core on the F446 (code runs from the flash being
+//! programmed): while a virtual ECU is stalled it neither steps its logic nor sends, and of
+//! the frames that arrive meanwhile only the 3 its bxCAN receive FIFO holds survive.
+
+use std::cell::RefCell;
+
+use autoplug_can::{Frame, Node, VehicleSpeedMsg, DIAG_FUNCTIONAL_REQUEST_ID};
+use autoplug_ecu::{Dtcs, Instant};
+use autoplug_flash::sim::{SimFlash, SlotPartition, SmallPartition};
+use autoplug_flash::{ACTIVE, BOOT_SWAP_BUFFER_SIZE, DFU, ECU_DATA, SECTORS, WRITE_SIZE};
+use autoplug_image::{
+    dev, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant, Version,
+    F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
+};
+use autoplug_uds::{Backend, DiagNode, FlashError, Identification, DEV_SECURITY_SECRET};
+use embassy_boot::{AlignedBuffer, BlockingFirmwareState, BootLoader, BootLoaderConfig, State};
+use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
+
+/// Frames the bxCAN receive FIFO holds while the core is stalled; one more is lost.
+pub const RX_FIFO_DEPTH: usize = 3;
+
+/// Time from the end of a reset (after the bootloader) until the application runs its
+/// first control step: clocks, CAN initialisation.
+pub const BOOT_TIME_US: u64 = 20_000;
+
+/// The version every virtual ECU leaves the factory with.
+pub const FACTORY_VERSION: Version = Version::new(1, 0, 0);
+
+/// Bytes of a factory image's payload: about what the real firmwares take (issue 4's
+/// size table), so a download of one takes as long as a download of those would.
+pub const FACTORY_PAYLOAD_LEN: usize = 30 * 1024;
+
+/// Marks a version-floor record in the ECU data sector.
+const FLOOR_RECORD_MAGIC: [u8; 2] = [0xA5, 0x5A];
+/// Bytes of a version-floor record: magic, major, minor, patch (2), check, pad.
+const FLOOR_RECORD_LEN: usize = 8;
+
+/// The part number of an ECU's software (UDS F187).
+pub fn part_number(node: Node) -> PartNumber {
+    let name = match node {
+        Node::Engine => "AP-ENGINE-0001",
+        Node::Pedals => "AP-PEDALS-0001",
+        Node::Steering => "AP-STEER-0001",
+        Node::Transmission => "AP-TRANS-0001",
+        Node::Cabin => "AP-CABIN-0001",
+        Node::Console => "AP-CONSOLE-0001",
+        Node::Differential => "AP-DIFF-0001",
+        Node::Cruise => "AP-CRUISE-0001",
+        Node::ABS => "AP-ABS-0001",
+        Node::Gateway => "AP-GATEWAY-0001",
+    };
+    PartNumber::new(name).expect("a valid part number")
+}
+
+/// A signed image for `node`, as the project's build would make it: the development key,
+/// a deterministic payload of `payload_len` bytes (contents do not matter on a host).
+pub fn build_image(
+    node: Node,
+    version: Version,
+    variant: SoftwareVariant,
+    payload_len: usize,
+    key: &SigningKey,
+) -> Vec<u8> {
+    let number = node.diag_node_number().expect("an ECU");
+    let payload: Vec<u8> = (0..payload_len)
+        .map(|i| (i as u32).wrapping_mul(2_654_435_761).to_le_bytes()[3] ^ number)
+        .collect();
+    let mut builder = ImageBuilder::new(number, version, payload);
+    builder.variant = variant;
+    builder.part_number = part_number(node);
+    builder.load_address = F446RE_LOAD_ADDRESS;
+    builder.build_id[0] = number;
+    builder.build_id[1..5].copy_from_slice(&u32::from(version.patch).to_le_bytes());
+    builder.sign(key).expect("a valid image")
+}
+
+/// What a virtual ECU runs after a (re)start.
+#[derive(Debug)]
+pub struct Boot {
+    /// The header of the image in the active slot.
+    pub header: ImageHeader,
+    /// The bootloader's state before it acted (Swap: a new image was swapped in and must
+    /// confirm itself; Revert... see embassy-boot).
+    pub state: State,
+    /// Simulated time the bootloader took (erases and copies), µs.
+    pub took_us: u64,
+}
+
+/// The live values the diagnostic server reports, filled by the car from the ECU.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LiveValues {
+    /// Vehicle speed as the ECU knows it (received, or its own sensor), km/h.
+    pub speed_kmh: Option<f32>,
+    /// Engine speed, rpm (engine ECU).
+    pub engine_rpm: Option<f32>,
+    /// Fuel level, litres (engine ECU).
+    pub fuel_l: Option<f32>,
+}
+
+/// Tank capacity for OBD-II PID 0x2F (fuel level in percent): the EVO VI's 48 L.
+pub const FUEL_TANK_L: f32 = 48.0;
+
+/// The diagnostic half of one virtual ECU.
+pub struct VirtualDiag {
+    node: Node,
+    flash: RefCell<SimFlash>,
+    stack: DiagNode,
+    installed: ImageHeader,
+    floor: Version,
+    serial: String,
+    software_version: String,
+    /// Set after a boot into a swapped image: it confirms itself after its self-test.
+    unconfirmed: bool,
+    /// The core is stalled (flash busy) or resetting until then, µs.
+    stalled_until_us: u64,
+    /// Frames accepted during the current stall.
+    stalled_frames: usize,
+    /// Frames lost to a full receive FIFO during stalls.
+    overruns: u64,
+    /// Last VehicleSpeedMsg received, and when.
+    speed_frame: Option<(u64, f32)>,
+    /// The data bytes each of the ECU's own messages last carried (live DIDs 0x0100 + ID).
+    last_sent: Vec<(u16, Frame)>,
+    key: [u8; 32],
+    booted_at_us: u64,
+    /// Mixed into security seeds (the simulation has no entropy source).
+    seed_counter: usize,
+}
+
+impl VirtualDiag {
+    /// An ECU fresh from the factory: the development-signed `variant` image of version
+    /// [`FACTORY_VERSION`] in its active slot, booted.
+    pub fn new(node: Node, variant: SoftwareVariant, seed: u64) -> Self {
+        let key = SigningKey::from_seed(dev::SIGNING_SEED);
+        let image = build_image(node, FACTORY_VERSION, variant, FACTORY_PAYLOAD_LEN, &key);
+        let mut flash = SimFlash::new(seed ^ u64::from(node.diag_node_number().unwrap_or(0)));
+        flash
+            .program(ACTIVE.start, &pad_to_words(&image))
+            .expect("factory programming");
+        let flash = RefCell::new(flash);
+        write_floor(&flash, FACTORY_VERSION).expect("factory floor");
+        let number = node.diag_node_number().expect("an ECU");
+        let stack = DiagNode::new(node, DEV_SECURITY_SECRET, Instant::ZERO).expect("an ECU");
+        let mut diag = Self {
+            node,
+            flash,
+            stack,
+            installed: ImageHeader::parse(&image).expect("factory header"),
+            floor: FACTORY_VERSION,
+            serial: format!("AP{number:02X}{:08X}", (seed as u32) ^ u32::from(number)),
+            software_version: String::new(),
+            unconfirmed: false,
+            stalled_until_us: 0,
+            stalled_frames: 0,
+            overruns: 0,
+            speed_frame: None,
+            last_sent: Vec::new(),
+            key: dev::PUBLIC_KEY,
+            booted_at_us: 0,
+            seed_counter: number.into(),
+        };
+        diag.boot(0);
+        // The scenario starts with the ECUs running: power-up is before time zero.
+        diag.stalled_until_us = 0;
+        diag.booted_at_us = 0;
+        diag
+    }
+
+    /// The header of the software the ECU runs.
+    pub fn installed(&self) -> &ImageHeader {
+        &self.installed
+    }
+
+    /// Whether the ECU is stalled (flash busy) or resetting at `t_us`.
+    pub fn stalled(&self, t_us: u64) -> bool {
+        t_us < self.stalled_until_us
+    }
+
+    /// Frames lost to the receive FIFO while the core was stalled.
+    pub fn overruns(&self) -> u64 {
+        self.overruns
+    }
+
+    /// Whether the application may send its normal messages (UDS 0x28).
+    pub fn normal_tx_enabled(&self) -> bool {
+        self.stack.server().normal_tx_enabled()
+    }
+
+    /// Whether the application takes received normal messages (UDS 0x28).
+    pub fn normal_rx_enabled(&self) -> bool {
+        self.stack.server().normal_rx_enabled()
+    }
+
+    /// The identifiers the diagnostic half listens to, for the acceptance filter.
+    pub fn received_ids(node: Node) -> Vec<u16> {
+        let mut ids = vec![DIAG_FUNCTIONAL_REQUEST_ID];
+        ids.extend(node.diag_request_id());
+        if node != Node::Cruise {
+            // Everyone but its sender listens to the vehicle speed: no programming while
+            // the car moves.
+            ids.push(VehicleSpeedMsg::ID);
+        }
+        ids
+    }
+
+    /// Whether a frame arriving at `t_us` survives the receive FIFO (it always does unless
+    /// the core is stalled and the FIFO is full).
+    pub fn admit(&mut self, t_us: u64) -> bool {
+        if !self.stalled(t_us) {
+            return true;
+        }
+        if self.stalled_frames < RX_FIFO_DEPTH {
+            self.stalled_frames += 1;
+            true
+        } else {
+            self.overruns += 1;
+            false
+        }
+    }
+
+    /// Offers a received frame to the diagnostic half; returns whether it was a
+    /// diagnostic frame (the vehicle speed, which it notes, goes on to the application).
+    pub fn on_frame(
+        &mut self,
+        t_us: u64,
+        frame: &Frame,
+        dtcs: &mut Dtcs,
+        live: LiveValues,
+    ) -> bool {
+        if frame.id() == VehicleSpeedMsg::ID && self.node != Node::Cruise {
+            if let Ok(message) = VehicleSpeedMsg::decode(frame.data()) {
+                self.speed_frame = Some((t_us, message.vehicle_speed));
+            }
+            // The application may use the speed too.
+            return false;
+        }
+        if !self.stack.accepts(frame.id()) {
+            return false;
+        }
+        let now = Instant::from_micros(t_us);
+        let live = self.live_values(t_us, live);
+        let mut backend = backend!(self, dtcs, live);
+        self.stack.on_frame(now, frame, &mut backend);
+        let busy = backend.busy_us;
+        self.stall(t_us, busy);
+        true
+    }
+
+    /// Timers and a slice of pending programming; returns a reset request once its
+    /// response is out.
+    pub fn poll(&mut self, t_us: u64, dtcs: &mut Dtcs, live: LiveValues) -> bool {
+        if self.stalled(t_us) {
+            return false;
+        }
+        let live = self.live_values(t_us, live);
+        let mut backend = backend!(self, dtcs, live);
+        self.stack.poll(Instant::from_micros(t_us), &mut backend);
+        let busy = backend.busy_us;
+        self.stall(t_us, busy);
+        self.stack.take_reset().is_some()
+    }
+
+    /// The diagnostic frames to send now (sent at once: the stack is told so).
+    pub fn poll_transmit(&mut self, t_us: u64) -> Vec<Frame> {
+        let mut frames = Vec::new();
+        if self.stalled(t_us) {
+            return frames;
+        }
+        let now = Instant::from_micros(t_us);
+        while let Some(frame) = self.stack.poll_transmit(now) {
+            self.stack.confirm_transmit(now);
+            frames.push(frame);
+        }
+        frames
+    }
+
+    /// Records one of the application's own frames for the live DIDs.
+    pub fn note_sent(&mut self, frame: &Frame) {
+        match self.last_sent.iter_mut().find(|(id, _)| *id == frame.id()) {
+            Some(slot) => slot.1 = *frame,
+            None => self.last_sent.push((frame.id(), *frame)),
+        }
+    }
+
+    /// The self-test passed (CAN up, control loop running): an image booted unconfirmed
+    /// confirms itself and raises the version floor to its own version.
+    pub fn self_test_passed(&mut self, t_us: u64) {
+        if !self.unconfirmed || self.stalled(t_us) {
+            return;
+        }
+        let before = busy_us(&self.flash);
+        let mut aligned = [0u8; WRITE_SIZE];
+        let confirmed =
+            BlockingFirmwareState::new(SmallPartition::state(&self.flash), &mut aligned)
+                .mark_booted()
+                .is_ok();
+        if confirmed {
+            self.unconfirmed = false;
+            if self.installed.version > self.floor
+                && write_floor(&self.flash, self.installed.version).is_ok()
+            {
+                self.floor = self.installed.version;
+            }
+            autoplug_log::info!(
+                "{}: software {} confirmed",
+                self.node.name(),
+                self.installed.version
+            );
+        }
+        let busy = busy_us(&self.flash) - before;
+        self.stall(t_us, busy);
+    }
+
+    /// Whether the running image still has to confirm itself.
+    pub fn unconfirmed(&self) -> bool {
+        self.unconfirmed
+    }
+
+    /// When the application last started, µs.
+    pub fn booted_at_us(&self) -> u64 {
+        self.booted_at_us
+    }
+
+    /// A reset: the bootloader runs embassy-boot's `prepare_boot` over the flash (a swap
+    /// or a revert takes seconds), then the application starts with what the active slot
+    /// holds. The caller rebuilds the ECU's logic for [`VirtualDiag::installed`]'s variant.
+    pub fn boot(&mut self, t_us: u64) -> Boot {
+        let before = busy_us(&self.flash);
+        let mut bootloader = BootLoader::new(BootLoaderConfig {
+            active: SlotPartition::active(&self.flash),
+            dfu: SlotPartition::dfu(&self.flash),
+            state: SmallPartition::state(&self.flash),
+        });
+        let mut buffer = AlignedBuffer([0; BOOT_SWAP_BUFFER_SIZE]);
+        // A bootloader error leaves the active slot as it is: boot what is there.
+        let state = bootloader
+            .prepare_boot(buffer.as_mut())
+            .unwrap_or(State::Boot);
+        let took_us = busy_us(&self.flash) - before;
+        let mut header = [0u8; HEADER_LEN];
+        self.flash
+            .borrow()
+            .read(ACTIVE.start, &mut header)
+            .expect("the active slot is in the flash");
+        // The bootloader never puts a partial image in the active slot (the power-cut
+        // test of autoplug-flash): a header that does not parse would be a bug.
+        self.installed = ImageHeader::parse(&header).expect("a complete image in the active slot");
+        self.software_version = self.installed.version.to_string();
+        let mut aligned = [0u8; WRITE_SIZE];
+        let now_state =
+            BlockingFirmwareState::new(SmallPartition::state(&self.flash), &mut aligned)
+                .get_state()
+                .unwrap_or(State::Boot);
+        self.unconfirmed = now_state == State::Swap;
+        self.stack = DiagNode::new(self.node, DEV_SECURITY_SECRET, Instant::from_micros(t_us))
+            .expect("an ECU");
+        self.speed_frame = None;
+        self.last_sent.clear();
+        self.stalled_frames = 0;
+        self.stalled_until_us = t_us + took_us + BOOT_TIME_US;
+        self.booted_at_us = self.stalled_until_us;
+        if state != State::Boot {
+            autoplug_log::info!(
+                "{}: bootloader {:?} in {} ms, running {} {}",
+                self.node.name(),
+                state,
+                took_us / 1000,
+                self.installed.variant,
+                self.installed.version
+            );
+        }
+        Boot {
+            header: self.installed,
+            state,
+            took_us,
+        }
+    }
+
+    fn stall(&mut self, t_us: u64, busy_us: u64) {
+        if busy_us > 0 {
+            let from = self.stalled_until_us.max(t_us);
+            if from == t_us {
+                self.stalled_frames = 0;
+            }
+            self.stalled_until_us = from + busy_us;
+        }
+    }
+
+    fn live_values(&self, t_us: u64, mut live: LiveValues) -> LiveValues {
+        if self.node != Node::Cruise {
+            // Stale after 3 periods of VehicleSpeedMsg (10 ms), like every CAN input.
+            live.speed_kmh = self
+                .speed_frame
+                .filter(|(at, _)| t_us.saturating_sub(*at) <= 30_000)
+                .map(|(_, v)| v);
+        }
+        live
+    }
+}
+
+/// The ECU's side of its UDS server for one call, from the fields of a [`VirtualDiag`]
+/// other than its stack (a macro, so the borrows stay per field).
+macro_rules! backend {
+    ($diag:expr, $dtcs:expr, $live:expr) => {
+        EcuBackend {
+            node: $diag.node,
+            flash: &$diag.flash,
+            dtcs: $dtcs,
+            live: $live,
+            installed: &$diag.installed,
+            software_version: &$diag.software_version,
+            serial: &$diag.serial,
+            floor: $diag.floor,
+            key: $diag.key,
+            last_sent: &$diag.last_sent,
+            random: &mut $diag.seed_counter,
+            busy_us: 0,
+        }
+    };
+}
+use backend;
+
+/// The ECU as its UDS server sees it.
+struct EcuBackend<'a> {
+    node: Node,
+    flash: &'a RefCell<SimFlash>,
+    dtcs: &'a mut Dtcs,
+    live: LiveValues,
+    installed: &'a ImageHeader,
+    software_version: &'a str,
+    serial: &'a str,
+    floor: Version,
+    key: [u8; 32],
+    last_sent: &'a [(u16, Frame)],
+    /// Entropy for seeds: the simulation is deterministic, so seeds come from the flash's
+    /// busy time and a counter, which differ from request to request.
+    random: &'a mut usize,
+    /// Flash busy time of the operations of this call, µs.
+    busy_us: u64,
+}
+
+impl EcuBackend<'_> {
+    fn timed<T>(&mut self, op: impl FnOnce(&RefCell<SimFlash>) -> T) -> T {
+        let before = busy_us(self.flash);
+        let result = op(self.flash);
+        self.busy_us += busy_us(self.flash) - before;
+        result
+    }
+
+    fn state_is_boot(&self) -> bool {
+        let mut aligned = [0u8; WRITE_SIZE];
+        BlockingFirmwareState::new(SmallPartition::state(self.flash), &mut aligned)
+            .get_state()
+            .is_ok_and(|s| s == State::Boot)
+    }
+}
+
+/// Live data DIDs: 0x0100 + a CAN identifier the ECU sends = that message's last data.
+const LIVE_DID_BASE: u16 = 0x0100;
+
+impl Backend for EcuBackend<'_> {
+    fn identification(&self) -> Identification<'_> {
+        Identification {
+            part_number: self.installed.part_number.as_str().as_bytes(),
+            software_version: self.software_version.as_bytes(),
+            serial_number: self.serial.as_bytes(),
+            hardware_version: b"NUCLEO-F446RE",
+        }
+    }
+
+    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
+        let id = did.checked_sub(LIVE_DID_BASE)?;
+        let (_, frame) = self.last_sent.iter().find(|(sent, _)| *sent == id)?;
+        let data = frame.data();
+        (data.len() <= out.len()).then(|| {
+            out[..data.len()].copy_from_slice(data);
+            data.len()
+        })
+    }
+
+    fn vehicle_speed_kmh(&self) -> Option<f32> {
+        self.live.speed_kmh
+    }
+
+    fn dtcs(&mut self) -> &mut Dtcs {
+        self.dtcs
+    }
+
+    fn fill_random(&mut self, out: &mut [u8]) {
+        let mut x = busy_us(self.flash) ^ ((*self.random as u64) << 32) ^ 0x9E37_79B9;
+        for b in out {
+            *self.random = self.random.wrapping_add(1);
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x = x.wrapping_add(*self.random as u64);
+            *b = (x >> 24) as u8;
+        }
+    }
+
+    fn image_expectations(&self) -> Expectations {
+        Expectations {
+            node: self.node.diag_node_number().unwrap_or(0),
+            hardware_id: NUCLEO_F446RE,
+            version_floor: self.floor,
+            max_image_len: ACTIVE.size,
+            load_address: F446RE_LOAD_ADDRESS,
+        }
+    }
+
+    fn public_key(&self) -> [u8; 32] {
+        self.key
+    }
+
+    fn dfu_erase_steps(&self) -> u32 {
+        DFU.size / SECTORS[7].size
+    }
+
+    fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
+        // embassy-boot's rule: only a confirmed image may download the next one (else the
+        // bootloader would take the new one for a failed swap and revert).
+        if !self.state_is_boot() {
+            return Err(FlashError);
+        }
+        let sector = SECTORS[7].size;
+        self.timed(|flash| {
+            SlotPartition::dfu(flash)
+                .erase(step * sector, (step + 1) * sector)
+                .map_err(|_| FlashError)
+        })
+    }
+
+    fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
+        self.timed(|flash| {
+            SlotPartition::dfu(flash)
+                .write(offset, data)
+                .map_err(|_| FlashError)
+        })
+    }
+
+    fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError> {
+        SlotPartition::dfu(self.flash)
+            .read(offset, out)
+            .map_err(|_| FlashError)
+    }
+
+    fn mark_updated(&mut self) -> Result<(), FlashError> {
+        self.timed(|flash| {
+            let mut aligned = [0u8; WRITE_SIZE];
+            BlockingFirmwareState::new(SmallPartition::state(flash), &mut aligned)
+                .mark_updated()
+                .map_err(|_| FlashError)
+        })
+    }
+
+    fn obd_pids(&self) -> &'static [u8] {
+        match self.node {
+            Node::Engine => &[0x0C, 0x2F],
+            Node::Cruise => &[0x0D],
+            _ => &[],
+        }
+    }
+
+    fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
+        match pid {
+            // Engine speed: (256 A + B) / 4 rpm.
+            0x0C => {
+                let quarter_rpm = (self.live.engine_rpm? * 4.0).clamp(0.0, 65_535.0) as u16;
+                out[..2].copy_from_slice(&quarter_rpm.to_be_bytes());
+                Some(2)
+            }
+            // Vehicle speed: A km/h.
+            0x0D => {
+                out[0] = self.live.speed_kmh?.clamp(0.0, 255.0).round() as u8;
+                Some(1)
+            }
+            // Fuel tank level: 100 A / 255 %.
+            0x2F => {
+                let fraction = self.live.fuel_l? / FUEL_TANK_L;
+                out[0] = (fraction.clamp(0.0, 1.0) * 255.0).round() as u8;
+                Some(1)
+            }
+            _ => None,
+        }
+    }
+}
+
+fn busy_us(flash: &RefCell<SimFlash>) -> u64 {
+    flash.borrow().total_busy().as_micros() as u64
+}
+
+/// The image padded with the erased value to whole flash words.
+fn pad_to_words(image: &[u8]) -> Vec<u8> {
+    let mut padded = image.to_vec();
+    padded.resize(image.len().div_ceil(WRITE_SIZE) * WRITE_SIZE, 0xFF);
+    padded
+}
+
+/// Appends a version-floor record to the ECU data sector (erasing it when full).
+fn write_floor(flash: &RefCell<SimFlash>, version: Version) -> Result<(), FlashError> {
+    let mut record = [0u8; FLOOR_RECORD_LEN];
+    record[..2].copy_from_slice(&FLOOR_RECORD_MAGIC);
+    record[2] = version.major;
+    record[3] = version.minor;
+    record[4..6].copy_from_slice(&version.patch.to_le_bytes());
+    record[6] = record[..6].iter().fold(0u8, |a, b| a.wrapping_add(*b)) ^ 0xFF;
+    record[7] = 0;
+    let mut partition = SmallPartition::ecu_data(flash);
+    let capacity = ECU_DATA.size as usize / FLOOR_RECORD_LEN;
+    let used = (0..capacity)
+        .take_while(|&i| {
+            let mut bytes = [0u8; FLOOR_RECORD_LEN];
+            partition
+                .read((i * FLOOR_RECORD_LEN) as u32, &mut bytes)
+                .is_ok()
+                && bytes != [0xFF; FLOOR_RECORD_LEN]
+        })
+        .count();
+    let slot = if used == capacity {
+        partition.erase(0, ECU_DATA.size).map_err(|_| FlashError)?;
+        0
+    } else {
+        used
+    };
+    partition
+        .write((slot * FLOOR_RECORD_LEN) as u32, &record)
+        .map_err(|_| FlashError)
+}
