@@ -5,10 +5,12 @@
 
 use autoplug_ecu::{Dtcs, Instant};
 use autoplug_image::{Expectations, Version, F446RE_LOAD_ADDRESS, NUCLEO_F446RE};
+use autoplug_uds::security::key_for;
 use autoplug_uds::{Backend, Config, FlashError, Identification, Reply, Server};
 use libfuzzer_sys::fuzz_target;
 
 const SECTOR: usize = 128 * 1024;
+const SECRET: &[u8] = b"fuzz secret";
 
 struct Ecu {
     dfu: Vec<u8>,
@@ -85,11 +87,34 @@ fuzz_target!(|data: &[u8]| {
         dtcs: Dtcs::new(),
         speed: Some(0.0),
     };
-    let mut server = Server::new(Config::new(0x0D, b"fuzz secret"), Instant::from_micros(0));
+    let mut server = Server::new(Config::new(0x0D, SECRET), Instant::from_micros(0));
     let mut now = 0u64;
     let mut out = [0u8; 256];
+    // The first byte's low bit: start unlocked in the programming session, erased, so the
+    // download and check paths are reachable (the fuzzer cannot guess an HMAC key).
+    let Some((&prelude, mut rest)) = data.split_first() else {
+        return;
+    };
+    if prelude & 1 == 1 {
+        let t = Instant::from_micros(0);
+        server.handle(t, &[0x10, 0x02], false, &mut ecu, &mut out);
+        let Reply::Send(n) = server.handle(t, &[0x27, 0x01], false, &mut ecu, &mut out) else {
+            panic!("no seed");
+        };
+        let seed: [u8; 16] = out[2..n].try_into().expect("a 16-byte seed");
+        let key = key_for(SECRET, 0x0D, &seed);
+        let send = [&[0x27, 0x02][..], &key].concat();
+        assert_eq!(
+            server.handle(t, &send, false, &mut ecu, &mut out),
+            Reply::Send(2)
+        );
+        let mut reply = server.handle(t, &[0x31, 0x01, 0xFF, 0x00], false, &mut ecu, &mut out);
+        while matches!(reply, Reply::Pending(_) | Reply::Working) {
+            reply = server.resume(t, &mut ecu, &mut out);
+        }
+        assert!(server.unlocked());
+    }
     // Each request: a length byte, a flags byte (functional, time step), then the bytes.
-    let mut rest = data;
     while let [len, flags, tail @ ..] = rest {
         let len = usize::from(*len).min(tail.len());
         let (request, next) = tail.split_at(len);
