@@ -261,7 +261,7 @@ impl VirtualDiag {
     /// Timers and a slice of pending programming; returns a reset request once its
     /// response is out.
     pub fn poll(&mut self, t_us: u64, dtcs: &mut Dtcs, live: LiveValues) -> bool {
-        if self.stalled(t_us) {
+        if self.stalled(t_us) || self.stack.quiescent() {
             return false;
         }
         let live = self.live_values(t_us, live);
@@ -275,7 +275,7 @@ impl VirtualDiag {
     /// The diagnostic frames to send now (sent at once: the stack is told so).
     pub fn poll_transmit(&mut self, t_us: u64) -> Vec<Frame> {
         let mut frames = Vec::new();
-        if self.stalled(t_us) {
+        if self.stalled(t_us) || self.stack.quiescent() {
             return frames;
         }
         let now = Instant::from_micros(t_us);

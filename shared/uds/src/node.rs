@@ -87,6 +87,21 @@ impl DiagNode {
         &self.server
     }
 
+    /// Whether nothing is under way: no transfer in either direction, nothing queued, the
+    /// default session, no long operation or programming pending. [`DiagNode::poll`] has
+    /// nothing to do then, until the next frame arrives.
+    pub fn quiescent(&self) -> bool {
+        self.channel.is_idle()
+            && self.queued.is_none()
+            && !self.resume_after_send
+            && self.reset_after_send.is_none()
+            && self.reset_due.is_none()
+            && self.obd_frame.is_none()
+            && self.server.session() == crate::Session::Default
+            && !self.server.busy()
+            && !self.server.programming_pending()
+    }
+
     /// Whether `id` is one of the diagnostic identifiers this ECU listens to.
     pub fn accepts(&self, id: u16) -> bool {
         Some(id) == self.node.diag_request_id() || id == DIAG_FUNCTIONAL_REQUEST_ID
