@@ -405,3 +405,109 @@ fn the_streamed_bus_log_is_the_recorded_one() {
         String::from_utf8(recorded).unwrap().lines().count()
     );
 }
+
+/// A car standing still (for programming), with its ECUs as from the factory.
+fn standing_car(cruise: &str) -> crate::car::VirtualCar {
+    let text = format!(
+        "name = \"standstill\"\nduration_s = 60.0\n[initial]\nspeed_kmh = 0.0\ngear = \"N\"\n[ecus]\ncruise = \"{cruise}\"\n"
+    );
+    let scenario = Scenario::parse(&text, "standstill").unwrap();
+    crate::car::VirtualCar::new(&scenario)
+}
+
+/// Runs the car for `ms` ticks, returning the frames the external node received.
+fn run_ms(car: &mut crate::car::VirtualCar, ms: u64) -> Vec<Frame> {
+    let mut frames = Vec::new();
+    for _ in 0..ms {
+        car.tick();
+        frames.extend(car.take_external_rx());
+    }
+    frames
+}
+
+#[test]
+fn virtual_ecus_answer_uds_and_obd_on_their_identifiers() {
+    use autoplug_can::Node;
+    let mut car = standing_car("correct");
+    run_ms(&mut car, 50);
+    // Diagnostic session control to the cruise ECU (physical): a single-frame answer.
+    assert!(
+        car.inject(Frame::new(0x70D, &[0x02, 0x10, 0x03, 0xCC, 0xCC, 0xCC, 0xCC, 0xCC]).unwrap())
+    );
+    let frames = run_ms(&mut car, 20);
+    let response = frames
+        .iter()
+        .find(|f| f.id() == 0x78D)
+        .expect("a response on 0x78D");
+    assert_eq!(
+        response.data()[..7],
+        [0x06, 0x50, 0x03, 0x00, 0x32, 0x01, 0xF4]
+    );
+    // OBD-II vehicle speed, functionally: the cruise ECU (which measures it) answers on
+    // 0x7E9, nobody else.
+    assert!(car.inject(Frame::new(0x7DF, &[0x02, 0x01, 0x0D, 0, 0, 0, 0, 0]).unwrap()));
+    let frames = run_ms(&mut car, 20);
+    let obd: Vec<_> = frames
+        .iter()
+        .filter(|f| (0x7E8..=0x7EF).contains(&f.id()))
+        .collect();
+    assert_eq!(obd.len(), 1, "{obd:?}");
+    assert_eq!(
+        (obd[0].id(), obd[0].data()[..3].to_vec()),
+        (0x7E9, vec![0x03, 0x41, 0x0D])
+    );
+    // What each ECU runs is its factory image.
+    for node in Node::ALL.into_iter().filter(|n| *n != Node::Gateway) {
+        let diag = car.ecu_diag(node).unwrap();
+        assert_eq!(diag.installed().version, crate::diag::FACTORY_VERSION);
+        assert_eq!(
+            usize::from(diag.installed().node),
+            usize::from(node.diag_node_number().unwrap())
+        );
+    }
+}
+
+#[test]
+fn communication_control_silences_the_application_frames() {
+    let mut car = standing_car("correct");
+    run_ms(&mut car, 100);
+    // Extended session, then normal messages off, to every ECU at once (functional).
+    car.inject(Frame::new(0x7DF, &[0x02, 0x10, 0x03, 0, 0, 0, 0, 0]).unwrap());
+    run_ms(&mut car, 10);
+    car.inject(Frame::new(0x7DF, &[0x03, 0x28, 0x03, 0x01, 0, 0, 0, 0]).unwrap());
+    let answers = run_ms(&mut car, 20);
+    assert_eq!(
+        answers
+            .iter()
+            .filter(|f| (0x783..=0x78E).contains(&f.id()) && f.data()[1] == 0x68)
+            .count(),
+        9,
+        "every ECU confirms"
+    );
+    let before = car.log().len();
+    run_ms(&mut car, 200);
+    let application = car.log()[before..]
+        .iter()
+        .filter(|f| f.frame.id() < 0x700)
+        .count();
+    assert_eq!(application, 0, "the bus is free for a download");
+    // Without tester present, S3 ends the session after 5 s: the ECUs talk again.
+    run_ms(&mut car, 5_100);
+    let before = car.log().len();
+    run_ms(&mut car, 100);
+    assert!(car.log()[before..].iter().any(|f| f.frame.id() == 0x003));
+}
+
+#[test]
+fn the_faulty_software_a_scenario_installs_is_what_the_ecu_reports() {
+    let car = standing_car("faulty");
+    let diag = car.ecu_diag(autoplug_can::Node::Cruise).unwrap();
+    assert_eq!(
+        diag.installed().variant,
+        autoplug_image::SoftwareVariant::Faulty
+    );
+    assert!(
+        !car.cruise_status().engaged,
+        "a standing car's cruise is off"
+    );
+}
