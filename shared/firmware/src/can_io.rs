@@ -25,6 +25,9 @@ bind_interrupts!(
     }
 );
 
+/// Identifiers the acceptance filters take: 4 per bank of CAN1's 14.
+const MAX_FILTER_IDS: usize = 4 * 14;
+
 /// The AutoPlug bus bit rate.
 pub const BITRATE: u32 = 500_000;
 
@@ -42,8 +45,8 @@ pub static TX_DROPPED: AtomicU32 = AtomicU32::new(0);
 pub static BUS_ERRORS: AtomicU32 = AtomicU32::new(0);
 
 /// Configures CAN1 for the AutoPlug bus: 500 kbit/s, automatic retransmission, and
-/// acceptance filters for exactly the data frames `node` receives (list mode, four 11-bit
-/// identifiers per bank; a node that receives nothing gets no bank and hears nothing). Then
+/// acceptance filters for exactly the data frames `node` receives, its diagnostic ones
+/// included (list mode, four 11-bit identifiers per bank). Then
 /// joins the bus. Bus-off recovery is the hardware's: the driver sets ABOM, so after bus-off
 /// the controller rejoins on its own once it has seen 128 × 11 recessive bits.
 pub async fn start(can: &mut Can<'static>, node: Node) {
@@ -53,7 +56,27 @@ pub async fn start(can: &mut Can<'static>, node: Node) {
         .set_silent(false)
         .set_automatic_retransmit(true);
 
-    let ids = node.received_ids();
+    // The application's inputs, then the diagnostic ones: the node's UDS requests, the
+    // functional identifier, and the vehicle speed (no programming while the car moves).
+    let mut buffer = [0u16; MAX_FILTER_IDS];
+    let mut len = 0;
+    let diagnostic = [
+        node.diag_request_id(),
+        Some(autoplug_can::DIAG_FUNCTIONAL_REQUEST_ID),
+        Some(autoplug_can::VehicleSpeedMsg::ID),
+    ];
+    for id in node
+        .received_ids()
+        .iter()
+        .copied()
+        .chain(diagnostic.into_iter().flatten())
+    {
+        if !buffer[..len].contains(&id) && len < MAX_FILTER_IDS {
+            buffer[len] = id;
+            len += 1;
+        }
+    }
+    let ids = &buffer[..len];
     let mut filters = can.modify_filters();
     filters.clear();
     for (bank, chunk) in ids.chunks(4).enumerate() {

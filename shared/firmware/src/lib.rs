@@ -24,6 +24,8 @@ pub mod can_io;
 #[cfg(target_os = "none")]
 pub mod clocks;
 #[cfg(target_os = "none")]
+pub mod diag;
+#[cfg(target_os = "none")]
 mod fault;
 #[cfg(target_os = "none")]
 pub mod io;

@@ -9,17 +9,22 @@
 //!   `poll_transmit` hands out;
 //! - CAN1 → RX queue, TX queue → CAN1 mailboxes, and the error monitor ([`can_io`]).
 
+use autoplug_can::{Frame, VehicleSpeedMsg};
 use autoplug_ecu::{EcuLogic, Instant};
+use autoplug_uds::{DiagNode, DEV_SECURITY_SECRET};
+use embassy_boot::State;
 use embassy_executor::Spawner;
-use embassy_futures::select::{select, Either};
+use embassy_futures::select::{select3, Either3};
 use embassy_stm32::can::{Can, CanRx, CanTx};
+use embassy_stm32::flash::Flash;
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::IWDG;
+use embassy_stm32::peripherals::{FLASH, IWDG};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::Peri;
-use embassy_time::{Duration, Ticker};
+use embassy_time::{Duration, Ticker, Timer};
 
 use crate::can_io::{self, RxQueue, TxQueue};
+use crate::diag::{EcuFlash, FirmwareBackend};
 use crate::reset::{ResetCause, ResetFlags};
 
 static RX_QUEUE: RxQueue = RxQueue::new();
@@ -46,7 +51,19 @@ pub struct Platform {
     pub can: Can<'static>,
     /// The independent watchdog, not yet started.
     pub watchdog: Peri<'static, IWDG>,
+    /// The flash controller, for firmware upgrades over CAN.
+    pub flash: Peri<'static, FLASH>,
 }
+
+/// How often the diagnostic stack is polled while it has work (a transfer, a session):
+/// ISO-TP timing and the programming slices want about a millisecond.
+const DIAG_POLL_US: u64 = 1_000;
+
+/// Control steps (with frames sent) before a freshly swapped-in image confirms itself.
+const SELF_TEST_STEPS: u32 = 10;
+
+/// Time for the last response to leave before a reset the tester asked for.
+const RESET_DRAIN_MS: u64 = 10;
 
 /// The logic's clock: microseconds since power-up.
 pub fn now() -> Instant {
@@ -69,7 +86,11 @@ where
     E::Actuators: defmt::Format,
     B: Io<E>,
 {
-    let Platform { mut can, watchdog } = platform;
+    let Platform {
+        mut can,
+        watchdog,
+        flash,
+    } = platform;
     defmt::info!(
         "{} ECU (node {=?}), reset cause: {}",
         E::NODE,
@@ -83,12 +104,21 @@ where
     spawner.spawn(can_tx(tx).expect("can_tx spawned once"));
     spawner.spawn(can_monitor().expect("can_monitor spawned once"));
 
+    let layout = Flash::new_blocking(flash).into_blocking_regions();
+    let mut ecu_flash = EcuFlash::new(layout.bank1_region1, layout.bank1_region3);
+    let mut unconfirmed = ecu_flash.boot_state() == State::Swap;
+    let mut diag = DiagNode::new(E::NODE, DEV_SECURITY_SECRET, now()).expect("an ECU");
+    let mut speed: Option<(u64, f32)> = None;
+    let mut seed_counter = 0u32;
+
     let timeout_us = WATCHDOG_TIMEOUT_PERIODS * E::STEP_PERIOD_US;
     let mut watchdog = IndependentWatchdog::new(watchdog, timeout_us as u32);
     let mut ecu = new_ecu(now());
     let mut ticker = Ticker::every(Duration::from_micros(E::STEP_PERIOD_US));
+    let mut diag_ticker = Ticker::every(Duration::from_micros(DIAG_POLL_US));
     let dtc_log_every_steps = (DTC_LOG_PERIOD_US / E::STEP_PERIOD_US).max(1) as u32;
     let mut steps: u32 = 0;
+    let mut sent: u32 = 0;
     let mut logged_dtcs = None;
     watchdog.unleash();
     defmt::info!(
@@ -96,9 +126,25 @@ where
         E::STEP_PERIOD_US,
         timeout_us
     );
+    // The backend of one diagnostic call, from the loop's state.
+    macro_rules! backend {
+        () => {
+            FirmwareBackend {
+                node: E::NODE,
+                flash: &mut ecu_flash,
+                dtcs: ecu.dtcs_mut(),
+                // Stale after 3 periods of VehicleSpeedMsg, like every input.
+                speed_kmh: speed
+                    .filter(|(at, _)| now().as_micros().saturating_sub(*at) <= 30_000)
+                    .map(|(_, v)| v),
+                now_us: now().as_micros(),
+                seed_counter: &mut seed_counter,
+            }
+        };
+    }
     loop {
-        match select(ticker.next(), RX_QUEUE.receive()).await {
-            Either::First(()) => {
+        match select3(ticker.next(), RX_QUEUE.receive(), diag_ticker.next()).await {
+            Either3::First(()) => {
                 let sensors = board.read();
                 let actuators = ecu.step(now(), &sensors);
                 board.write(&actuators);
@@ -108,11 +154,45 @@ where
                 if steps % dtc_log_every_steps == 0 {
                     log_dtcs_if_changed(ecu.dtcs(), &mut logged_dtcs);
                 }
+                // The self-test of a new image: CAN up, the control loop running, frames
+                // going out. Only then does it keep itself (else the next reset reverts).
+                if unconfirmed && steps >= SELF_TEST_STEPS && sent > 0 {
+                    unconfirmed = !ecu_flash.confirm();
+                    if !unconfirmed {
+                        defmt::info!("self-test passed: this image is confirmed");
+                    }
+                }
             }
-            Either::Second(frame) => ecu.on_frame(now(), &frame),
+            Either3::Second(frame) => {
+                note_speed(&frame, &mut speed);
+                if diag.accepts(frame.id()) {
+                    diag.on_frame(now(), &frame, &mut backend!());
+                } else if diag.server().normal_rx_enabled() {
+                    ecu.on_frame(now(), &frame);
+                }
+            }
+            Either3::Third(()) => {
+                if !diag.quiescent() {
+                    diag.poll(now(), &mut backend!());
+                }
+            }
         }
+        let tx_enabled = diag.server().normal_tx_enabled();
         while let Some(frame) = ecu.poll_transmit(now()) {
+            note_speed(&frame, &mut speed);
+            if tx_enabled {
+                can_io::queue_for_transmit(&TX_QUEUE, frame);
+                sent = sent.wrapping_add(1);
+            }
+        }
+        while let Some(frame) = diag.poll_transmit(now()) {
             can_io::queue_for_transmit(&TX_QUEUE, frame);
+            diag.confirm_transmit(now());
+        }
+        if let Some(kind) = diag.take_reset() {
+            defmt::warn!("reset ({}) requested by the tester", kind);
+            Timer::after_millis(RESET_DRAIN_MS).await;
+            cortex_m::peripheral::SCB::sys_reset();
         }
     }
     // `can` was split, not dropped: dropping the driver would reset CAN1 under the RX and
@@ -132,6 +212,16 @@ async fn can_tx(tx: CanTx<'static>) {
 #[embassy_executor::task]
 async fn can_monitor() {
     can_io::monitor().await
+}
+
+/// Notes the vehicle speed from a VehicleSpeedMsg seen on the bus (received, or sent by
+/// this ECU): programming is allowed only while the car stands.
+fn note_speed(frame: &Frame, speed: &mut Option<(u64, f32)>) {
+    if frame.id() == VehicleSpeedMsg::ID {
+        if let Ok(message) = VehicleSpeedMsg::decode(frame.data()) {
+            *speed = Some((now().as_micros(), message.vehicle_speed));
+        }
+    }
 }
 
 /// Reads the reset flags and clears them, so the next reset's flags stand alone.

@@ -49,6 +49,7 @@ pub fn init() -> (Platform, Board) {
     let platform = Platform {
         can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
         watchdog: p.IWDG,
+        flash: p.FLASH,
     };
     let pwm = SimplePwm::new(
         p.TIM3,

@@ -1,0 +1,396 @@
+//! The ECU side of firmware upgrades on the F446: the UDS server's [`Backend`] over the
+//! MCU's own flash (DFU slot, embassy-boot's state sector, the ECU data sector), the
+//! identification of the running image, the self-test that confirms a new image, and a
+//! watchdog that outlasts the long flash operations.
+//!
+//! Erasing a 128 KiB sector stalls the core for about a second (the code runs from the
+//! flash being erased), far beyond the control loop's watchdog timeout: the watchdog is
+//! stretched to [`FLASH_WATCHDOG_TIMEOUT_US`] for each such operation and restored after.
+
+use core::cell::RefCell;
+
+use autoplug_can::Node;
+use autoplug_ecu::Dtcs;
+use autoplug_flash::{ACTIVE, BOOT_STATE, DFU, ECU_DATA, SLOT_ERASE_SIZE};
+use autoplug_image::{
+    dev, Expectations, ImageHeader, Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
+};
+use autoplug_uds::{Backend, FlashError, Identification};
+use embassy_boot::{BlockingFirmwareState, State};
+use embassy_embedded_hal::flash::partition::BlockingPartition;
+use embassy_stm32::flash::{Bank1Region1, Bank1Region3, Blocking};
+use embassy_stm32::pac;
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::blocking_mutex::Mutex;
+
+/// Watchdog timeout during a flash operation: above the datasheet's worst 128 KiB sector
+/// erase (2 s).
+pub const FLASH_WATCHDOG_TIMEOUT_US: u32 = 4_000_000;
+
+/// Flash regions of embassy-stm32: region 1 (16 KiB sectors) from the flash base, region
+/// 3 (128 KiB sectors) from sector 5.
+const REGION1_BASE: u32 = 0x0800_0000;
+const REGION3_BASE: u32 = 0x0802_0000;
+
+/// A version-floor record in the ECU data sector: magic, major, minor, patch (LE), check.
+const FLOOR_RECORD_MAGIC: [u8; 2] = [0xA5, 0x5A];
+const FLOOR_RECORD_LEN: usize = 8;
+
+/// The version a firmware flashed by a probe (without an image header) reports.
+const UNSIGNED_VERSION: Version = Version::new(0, 0, 0);
+
+/// The flash of the ECU as the diagnostic server uses it.
+pub struct EcuFlash {
+    small: Mutex<NoopRawMutex, RefCell<Bank1Region1<'static, Blocking>>>,
+    large: Mutex<NoopRawMutex, RefCell<Bank1Region3<'static, Blocking>>>,
+    header: Option<ImageHeader>,
+    version_text: [u8; 16],
+    version_len: usize,
+    serial: [u8; 24],
+    floor: Version,
+}
+
+impl EcuFlash {
+    /// Reads what the active slot holds and the stored version floor.
+    pub fn new(
+        small: Bank1Region1<'static, Blocking>,
+        large: Bank1Region3<'static, Blocking>,
+    ) -> Self {
+        let mut flash = Self {
+            small: Mutex::new(RefCell::new(small)),
+            large: Mutex::new(RefCell::new(large)),
+            header: None,
+            version_text: [0; 16],
+            version_len: 0,
+            serial: hex_uid(),
+            floor: UNSIGNED_VERSION,
+        };
+        let mut bytes = [0u8; HEADER_LEN];
+        let read = flash.large.lock(|r| {
+            r.borrow_mut()
+                .blocking_read(ACTIVE.start - REGION3_BASE, &mut bytes)
+        });
+        flash.header = read.ok().and_then(|()| ImageHeader::parse(&bytes).ok());
+        let version = flash.header.map_or(UNSIGNED_VERSION, |h| h.version);
+        flash.version_len = write_version(&mut flash.version_text, version);
+        flash.floor = flash.read_floor().unwrap_or(UNSIGNED_VERSION);
+        match &flash.header {
+            Some(h) => defmt::info!(
+                "running image {=str} {=u8}.{=u8}.{=u16} (variant {=u8}), version floor {=u8}.{=u8}.{=u16}",
+                h.part_number.as_str(),
+                h.version.major,
+                h.version.minor,
+                h.version.patch,
+                h.variant.as_u8(),
+                flash.floor.major,
+                flash.floor.minor,
+                flash.floor.patch
+            ),
+            None => defmt::warn!("no image header in the active slot: flashed by a probe?"),
+        }
+        flash
+    }
+
+    /// The bootloader's state as the application sees it (Swap: this image was just
+    /// swapped in and has not confirmed itself yet).
+    pub fn boot_state(&self) -> State {
+        let mut aligned = [0u8; 4];
+        self.with_state(|state| {
+            BlockingFirmwareState::new(state, &mut aligned)
+                .get_state()
+                .unwrap_or(State::Boot)
+        })
+    }
+
+    /// Confirms the running image after its self-test and raises the version floor to it.
+    pub fn confirm(&mut self) -> bool {
+        let mut aligned = [0u8; 4];
+        let confirmed = stretched(|| {
+            self.with_state(|state| {
+                BlockingFirmwareState::new(state, &mut aligned)
+                    .mark_booted()
+                    .is_ok()
+            })
+        });
+        if let Some(version) = self.header.map(|h| h.version) {
+            if confirmed && version > self.floor && stretched(|| self.write_floor(version)).is_ok()
+            {
+                self.floor = version;
+            }
+        }
+        confirmed
+    }
+
+    fn with_state<T>(
+        &self,
+        op: impl FnOnce(&mut BlockingPartition<'_, NoopRawMutex, Bank1Region1<'static, Blocking>>) -> T,
+    ) -> T {
+        let mut state = BlockingPartition::new(
+            &self.small,
+            BOOT_STATE.start - REGION1_BASE,
+            BOOT_STATE.size,
+        );
+        op(&mut state)
+    }
+
+    fn read_floor(&self) -> Option<Version> {
+        let mut last = None;
+        let mut record = [0u8; FLOOR_RECORD_LEN];
+        for i in 0..ECU_DATA.size as usize / FLOOR_RECORD_LEN {
+            let at = ECU_DATA.start - REGION1_BASE + (i * FLOOR_RECORD_LEN) as u32;
+            self.small
+                .lock(|r| r.borrow_mut().blocking_read(at, &mut record))
+                .ok()?;
+            if record[..2] != FLOOR_RECORD_MAGIC {
+                break;
+            }
+            if record[6] == record_check(&record) {
+                last = Some(Version::new(
+                    record[2],
+                    record[3],
+                    u16::from_le_bytes([record[4], record[5]]),
+                ));
+            }
+        }
+        last
+    }
+
+    fn write_floor(&self, version: Version) -> Result<(), FlashError> {
+        let mut record = [0u8; FLOOR_RECORD_LEN];
+        record[..2].copy_from_slice(&FLOOR_RECORD_MAGIC);
+        record[2] = version.major;
+        record[3] = version.minor;
+        record[4..6].copy_from_slice(&version.patch.to_le_bytes());
+        record[6] = record_check(&record);
+        let base = ECU_DATA.start - REGION1_BASE;
+        let capacity = ECU_DATA.size as usize / FLOOR_RECORD_LEN;
+        let mut slot = None;
+        let mut probe = [0u8; FLOOR_RECORD_LEN];
+        for i in 0..capacity {
+            let at = base + (i * FLOOR_RECORD_LEN) as u32;
+            self.small
+                .lock(|r| r.borrow_mut().blocking_read(at, &mut probe))
+                .map_err(|_| FlashError)?;
+            if probe == [0xFF; FLOOR_RECORD_LEN] {
+                slot = Some(at);
+                break;
+            }
+        }
+        self.small.lock(|r| {
+            let mut region = r.borrow_mut();
+            let at = match slot {
+                Some(at) => at,
+                None => {
+                    region
+                        .blocking_erase(base, base + ECU_DATA.size)
+                        .map_err(|_| FlashError)?;
+                    base
+                }
+            };
+            region.blocking_write(at, &record).map_err(|_| FlashError)
+        })
+    }
+}
+
+fn record_check(record: &[u8; FLOOR_RECORD_LEN]) -> u8 {
+    record[..6].iter().fold(0u8, |a, b| a.wrapping_add(*b)) ^ 0xFF
+}
+
+/// The MCU's 96-bit unique ID in hex: the ECU serial number (UDS F18C).
+fn hex_uid() -> [u8; 24] {
+    const HEX: &[u8; 16] = b"0123456789ABCDEF";
+    let uid = embassy_stm32::uid::uid();
+    let mut out = [0u8; 24];
+    for (i, byte) in uid.iter().enumerate() {
+        out[2 * i] = HEX[usize::from(byte >> 4)];
+        out[2 * i + 1] = HEX[usize::from(byte & 0x0F)];
+    }
+    out
+}
+
+/// "major.minor.patch" into `out`; returns its length.
+fn write_version(out: &mut [u8; 16], version: Version) -> usize {
+    let mut len = 0;
+    for (i, part) in [
+        u32::from(version.major),
+        u32::from(version.minor),
+        u32::from(version.patch),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        if i > 0 {
+            out[len] = b'.';
+            len += 1;
+        }
+        len += write_decimal(&mut out[len..], part);
+    }
+    len
+}
+
+/// `n` in decimal at the start of `out`; returns the digits written.
+fn write_decimal(out: &mut [u8], mut n: u32) -> usize {
+    let mut digits = [0u8; 10];
+    let mut count = 0;
+    loop {
+        digits[count] = b'0' + (n % 10) as u8;
+        count += 1;
+        n /= 10;
+        if n == 0 {
+            break;
+        }
+    }
+    for (slot, digit) in out.iter_mut().zip(digits[..count].iter().rev()) {
+        *slot = *digit;
+    }
+    count
+}
+
+/// Runs a long flash operation with the watchdog stretched, then restores it.
+fn stretched<T>(op: impl FnOnce() -> T) -> T {
+    let iwdg = pac::IWDG;
+    let (pr, rlr) = (iwdg.pr().read(), iwdg.rlr().read());
+    set_watchdog(FLASH_WATCHDOG_TIMEOUT_US);
+    let result = op();
+    iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::ENABLE));
+    iwdg.pr().write_value(pr);
+    iwdg.rlr().write_value(rlr);
+    iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+    result
+}
+
+/// Sets the watchdog's timeout (prescaler 64 at the 32 kHz LSI: 2 ms per count) and
+/// feeds it.
+fn set_watchdog(timeout_us: u32) {
+    let iwdg = pac::IWDG;
+    iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::ENABLE));
+    iwdg.pr()
+        .write(|w| w.set_pr(pac::iwdg::vals::Pr::DIVIDE_BY64));
+    iwdg.rlr()
+        .write(|w| w.set_rl((timeout_us / 2_000).min(0xFFF) as u16));
+    iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+}
+
+/// The ECU as its UDS server sees it, for one call.
+pub struct FirmwareBackend<'a> {
+    /// The ECU's node.
+    pub node: Node,
+    /// Its flash.
+    pub flash: &'a mut EcuFlash,
+    /// The logic's DTCs.
+    pub dtcs: &'a mut Dtcs,
+    /// Vehicle speed as last received (or measured), km/h.
+    pub speed_kmh: Option<f32>,
+    /// Time in µs, mixed into security seeds with the UID (the F446 has no RNG).
+    pub now_us: u64,
+    /// Counter mixed into seeds.
+    pub seed_counter: &'a mut u32,
+}
+
+impl Backend for FirmwareBackend<'_> {
+    fn identification(&self) -> Identification<'_> {
+        Identification {
+            part_number: self
+                .flash
+                .header
+                .as_ref()
+                .map_or(b"AP-UNSIGNED".as_slice(), |h| {
+                    h.part_number.as_str().as_bytes()
+                }),
+            software_version: &self.flash.version_text[..self.flash.version_len],
+            serial_number: &self.flash.serial,
+            hardware_version: b"NUCLEO-F446RE",
+        }
+    }
+
+    fn read_live_data(&mut self, _did: u16, _out: &mut [u8]) -> Option<usize> {
+        None
+    }
+
+    fn vehicle_speed_kmh(&self) -> Option<f32> {
+        self.speed_kmh
+    }
+
+    fn dtcs(&mut self) -> &mut Dtcs {
+        self.dtcs
+    }
+
+    fn fill_random(&mut self, out: &mut [u8]) {
+        // No RNG on the F446: the time of the request (µs, jittered by the bus and the
+        // tester) and a counter, whitened with the UID. Enough for seeds that must not
+        // repeat; not a cryptographic generator.
+        let uid = embassy_stm32::uid::uid();
+        let mut x = self.now_us ^ u64::from_le_bytes(uid[..8].try_into().unwrap_or([0; 8]));
+        for b in out {
+            *self.seed_counter = self.seed_counter.wrapping_add(1);
+            x = x
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(u64::from(*self.seed_counter) | 1);
+            *b = (x >> 33) as u8;
+        }
+    }
+
+    fn image_expectations(&self) -> Expectations {
+        Expectations {
+            node: self.node.diag_node_number().unwrap_or(0),
+            hardware_id: NUCLEO_F446RE,
+            version_floor: self.flash.floor,
+            max_image_len: ACTIVE.size,
+            load_address: F446RE_LOAD_ADDRESS,
+        }
+    }
+
+    fn public_key(&self) -> [u8; 32] {
+        dev::PUBLIC_KEY
+    }
+
+    fn dfu_erase_steps(&self) -> u32 {
+        DFU.size / SLOT_ERASE_SIZE
+    }
+
+    fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
+        // embassy-boot's rule: only a confirmed image may download the next one.
+        if self.flash.boot_state() != State::Boot {
+            return Err(FlashError);
+        }
+        let from = DFU.start - REGION3_BASE + step * SLOT_ERASE_SIZE;
+        let large = &self.flash.large;
+        stretched(|| {
+            large.lock(|r| {
+                r.borrow_mut()
+                    .blocking_erase(from, from + SLOT_ERASE_SIZE)
+                    .map_err(|_| FlashError)
+            })
+        })
+    }
+
+    fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
+        let at = DFU.start - REGION3_BASE + offset;
+        self.flash.large.lock(|r| {
+            r.borrow_mut()
+                .blocking_write(at, data)
+                .map_err(|_| FlashError)
+        })
+    }
+
+    fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError> {
+        let at = DFU.start - REGION3_BASE + offset;
+        self.flash.large.lock(|r| {
+            r.borrow_mut()
+                .blocking_read(at, out)
+                .map_err(|_| FlashError)
+        })
+    }
+
+    fn mark_updated(&mut self) -> Result<(), FlashError> {
+        let flash = &*self.flash;
+        let mut aligned = [0u8; 4];
+        stretched(|| {
+            flash.with_state(|state| {
+                BlockingFirmwareState::new(state, &mut aligned)
+                    .mark_updated()
+                    .map_err(|_| FlashError)
+            })
+        })
+    }
+}
