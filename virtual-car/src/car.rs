@@ -286,8 +286,8 @@ pub struct VirtualCar {
     t_us: u64,
     log: Vec<LoggedFrame>,
     node_names: Vec<&'static str>,
-    /// Frames the external node (a tester in the process, a socketcand client) received.
-    external_rx: Vec<Frame>,
+    /// Frames the external node (a tester in the process) received, when captured.
+    external_rx: Option<Vec<Frame>>,
 }
 
 fn vehicle_gear(gear: GearName) -> VehicleGear {
@@ -413,7 +413,7 @@ impl VirtualCar {
             t_us: 0,
             log: Vec::with_capacity(1 << 16),
             node_names,
-            external_rx: Vec::new(),
+            external_rx: None,
         };
         car.controls = car.timeline.advance(0.0, |_| {});
         car
@@ -498,9 +498,16 @@ impl VirtualCar {
             .is_ok()
     }
 
-    /// The frames the external node (a tester) received since the last call.
+    /// Keeps the frames the external node receives, for [`VirtualCar::take_external_rx`]
+    /// (off by default: a long run would pile them up).
+    pub fn capture_external_rx(&mut self, on: bool) {
+        self.external_rx = on.then(Vec::new);
+    }
+
+    /// The frames the external node (a tester in the process) received since the last
+    /// call, when captured.
     pub fn take_external_rx(&mut self) -> Vec<Frame> {
-        std::mem::take(&mut self.external_rx)
+        self.external_rx.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
     /// The diagnostic half of an ECU: what it runs, whether it is stalled...
@@ -636,7 +643,9 @@ impl VirtualCar {
         e.cruise.deliver(&mut self.bus, cruise_live);
         e.abs.deliver(&mut self.bus, quiet);
         while let Some(delivered) = self.bus.recv(self.external) {
-            self.external_rx.push(delivered.frame);
+            if let Some(rx) = &mut self.external_rx {
+                rx.push(delivered.frame);
+            }
         }
 
         // Each ECU's control step, when due, on its own sensors.

@@ -412,7 +412,9 @@ fn standing_car(cruise: &str) -> crate::car::VirtualCar {
         "name = \"standstill\"\nduration_s = 60.0\n[initial]\nspeed_kmh = 0.0\ngear = \"N\"\n[ecus]\ncruise = \"{cruise}\"\n"
     );
     let scenario = Scenario::parse(&text, "standstill").unwrap();
-    crate::car::VirtualCar::new(&scenario)
+    let mut car = crate::car::VirtualCar::new(&scenario);
+    car.capture_external_rx(true);
+    car
 }
 
 /// Runs the car for `ms` ticks, returning the frames the external node received.

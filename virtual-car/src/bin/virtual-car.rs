@@ -124,10 +124,19 @@ fn run_one(
     let dir = out.join(&scenario.name);
     std::fs::create_dir_all(&dir)?;
     let mut bus_log = BufWriter::new(File::create(dir.join("bus.log"))?);
+    // Client frames wait here while the external node's transmit queue is full: a tester
+    // sending a whole ISO-TP block at once must not lose frames to the simulation.
+    let mut from_clients = std::collections::VecDeque::new();
     let record: RunRecord = report::run_streaming(scenario, &mut bus_log, |car, frames| {
         if let Some(server) = server {
             while let Some(client) = server.try_recv() {
-                car.inject(client.frame);
+                from_clients.push_back(client.frame);
+            }
+            while let Some(frame) = from_clients.front() {
+                if !car.inject(*frame) {
+                    break;
+                }
+                from_clients.pop_front();
             }
             // Clients get every frame but their own (socketcand does not echo); frames
             // injected by clients go through the "External" node and are not sent back.
