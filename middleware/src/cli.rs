@@ -1,0 +1,558 @@
+//! The `autoplug` command: keys, images, identification and flashing.
+//!
+//! [`Cli`] is the command line (clap); [`run`] carries a parsed one out and writes what it
+//! has to say to `out`, so tests run commands without a process; [`main`] is the whole
+//! program.
+
+use std::fmt;
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use autoplug_can::Node;
+use autoplug_image::{ImageHeader, SoftwareVariant, Version, BUILD_ID_LEN};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::driver::{self, DriveError};
+use crate::image_tool::{self, BuildOptions, ImageToolError, PayloadKind, SignatureCheck};
+use crate::names::{ecu_label, parse_ecu, ECUS, ECU_NAME_LIST};
+use crate::tester::{
+    identification_table, FlashConfig, FlashError, FlashJob, IdentJob, TesterConfig,
+};
+use crate::transport::{self, TransportError, Via};
+use crate::DEV_SECURITY_SECRET;
+
+/// The `autoplug` command line.
+#[derive(Debug, Parser)]
+#[command(
+    name = "autoplug",
+    version,
+    about = "AutoPlug middleware: sign firmware images, read ECU identification and flash ECUs over CAN (UDS on ISO-TP)",
+    after_help = "Transports (--via): socketcand://HOST:PORT/BUS (the virtual car's --socketcand server, or socketcand next to a real bus), socketcan://IFACE (Linux SocketCAN, e.g. a USB-CAN adapter)."
+)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Generate an Ed25519 key pair for signing images: PATH.key (secret, mode 0600) and
+    /// PATH.pub. Never overwrites.
+    Keygen {
+        /// Where to write, without extension (e.g. keys/dev).
+        #[arg(long, value_name = "PATH")]
+        out: PathBuf,
+    },
+    /// Build or inspect a signed image.
+    #[command(subcommand)]
+    Image(ImageCommand),
+    /// Read the identification (part number F187, software F189, serial F18C, hardware
+    /// F191) of one ECU or all nine.
+    Ids {
+        /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
+        #[arg(long, value_name = "URL", value_parser = parse_via)]
+        via: Via,
+        /// Which ECU (engine, pedals, steering, transmission, cabin, console,
+        /// differential, cruise, abs), or all.
+        #[arg(long, value_name = "NAME|all", default_value = "all", value_parser = parse_selection)]
+        ecu: EcuSelection,
+        /// UDS timing.
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
+    /// Flash an image into an ECU over CAN, with a progress bar and a timing report.
+    Flash {
+        /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
+        #[arg(long, value_name = "URL", value_parser = parse_via)]
+        via: Via,
+        /// The ECU to flash: engine, pedals, steering, transmission (trans), cabin,
+        /// console, differential (diff), cruise, abs.
+        #[arg(long, value_name = "NAME", value_parser = parse_ecu_arg)]
+        ecu: Node,
+        /// The signed image file.
+        #[arg(long, value_name = "FILE")]
+        image: PathBuf,
+        /// The SecurityAccess secret (the file's bytes, less a final newline); default:
+        /// the development secret of the AutoPlug ECUs.
+        #[arg(long, value_name = "FILE")]
+        secret_file: Option<PathBuf>,
+        /// Verify the image's signature with this public key before flashing.
+        #[arg(long, value_name = "FILE.pub")]
+        key: Option<PathBuf>,
+        /// Seconds the ECU may take to answer again after its reset.
+        #[arg(long, value_name = "SECONDS", default_value_t = 30.0, value_parser = parse_seconds)]
+        reset_timeout: f64,
+        /// UDS timing.
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
+}
+
+/// `image` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum ImageCommand {
+    /// Build a signed image from a raw binary or an ELF file.
+    Build {
+        /// The target ECU: engine, pedals, steering, transmission (trans), cabin, console,
+        /// differential (diff), cruise, abs.
+        #[arg(long, value_name = "NAME", value_parser = parse_ecu_arg)]
+        ecu: Node,
+        /// The software version, MAJOR.MINOR.PATCH.
+        #[arg(long, value_name = "X.Y.Z", value_parser = parse_version)]
+        version: Version,
+        /// Standard software or the faulty demonstration.
+        #[arg(long, value_enum, default_value_t = Variant::Standard)]
+        variant: Variant,
+        /// The part number (UDS F187), up to 16 printable ASCII characters.
+        #[arg(long, value_name = "TEXT")]
+        part_number: Option<String>,
+        /// The build id, 32 hex digits; default: the first 16 bytes of the payload's
+        /// SHA-256.
+        #[arg(long, value_name = "HEX32", value_parser = parse_build_id)]
+        build_id: Option<[u8; BUILD_ID_LEN]>,
+        /// The application: a raw binary, or an ELF file whose loadable segments start at
+        /// the load address (0x08020200).
+        #[arg(long, value_name = "FILE")]
+        payload: PathBuf,
+        /// The secret key file to sign with ("dev": the development key, whose secret is
+        /// public: for the virtual car and benches without their own keys).
+        #[arg(long, value_name = "FILE.key")]
+        key: PathBuf,
+        /// The image file to write.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+    },
+    /// Show an image's header and sizes, and check its signature.
+    Inspect {
+        /// The image file.
+        #[arg(value_name = "FILE")]
+        file: PathBuf,
+        /// The public key to check the signature with (a secret key file works too).
+        #[arg(long, value_name = "FILE.pub")]
+        key: Option<PathBuf>,
+    },
+}
+
+/// `--variant`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Variant {
+    /// The ECU's normal software.
+    Standard,
+    /// The deliberately faulty demonstration software.
+    Faulty,
+}
+
+impl From<Variant> for SoftwareVariant {
+    fn from(variant: Variant) -> Self {
+        match variant {
+            Variant::Standard => SoftwareVariant::Standard,
+            Variant::Faulty => SoftwareVariant::Faulty,
+        }
+    }
+}
+
+/// `--ecu NAME|all`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EcuSelection {
+    /// The nine ECUs.
+    All,
+    /// One of them.
+    One(Node),
+}
+
+impl EcuSelection {
+    /// The ECUs selected.
+    pub fn ecus(self) -> Vec<Node> {
+        match self {
+            EcuSelection::All => ECUS.to_vec(),
+            EcuSelection::One(node) => vec![node],
+        }
+    }
+}
+
+/// UDS timing options.
+#[derive(Debug, Clone, Copy, Args)]
+pub struct TimingArgs {
+    /// P2: the longest wait for a response, in ms (add the latency of a remote socketcand
+    /// link to the ECUs' 50 ms).
+    #[arg(long, value_name = "MS", default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..=60_000))]
+    pub p2_ms: u64,
+    /// P2*: the longest wait after each "response pending", in ms.
+    #[arg(long, value_name = "MS", default_value_t = 5000, value_parser = clap::value_parser!(u64).range(1..=600_000))]
+    pub p2_star_ms: u64,
+}
+
+impl TimingArgs {
+    /// The tester configuration these options give.
+    pub fn tester_config(self) -> TesterConfig {
+        TesterConfig {
+            p2_us: self.p2_ms * 1000,
+            p2_star_us: self.p2_star_ms * 1000,
+            // A link slow enough to need a longer P2 is as slow for functional answers.
+            functional_window_us: TesterConfig::DEFAULT
+                .functional_window_us
+                .max(self.p2_ms * 1000),
+            ..TesterConfig::DEFAULT
+        }
+    }
+}
+
+fn parse_via(text: &str) -> Result<Via, String> {
+    text.parse().map_err(|e: transport::ViaError| e.to_string())
+}
+
+fn parse_ecu_arg(text: &str) -> Result<Node, String> {
+    parse_ecu(text).map_err(|e| e.to_string())
+}
+
+fn parse_selection(text: &str) -> Result<EcuSelection, String> {
+    if text.eq_ignore_ascii_case("all") {
+        return Ok(EcuSelection::All);
+    }
+    parse_ecu(text)
+        .map(EcuSelection::One)
+        .map_err(|_| format!("unknown ECU '{text}': expected all or one of {ECU_NAME_LIST}"))
+}
+
+fn parse_version(text: &str) -> Result<Version, String> {
+    text.parse()
+        .map_err(|e: autoplug_image::ParseVersionError| format!("version '{text}': {e}"))
+}
+
+fn parse_build_id(text: &str) -> Result<[u8; BUILD_ID_LEN], String> {
+    image_tool::parse_build_id(text)
+}
+
+fn parse_seconds(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 && s <= 3600.0 => Ok(s),
+        _ => Err(format!("'{text}' is not a number of seconds in (0, 3600]")),
+    }
+}
+
+/// Why a command failed.
+#[derive(Debug)]
+pub enum CliError {
+    /// A key, payload or image file.
+    Image(ImageToolError),
+    /// The transport.
+    Transport(TransportError),
+    /// The flash job (its report was written before).
+    Flash(Box<FlashError>),
+    /// The security secret file.
+    Secret {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The image does not suit the ECU named on the command line.
+    WrongImage(String),
+    /// ECUs that were asked did not answer.
+    NoAnswer(String),
+    /// Writing the output failed.
+    Output(io::Error),
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CliError::Image(error) => error.fmt(f),
+            CliError::Transport(error) => error.fmt(f),
+            CliError::Flash(error) => error.fmt(f),
+            CliError::Secret { path, reason } => {
+                write!(f, "security secret file '{}': {reason}", path.display())
+            }
+            CliError::WrongImage(reason) | CliError::NoAnswer(reason) => f.write_str(reason),
+            CliError::Output(error) => write!(f, "cannot write the output: {error}"),
+        }
+    }
+}
+
+impl std::error::Error for CliError {}
+
+impl From<ImageToolError> for CliError {
+    fn from(error: ImageToolError) -> Self {
+        CliError::Image(error)
+    }
+}
+
+impl From<TransportError> for CliError {
+    fn from(error: TransportError) -> Self {
+        CliError::Transport(error)
+    }
+}
+
+impl From<io::Error> for CliError {
+    fn from(error: io::Error) -> Self {
+        CliError::Output(error)
+    }
+}
+
+/// Reads a security secret file: its bytes, less one final newline.
+pub fn read_secret_file(path: &Path) -> Result<Vec<u8>, CliError> {
+    let mut bytes = std::fs::read(path).map_err(|e| CliError::Secret {
+        path: path.to_path_buf(),
+        reason: format!("cannot read it: {e}"),
+    })?;
+    if bytes.ends_with(b"\r\n") {
+        bytes.truncate(bytes.len() - 2);
+    } else if bytes.ends_with(b"\n") {
+        bytes.truncate(bytes.len() - 1);
+    }
+    if bytes.is_empty() {
+        return Err(CliError::Secret {
+            path: path.to_path_buf(),
+            reason: "it is empty".into(),
+        });
+    }
+    Ok(bytes)
+}
+
+/// Carries out a parsed command line; what it prints goes to `out` (the progress bar of
+/// `flash` goes to the terminal's stderr).
+pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
+    match cli.command {
+        Command::Keygen { out: path } => {
+            let paths = image_tool::keygen(&path)?;
+            writeln!(
+                out,
+                "wrote {} (secret, keep it private) and {} (public, for the ECUs)",
+                paths.secret.display(),
+                paths.public.display()
+            )?;
+            Ok(())
+        }
+        Command::Image(ImageCommand::Build {
+            ecu,
+            version,
+            variant,
+            part_number,
+            build_id,
+            payload,
+            key,
+            out: image,
+        }) => {
+            let options = BuildOptions {
+                ecu,
+                version,
+                variant: variant.into(),
+                part_number,
+                build_id,
+                payload,
+                key,
+                out: image,
+            };
+            let built = image_tool::build_image(&options)?;
+            let kind = match built.kind {
+                PayloadKind::Raw => "raw binary".to_string(),
+                PayloadKind::Elf { segments } => format!("ELF, {segments} loadable segment(s)"),
+            };
+            writeln!(
+                out,
+                "wrote {} ({} bytes; payload {} bytes from {kind})\n{}",
+                options.out.display(),
+                built.image_len,
+                built.header.payload_len,
+                built.header
+            )?;
+            Ok(())
+        }
+        Command::Image(ImageCommand::Inspect { file, key }) => {
+            let inspection = image_tool::inspect_file(&file, key.as_deref())?;
+            writeln!(out, "File:           {}", file.display())?;
+            writeln!(out, "{inspection}")?;
+            let problems = inspection.problems();
+            if !problems.is_empty() {
+                return Err(ImageToolError::Corrupted {
+                    path: file,
+                    problems,
+                }
+                .into());
+            }
+            Ok(())
+        }
+        Command::Ids { via, ecu, timing } => {
+            let mut transport = transport::open(&via)?;
+            let ecus = ecu.ecus();
+            let mut job = IdentJob::new(&ecus, timing.tester_config());
+            let rows = match driver::run(transport.as_mut(), &mut job) {
+                Ok(rows) => rows,
+                Err(DriveError::Transport(error)) => return Err(error.into()),
+                Err(DriveError::Job(never)) => match never {},
+            };
+            write!(out, "{}", identification_table(&rows))?;
+            let silent: Vec<String> = rows
+                .iter()
+                .filter(|r| !r.answered())
+                .map(|r| ecu_label(r.ecu))
+                .collect();
+            if silent.len() == rows.len() {
+                return Err(CliError::NoAnswer(format!(
+                    "no ECU answered on {} ({}): is the bus the right one, and are the ECUs powered?",
+                    transport.describe(),
+                    silent.join(", ")
+                )));
+            }
+            Ok(())
+        }
+        Command::Flash {
+            via,
+            ecu,
+            image,
+            secret_file,
+            key,
+            reset_timeout,
+            timing,
+        } => flash(
+            &via,
+            ecu,
+            &image,
+            secret_file.as_deref(),
+            key.as_deref(),
+            reset_timeout,
+            timing,
+            out,
+        ),
+    }
+}
+
+/// Checks an image file against the ECU before anything is sent: a header, the right
+/// ECU, the right length, and the signature if a key is given.
+fn precheck_image(
+    ecu: Node,
+    path: &Path,
+    key: Option<&Path>,
+) -> Result<(Vec<u8>, ImageHeader), CliError> {
+    let inspection = image_tool::inspect_file(path, key)?;
+    let header = inspection.header;
+    if Some(header.node) != ecu.diag_node_number() {
+        let target = ECUS
+            .iter()
+            .find(|n| n.diag_node_number() == Some(header.node))
+            .map_or_else(|| format!("node 0x{:02X}", header.node), |n| ecu_label(*n));
+        return Err(CliError::WrongImage(format!(
+            "'{}' is an image for {target}, not for {}: the ECU would refuse it",
+            path.display(),
+            ecu_label(ecu)
+        )));
+    }
+    let problems = inspection.problems();
+    if !problems.is_empty() {
+        return Err(ImageToolError::Corrupted {
+            path: path.to_path_buf(),
+            problems,
+        }
+        .into());
+    }
+    if let SignatureCheck::Invalid(error) = &inspection.signature {
+        return Err(ImageToolError::Corrupted {
+            path: path.to_path_buf(),
+            problems: vec![error.to_string()],
+        }
+        .into());
+    }
+    let bytes = std::fs::read(path).map_err(|source| {
+        CliError::Image(ImageToolError::Io {
+            context: format!("cannot read the image '{}'", path.display()),
+            source,
+        })
+    })?;
+    Ok((bytes, header))
+}
+
+#[allow(clippy::too_many_arguments)] // one per command-line option
+fn flash(
+    via: &Via,
+    ecu: Node,
+    image: &Path,
+    secret_file: Option<&Path>,
+    key: Option<&Path>,
+    reset_timeout: f64,
+    timing: TimingArgs,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    let (bytes, header) = precheck_image(ecu, image, key)?;
+    let secret = match secret_file {
+        Some(path) => read_secret_file(path)?,
+        None => DEV_SECURITY_SECRET.to_vec(),
+    };
+    let mut transport = transport::open(via)?;
+    writeln!(
+        out,
+        "flashing {} with {} (version {}, {} bytes) via {}",
+        ecu_label(ecu),
+        image.display(),
+        header.version,
+        bytes.len(),
+        transport.describe()
+    )?;
+    let total = bytes.len() as u64;
+    let mut config = FlashConfig::new(ecu, bytes, &secret);
+    config.tester = timing.tester_config();
+    config.reset_timeout_us = (reset_timeout * 1e6) as u64;
+    // `new` refuses only nodes without a diagnostic address, which `--ecu` cannot name.
+    let mut job = FlashJob::new(config).map_err(|e| CliError::WrongImage(e.to_string()))?;
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg:>14} [{bar:40.cyan/blue}] {bytes}/{total_bytes} {bytes_per_sec} {elapsed}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let observer = bar.clone();
+    let mut phase = None;
+    job.on_progress(move |progress| {
+        if phase != Some(progress.phase) {
+            phase = Some(progress.phase);
+            if progress.phase == crate::tester::Phase::Transfer {
+                // The rate shown is the transfer's, not diluted by the setup and erase.
+                observer.reset();
+            }
+            observer.set_message(progress.phase.name());
+        }
+        observer.set_position(progress.transferred);
+    });
+    let result = driver::run(transport.as_mut(), &mut job);
+    match result {
+        Ok(report) => {
+            bar.finish_and_clear();
+            writeln!(out, "{report}")?;
+            writeln!(out, "done: {} runs the new image", ecu_label(ecu))?;
+            Ok(())
+        }
+        Err(DriveError::Job(error)) => {
+            bar.abandon();
+            writeln!(out, "{}", error.report)?;
+            Err(CliError::Flash(Box::new(error)))
+        }
+        Err(DriveError::Transport(error)) => {
+            bar.abandon();
+            Err(error.into())
+        }
+    }
+}
+
+/// The `autoplug` program: parses the command line, runs it, prints an error and exits
+/// with status 1 if it fails (2 for a command-line error, as clap does).
+pub fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(error) => error.exit(),
+    };
+    let stdout = io::stdout();
+    let mut out = stdout.lock();
+    match run(cli, &mut out) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            let _ = out.flush();
+            eprintln!("autoplug: error: {error}");
+            ExitCode::FAILURE
+        }
+    }
+}

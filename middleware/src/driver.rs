@@ -1,0 +1,205 @@
+//! Runs a sans-IO [`Job`] over a real-time [`Transport`] with the wall clock.
+//!
+//! The loop: poll the job, hand every frame it has to the transport (a frame counts as on
+//! the bus once the transport has taken it), then wait for a frame until the job's next
+//! deadline. Frames of a block go out back to back: the ECUs advertise block size 0 and
+//! STmin 0, and waiting for the socket between them would only slow the transfer down.
+
+use std::fmt;
+use std::time::{Duration, Instant as WallInstant};
+
+use autoplug_ecu::Instant;
+
+use crate::tester::Job;
+use crate::transport::{Transport, TransportError};
+
+/// The longest the loop sleeps in the transport, even without a deadline: a bound on how
+/// late a timer set by a callback (e.g. a progress bar) is noticed.
+pub const MAX_WAIT: Duration = Duration::from_millis(10);
+
+/// Frames taken from the transport before the job gets to send again.
+const MAX_BATCH: usize = 64;
+
+/// The wall clock as the sans-IO code sees it: microseconds since the clock was made.
+#[derive(Debug, Clone, Copy)]
+pub struct WallClock {
+    epoch: WallInstant,
+}
+
+impl WallClock {
+    /// A clock reading 0 now.
+    pub fn new() -> Self {
+        Self {
+            epoch: WallInstant::now(),
+        }
+    }
+
+    /// The time now.
+    pub fn now(&self) -> Instant {
+        Instant::from_micros(self.epoch.elapsed().as_micros() as u64)
+    }
+}
+
+impl Default for WallClock {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Why a driven job did not give its output.
+#[derive(Debug)]
+pub enum DriveError<E> {
+    /// The transport failed (the job was abandoned where it stood).
+    Transport(TransportError),
+    /// The job failed.
+    Job(E),
+}
+
+impl<E: fmt::Display> fmt::Display for DriveError<E> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DriveError::Transport(error) => write!(f, "transport failed: {error}"),
+            DriveError::Job(error) => error.fmt(f),
+        }
+    }
+}
+
+impl<E: std::error::Error + 'static> std::error::Error for DriveError<E> {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            DriveError::Transport(error) => Some(error),
+            DriveError::Job(error) => Some(error),
+        }
+    }
+}
+
+/// Runs `job` over `transport` until it has a result.
+pub fn run<J: Job + ?Sized>(
+    transport: &mut dyn Transport,
+    job: &mut J,
+) -> Result<J::Output, DriveError<J::Error>> {
+    let clock = WallClock::new();
+    loop {
+        let now = clock.now();
+        job.poll(now);
+        while let Some(frame) = job.poll_transmit(now) {
+            transport.send(&frame).map_err(DriveError::Transport)?;
+            job.confirm_transmit(clock.now());
+        }
+        if let Some(result) = job.take_result() {
+            return result.map_err(DriveError::Job);
+        }
+        let now = clock.now();
+        let wait = job
+            .next_deadline()
+            .map_or(MAX_WAIT, |deadline| {
+                Duration::from_micros(deadline.micros_since(now))
+            })
+            .min(MAX_WAIT);
+        let mut timeout = wait;
+        // What has arrived (a bounded batch, so a busy bus cannot starve the job's own
+        // frames and timers), then back to the job.
+        for _ in 0..MAX_BATCH {
+            match transport.recv(timeout).map_err(DriveError::Transport)? {
+                Some((frame, _)) => job.on_frame(clock.now(), &frame),
+                None => break,
+            }
+            timeout = Duration::ZERO;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::VecDeque;
+    use std::io;
+
+    use autoplug_can::{Frame, Node};
+
+    use super::*;
+    use crate::tester::{IdentJob, TesterConfig, UdsError};
+    use crate::transport::Timestamp;
+
+    /// A bus with one ECU that answers every ReadDataByIdentifier with "AB", or a link
+    /// that breaks at the first frame.
+    struct Scripted {
+        broken: bool,
+        inbox: VecDeque<Frame>,
+        sent: usize,
+    }
+
+    impl Transport for Scripted {
+        fn send(&mut self, frame: &Frame) -> Result<(), TransportError> {
+            if self.broken {
+                return Err(TransportError::Io {
+                    context: "writing to the test link".into(),
+                    source: io::Error::new(io::ErrorKind::BrokenPipe, "gone"),
+                });
+            }
+            self.sent += 1;
+            let data = frame.data();
+            if frame.id() == 0x70D && data[1] == 0x22 {
+                let answer = [0x05, 0x62, data[2], data[3], b'A', b'B', 0xCC, 0xCC];
+                self.inbox.push_back(Frame::new(0x78D, &answer).unwrap());
+            }
+            Ok(())
+        }
+
+        fn recv(
+            &mut self,
+            timeout: Duration,
+        ) -> Result<Option<(Frame, Timestamp)>, TransportError> {
+            match self.inbox.pop_front() {
+                Some(frame) => Ok(Some((
+                    frame,
+                    Timestamp {
+                        host: WallInstant::now(),
+                        bus_us: None,
+                    },
+                ))),
+                None => {
+                    std::thread::sleep(timeout);
+                    Ok(None)
+                }
+            }
+        }
+
+        fn describe(&self) -> String {
+            "scripted".into()
+        }
+    }
+
+    #[test]
+    fn a_job_runs_over_a_transport_with_the_wall_clock() {
+        let mut link = Scripted {
+            broken: false,
+            inbox: VecDeque::new(),
+            sent: 0,
+        };
+        let mut job = IdentJob::new(&[Node::Cruise, Node::ABS], TesterConfig::default());
+        let rows = run(&mut link, &mut job).unwrap();
+        assert_eq!(
+            link.sent, 5,
+            "four DIDs of the cruise ECU, one of the silent ABS"
+        );
+        assert_eq!(rows[0].part_number.as_deref(), Ok(&b"AB"[..]));
+        assert_eq!(rows[0].hardware_version.as_deref(), Ok(&b"AB"[..]));
+        assert!(matches!(rows[1].part_number, Err(UdsError::Timeout { .. })));
+    }
+
+    #[test]
+    fn a_broken_transport_ends_the_job_with_its_error() {
+        let mut link = Scripted {
+            broken: true,
+            inbox: VecDeque::new(),
+            sent: 0,
+        };
+        let mut job = IdentJob::new(&[Node::Cruise], TesterConfig::default());
+        let error = run(&mut link, &mut job).unwrap_err();
+        assert!(matches!(error, DriveError::Transport(_)));
+        assert_eq!(
+            error.to_string(),
+            "transport failed: writing to the test link: gone"
+        );
+    }
+}

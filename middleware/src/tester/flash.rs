@@ -1,0 +1,919 @@
+//! The flashing job: the download sequence of a production flash tool, as a state
+//! machine.
+//!
+//! | phase | requests |
+//! |---|---|
+//! | session setup | functional 0x10 03 (extended), 0x85 02 (DTC setting off), 0x28 03 01 (normal communication off); physical 0x10 02 (programming) |
+//! | security | 0x27 01 (seed), 0x27 02 (key = `key_for(secret, node, seed)`) |
+//! | erase | 0x31 01 FF00, answered after a series of 0x78 |
+//! | transfer | 0x34 00 44 (slot address, image length); 0x36 blocks of the announced length; 0x37 |
+//! | check | 0x31 01 FF01 (the ECU verifies the signature and marks the image) |
+//! | reset and wait | 0x11 01; TesterPresent (0x3E 00) until the ECU answers again |
+//! | restore | functional 0x28 00 01, 0x85 01, 0x10 01 |
+//!
+//! Switching normal communication and DTC setting off on every ECU frees the bus for the
+//! transfer and keeps the others from recording "lost communication" DTCs while the target
+//! is silent. A functional TesterPresent (0x3E 80) goes every 2 s throughout, so no ECU's
+//! S3 timer ends its session meanwhile.
+//!
+//! When a step fails, the restore phase still runs (its own failures are only noted), so
+//! the car is left with communication and DTC setting on and every ECU in its default
+//! session; the job then ends with the first failure.
+
+use std::fmt;
+
+use autoplug_can::Node;
+use autoplug_ecu::Instant;
+use autoplug_image::F446RE_ACTIVE_SLOT;
+use autoplug_uds::security::{key_for, SEED_LEN};
+
+use super::{hex_bytes, label, Job, Response, Tester, TesterConfig, UdsError};
+use crate::names::ecu_name;
+
+/// The phases of a flash job, in order; each is timed in the [`FlashReport`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Phase {
+    /// Extended session for all, DTC setting and communication off, programming session
+    /// for the target.
+    SessionSetup,
+    /// Seed and key.
+    Security,
+    /// The erase routine.
+    Erase,
+    /// RequestDownload, TransferData, RequestTransferExit.
+    Transfer,
+    /// The check routine (signature, ECU, version).
+    Check,
+    /// ECUReset and the wait until the ECU answers again.
+    ResetAndWait,
+    /// Communication and DTC setting on, default session for all.
+    Restore,
+}
+
+impl Phase {
+    /// Every phase, in order.
+    pub const ALL: [Phase; 7] = [
+        Phase::SessionSetup,
+        Phase::Security,
+        Phase::Erase,
+        Phase::Transfer,
+        Phase::Check,
+        Phase::ResetAndWait,
+        Phase::Restore,
+    ];
+
+    /// How reports name the phase.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Phase::SessionSetup => "session setup",
+            Phase::Security => "security",
+            Phase::Erase => "erase",
+            Phase::Transfer => "transfer",
+            Phase::Check => "check",
+            Phase::ResetAndWait => "reset and wait",
+            Phase::Restore => "restore",
+        }
+    }
+}
+
+impl fmt::Display for Phase {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How long one phase took.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PhaseTiming {
+    /// The phase.
+    pub phase: Phase,
+    /// From its first request to the response of its last, µs.
+    pub duration_us: u64,
+    /// 0x78 "response pending" received during the phase.
+    pub response_pending: u32,
+}
+
+/// What a flash job did and how long it took (also what a failed job did so far).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FlashReport {
+    /// The ECU flashed.
+    pub ecu: Node,
+    /// Bytes of the image.
+    pub image_len: u64,
+    /// Data bytes per TransferData block (the ECU's maxNumberOfBlockLength less 2); 0
+    /// before RequestDownload was answered.
+    pub block_len: usize,
+    /// TransferData blocks acknowledged.
+    pub blocks: u32,
+    /// The phases that ran, in order.
+    pub phases: Vec<PhaseTiming>,
+    /// Whatever deserves a mention without failing the job (negative answers to the
+    /// functional requests, a repeated block...).
+    pub notes: Vec<String>,
+    /// From the job's first poll to its end, µs.
+    pub total_us: u64,
+}
+
+impl FlashReport {
+    /// How long `phase` took, if it ran.
+    pub fn duration_us(&self, phase: Phase) -> Option<u64> {
+        self.phases
+            .iter()
+            .find(|p| p.phase == phase)
+            .map(|p| p.duration_us)
+    }
+
+    /// Image bytes per second over the transfer phase (RequestDownload to the end of
+    /// RequestTransferExit); `None` unless the whole image was transferred.
+    pub fn transfer_throughput(&self) -> Option<f64> {
+        let duration = self.duration_us(Phase::Transfer)?;
+        let transferred = self.blocks > 0 && self.duration_us(Phase::Check).is_some();
+        (transferred && duration > 0).then(|| self.image_len as f64 * 1e6 / duration as f64)
+    }
+}
+
+impl fmt::Display for FlashReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "{}: {} bytes, {} blocks of up to {} bytes",
+            label(self.ecu),
+            self.image_len,
+            self.blocks,
+            self.block_len
+        )?;
+        writeln!(f, "{:<16} {:>11}", "phase", "time")?;
+        for timing in &self.phases {
+            write!(
+                f,
+                "{:<16} {:>8.1} ms",
+                timing.phase.name(),
+                timing.duration_us as f64 / 1000.0
+            )?;
+            if timing.phase == Phase::Transfer {
+                if let Some(rate) = self.transfer_throughput() {
+                    write!(f, "   {:.0} bytes/s ({:.1} KiB/s)", rate, rate / 1024.0)?;
+                }
+            }
+            if timing.response_pending > 0 {
+                write!(f, "   {} x response pending", timing.response_pending)?;
+            }
+            writeln!(f)?;
+        }
+        write!(
+            f,
+            "{:<16} {:>8.1} ms",
+            "total",
+            self.total_us as f64 / 1000.0
+        )?;
+        for note in &self.notes {
+            write!(f, "\nnote: {note}")?;
+        }
+        Ok(())
+    }
+}
+
+/// What made a flash job fail.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FlashFailure {
+    /// A request failed (negative response, timeout, ISO-TP error, odd response).
+    Uds(UdsError),
+    /// The ECU did not answer TesterPresent within the reset timeout after ECUReset.
+    NoReturnAfterReset {
+        /// How long the tester waited, µs.
+        waited_us: u64,
+    },
+    /// The job cannot run as configured (no image, an image too large for a download).
+    Invalid(String),
+}
+
+impl fmt::Display for FlashFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FlashFailure::Uds(error) => error.fmt(f),
+            FlashFailure::NoReturnAfterReset { waited_us } => write!(
+                f,
+                "the ECU did not answer TesterPresent within {:.1} s after its reset",
+                *waited_us as f64 / 1e6
+            ),
+            FlashFailure::Invalid(reason) => f.write_str(reason),
+        }
+    }
+}
+
+/// A failed flash job: where and why, and the report of what it did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FlashError {
+    /// The ECU being flashed.
+    pub ecu: Node,
+    /// The phase that failed.
+    pub phase: Phase,
+    /// The request that failed, e.g. `"0x31 01 FF00 (erase)"`.
+    pub step: &'static str,
+    /// Why.
+    pub failure: FlashFailure,
+    /// What was done, restore included.
+    pub report: FlashReport,
+}
+
+impl FlashError {
+    /// The UDS error, when a request failed.
+    pub fn uds(&self) -> Option<&UdsError> {
+        match &self.failure {
+            FlashFailure::Uds(error) => Some(error),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for FlashError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "flashing {} failed in phase '{}' at {}: {}",
+            label(self.ecu),
+            self.phase,
+            self.step,
+            self.failure
+        )
+    }
+}
+
+impl std::error::Error for FlashError {}
+
+/// Where a flash job is: progress callbacks get one at each change of phase and each
+/// time more of the image is on the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// The phase under way.
+    pub phase: Phase,
+    /// Image bytes on the bus (acknowledged blocks plus the frames of the block going out).
+    pub transferred: u64,
+    /// Bytes of the image.
+    pub total: u64,
+}
+
+/// What to flash where, and the timing to do it with.
+#[derive(Debug, Clone)]
+pub struct FlashConfig {
+    /// The ECU to flash.
+    pub ecu: Node,
+    /// The signed image file, downloaded as it is.
+    pub image: Vec<u8>,
+    /// The SecurityAccess secret shared with the ECUs.
+    pub security_secret: Vec<u8>,
+    /// P2, P2*, functional window, TesterPresent interval.
+    pub tester: TesterConfig,
+    /// How long after ECUReset the ECU may take to answer again (the bootloader swaps the
+    /// image first), µs.
+    pub reset_timeout_us: u64,
+    /// Time from the reset's response to the first TesterPresent probe, and between probes
+    /// that got no answer, µs.
+    pub reset_probe_interval_us: u64,
+    /// How often a TransferData block whose response is lost is sent again (the ECU
+    /// acknowledges a repeated block without writing it twice).
+    pub transfer_retries: u8,
+}
+
+impl FlashConfig {
+    /// Flashing `image` into `ecu` with the default timing: ISO 14229-2 defaults, 30 s for
+    /// the ECU to come back after its reset (probed every 100 ms), one repeat of a block
+    /// whose response is lost.
+    pub fn new(ecu: Node, image: Vec<u8>, security_secret: &[u8]) -> Self {
+        Self {
+            ecu,
+            image,
+            security_secret: security_secret.to_vec(),
+            tester: TesterConfig::DEFAULT,
+            reset_timeout_us: 30_000_000,
+            reset_probe_interval_us: 100_000,
+            transfer_retries: 1,
+        }
+    }
+}
+
+/// One request of the sequence.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    Extended,
+    DtcOff,
+    CommOff,
+    Programming,
+    Seed,
+    Key,
+    Erase,
+    RequestDownload,
+    TransferData,
+    TransferExit,
+    Check,
+    Reset,
+    AwaitReturn,
+    CommOn,
+    DtcOn,
+    DefaultSession,
+    Finished,
+}
+
+impl Step {
+    const fn phase(self) -> Phase {
+        match self {
+            Step::Extended | Step::DtcOff | Step::CommOff | Step::Programming => {
+                Phase::SessionSetup
+            }
+            Step::Seed | Step::Key => Phase::Security,
+            Step::Erase => Phase::Erase,
+            Step::RequestDownload | Step::TransferData | Step::TransferExit => Phase::Transfer,
+            Step::Check => Phase::Check,
+            Step::Reset | Step::AwaitReturn => Phase::ResetAndWait,
+            Step::CommOn | Step::DtcOn | Step::DefaultSession | Step::Finished => Phase::Restore,
+        }
+    }
+
+    const fn describe(self) -> &'static str {
+        match self {
+            Step::Extended => "functional 0x10 03 (extended session)",
+            Step::DtcOff => "functional 0x85 02 (DTC setting off)",
+            Step::CommOff => "functional 0x28 03 01 (communication off)",
+            Step::Programming => "0x10 02 (programming session)",
+            Step::Seed => "0x27 01 (request seed)",
+            Step::Key => "0x27 02 (send key)",
+            Step::Erase => "0x31 01 FF00 (erase memory)",
+            Step::RequestDownload => "0x34 (request download)",
+            Step::TransferData => "0x36 (transfer data)",
+            Step::TransferExit => "0x37 (request transfer exit)",
+            Step::Check => "0x31 01 FF01 (check programming dependencies)",
+            Step::Reset => "0x11 01 (hard reset)",
+            Step::AwaitReturn => "0x3E 00 (tester present after the reset)",
+            Step::CommOn => "functional 0x28 00 01 (communication on)",
+            Step::DtcOn => "functional 0x85 01 (DTC setting on)",
+            Step::DefaultSession => "functional 0x10 01 (default session)",
+            Step::Finished => "the end of the job",
+        }
+    }
+
+    const fn is_restore(self) -> bool {
+        matches!(
+            self,
+            Step::CommOn | Step::DtcOn | Step::DefaultSession | Step::Finished
+        )
+    }
+}
+
+/// The flash job (see the module documentation).
+pub struct FlashJob {
+    tester: Tester,
+    config: FlashConfig,
+    /// The node number (checked in `new`).
+    node_number: u8,
+    step: Step,
+    /// A request of `step` is in progress.
+    in_flight: bool,
+    started: Option<Instant>,
+    current: Option<(Phase, Instant, u32)>,
+    phases: Vec<PhaseTiming>,
+    notes: Vec<String>,
+    key: [u8; 16],
+    block_len: usize,
+    offset: usize,
+    counter: u8,
+    blocks: u32,
+    retries_left: u8,
+    probe_at: Option<Instant>,
+    return_deadline: Option<Instant>,
+    reset_at: Option<Instant>,
+    failure: Option<(Phase, Step, FlashFailure)>,
+    result: Option<Result<FlashReport, FlashError>>,
+    observer: Option<Box<dyn FnMut(Progress)>>,
+    last_progress: Option<Progress>,
+}
+
+impl FlashJob {
+    /// A job flashing `config.image` into `config.ecu`. Refused when the node is not one of
+    /// the nine ECUs; an empty image or one too long for a 32-bit length fails at the
+    /// first poll.
+    pub fn new(config: FlashConfig) -> Result<Self, UdsError> {
+        let node_number = config
+            .ecu
+            .diag_node_number()
+            .ok_or(UdsError::NotAnEcu(config.ecu))?;
+        Ok(Self {
+            tester: Tester::new(config.tester),
+            node_number,
+            step: Step::Extended,
+            in_flight: false,
+            started: None,
+            current: None,
+            phases: Vec::new(),
+            notes: Vec::new(),
+            key: [0; 16],
+            block_len: 0,
+            offset: 0,
+            counter: 1,
+            blocks: 0,
+            retries_left: config.transfer_retries,
+            probe_at: None,
+            return_deadline: None,
+            reset_at: None,
+            failure: None,
+            result: None,
+            observer: None,
+            last_progress: None,
+            config,
+        })
+    }
+
+    /// Calls `observer` at each change of phase and each time more of the image is on the
+    /// bus (e.g. to move a progress bar).
+    pub fn on_progress(&mut self, observer: impl FnMut(Progress) + 'static) {
+        self.observer = Some(Box::new(observer));
+    }
+
+    /// Where the job is now.
+    pub fn progress(&self) -> Progress {
+        Progress {
+            phase: self.step.phase(),
+            transferred: self.transferred() as u64,
+            total: self.config.image.len() as u64,
+        }
+    }
+
+    fn transferred(&self) -> usize {
+        let mut done = self.offset;
+        if self.step == Step::TransferData && self.in_flight {
+            if let Some((sent, len)) = self.tester.request_progress() {
+                let block = len.saturating_sub(2);
+                done += sent.saturating_sub(2).min(block);
+            }
+        }
+        done.min(self.config.image.len())
+    }
+
+    fn report_progress(&mut self) {
+        let progress = self.progress();
+        if self.last_progress != Some(progress) {
+            self.last_progress = Some(progress);
+            if let Some(observer) = &mut self.observer {
+                observer(progress);
+            }
+        }
+    }
+
+    /// Closes the phase under way at `now` (counting the pending responses it saw).
+    fn close_phase(&mut self, now: Instant) {
+        if let Some((phase, start, pending)) = self.current.take() {
+            self.phases.push(PhaseTiming {
+                phase,
+                duration_us: now.micros_since(start),
+                response_pending: pending,
+            });
+        }
+    }
+
+    fn enter_phase(&mut self, now: Instant, phase: Phase) {
+        if self.current.map(|(p, ..)| p) != Some(phase) {
+            self.close_phase(now);
+            self.current = Some((phase, now, 0));
+        }
+    }
+
+    fn report(&self, now: Instant) -> FlashReport {
+        FlashReport {
+            ecu: self.config.ecu,
+            image_len: self.config.image.len() as u64,
+            block_len: self.block_len,
+            blocks: self.blocks,
+            phases: self.phases.clone(),
+            notes: self.notes.clone(),
+            total_us: self.started.map_or(0, |s| now.micros_since(s)),
+        }
+    }
+
+    /// Issues the request of the current step.
+    fn issue(&mut self, now: Instant) -> Result<(), FlashFailure> {
+        self.enter_phase(now, self.step.phase());
+        let ecu = self.config.ecu;
+        let tester = &mut self.tester;
+        let sent = match self.step {
+            Step::Extended => tester.request_functional(now, &[0x10, 0x03]),
+            Step::DtcOff => tester.request_functional(now, &[0x85, 0x02]),
+            Step::CommOff => tester.request_functional(now, &[0x28, 0x03, 0x01]),
+            Step::Programming => tester.request_echoing(now, ecu, &[0x10, 0x02], 1),
+            Step::Seed => tester.request_echoing(now, ecu, &[0x27, 0x01], 1),
+            Step::Key => {
+                let mut request = vec![0x27, 0x02];
+                request.extend_from_slice(&self.key);
+                tester.request_echoing(now, ecu, &request, 1)
+            }
+            Step::Erase => tester.request_echoing(now, ecu, &[0x31, 0x01, 0xFF, 0x00], 3),
+            Step::RequestDownload => {
+                let len = u32::try_from(self.config.image.len())
+                    .ok()
+                    .filter(|&len| len > 0)
+                    .ok_or_else(|| {
+                        FlashFailure::Invalid(format!(
+                            "an image of {} bytes cannot be downloaded (1 byte to 4 GiB)",
+                            self.config.image.len()
+                        ))
+                    })?;
+                let mut request = vec![0x34, 0x00, 0x44];
+                request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+                request.extend_from_slice(&len.to_be_bytes());
+                tester.request(now, ecu, &request)
+            }
+            Step::TransferData => {
+                let end = (self.offset + self.block_len).min(self.config.image.len());
+                let mut request = Vec::with_capacity(2 + end - self.offset);
+                request.extend_from_slice(&[0x36, self.counter]);
+                request.extend_from_slice(&self.config.image[self.offset..end]);
+                tester.request_echoing(now, ecu, &request, 1)
+            }
+            Step::TransferExit => tester.request(now, ecu, &[0x37]),
+            Step::Check => tester.request_echoing(now, ecu, &[0x31, 0x01, 0xFF, 0x01], 3),
+            Step::Reset => tester.request_echoing(now, ecu, &[0x11, 0x01], 1),
+            Step::AwaitReturn => tester.request_echoing(now, ecu, &[0x3E, 0x00], 1),
+            Step::CommOn => tester.request_functional(now, &[0x28, 0x00, 0x01]),
+            Step::DtcOn => tester.request_functional(now, &[0x85, 0x01]),
+            Step::DefaultSession => tester.request_functional(now, &[0x10, 0x01]),
+            Step::Finished => return Ok(()),
+        };
+        sent.map_err(FlashFailure::Uds)?;
+        self.in_flight = true;
+        Ok(())
+    }
+
+    /// Takes the outcome of the current step's request and picks the next step.
+    fn on_outcome(&mut self, now: Instant, outcome: Result<Response, UdsError>) {
+        let pending = self.tester.last_pending_count();
+        if let Some((_, _, count)) = &mut self.current {
+            *count += pending;
+        }
+        let step = self.step;
+        let next = match (step, outcome) {
+            (Step::Extended | Step::DtcOff | Step::CommOff, Ok(Response::Functional(list))) => {
+                self.note_functional(step, &list);
+                Ok(match step {
+                    Step::Extended => Step::DtcOff,
+                    Step::DtcOff => Step::CommOff,
+                    _ => Step::Programming,
+                })
+            }
+            (Step::CommOn | Step::DtcOn | Step::DefaultSession, outcome) => {
+                match outcome {
+                    Ok(Response::Functional(list)) => self.note_functional(step, &list),
+                    Ok(Response::Positive(_)) => {}
+                    Err(error) => self.notes.push(format!("{}: {error}", step.describe())),
+                }
+                Ok(match step {
+                    Step::CommOn => Step::DtcOn,
+                    Step::DtcOn => Step::DefaultSession,
+                    _ => Step::Finished,
+                })
+            }
+            (Step::AwaitReturn, outcome) => {
+                // Any answer, even a negative one, shows the ECU runs again.
+                let answered = match outcome {
+                    Ok(_) => true,
+                    Err(error) => matches!(error, UdsError::Negative { .. }),
+                };
+                if answered {
+                    Ok(Step::CommOn)
+                } else if self.return_deadline.is_some_and(|d| now >= d) {
+                    Err(FlashFailure::NoReturnAfterReset {
+                        waited_us: self.reset_at.map_or(0, |r| now.micros_since(r)),
+                    })
+                } else {
+                    self.probe_at = Some(now.plus_micros(self.config.reset_probe_interval_us));
+                    Ok(Step::AwaitReturn)
+                }
+            }
+            (Step::Reset, Err(UdsError::Timeout { .. })) => {
+                // The ECU may reset before its response is out: find out by probing.
+                self.notes
+                    .push("no response to ECUReset: probing whether the ECU reset".into());
+                self.start_waiting_for_return(now);
+                Ok(Step::AwaitReturn)
+            }
+            (Step::TransferData, Err(error @ UdsError::Timeout { .. }))
+                if self.retries_left > 0 =>
+            {
+                self.retries_left -= 1;
+                self.notes.push(format!(
+                    "TransferData block {}: {error}; sent again",
+                    self.counter
+                ));
+                Ok(Step::TransferData)
+            }
+            (step, Ok(Response::Positive(response))) => self.on_positive(now, step, &response),
+            (_, Ok(Response::Functional(_))) => Err(FlashFailure::Invalid(
+                "internal error: a functional answer to a physical request".into(),
+            )),
+            (_, Err(error)) => Err(FlashFailure::Uds(error)),
+        };
+        match next {
+            Ok(next) => self.step = next,
+            Err(failure) => self.fail(now, failure),
+        }
+    }
+
+    /// The next step after a positive response of `step`, or why the response is wrong.
+    fn on_positive(
+        &mut self,
+        now: Instant,
+        step: Step,
+        response: &[u8],
+    ) -> Result<Step, FlashFailure> {
+        let unexpected = |service: u8, expected: &str| {
+            FlashFailure::Uds(UdsError::UnexpectedResponse {
+                service,
+                response: response.to_vec(),
+                expected: expected.to_string(),
+            })
+        };
+        match step {
+            Step::Programming => match response {
+                [0x50, 0x02, ..] => Ok(Step::Seed),
+                _ => Err(unexpected(0x10, "50 02 ...")),
+            },
+            Step::Seed => {
+                let Some(seed) = response
+                    .strip_prefix(&[0x67, 0x01])
+                    .and_then(|s| <[u8; SEED_LEN]>::try_from(s).ok())
+                else {
+                    return Err(unexpected(0x27, "67 01 and a 16-byte seed"));
+                };
+                if seed.iter().all(|&b| b == 0) {
+                    // ISO 14229-1: an all-zero seed means "already unlocked".
+                    return Ok(Step::Erase);
+                }
+                self.key = key_for(&self.config.security_secret, self.node_number, &seed);
+                Ok(Step::Key)
+            }
+            Step::Key => match response {
+                [0x67, 0x02, ..] => Ok(Step::Erase),
+                _ => Err(unexpected(0x27, "67 02")),
+            },
+            Step::Erase | Step::Check => {
+                let id: &[u8] = if step == Step::Erase {
+                    &[0xFF, 0x00]
+                } else {
+                    &[0xFF, 0x01]
+                };
+                match response {
+                    [0x71, 0x01, a, b, status @ ..] if [*a, *b] == id => {
+                        // routineStatusRecord: 0x00 is "completed correctly".
+                        if let Some(&status) = status.first() {
+                            if status != 0 {
+                                return Err(unexpected(
+                                    0x31,
+                                    "routine status 00 (completed correctly)",
+                                ));
+                            }
+                        }
+                        Ok(if step == Step::Erase {
+                            Step::RequestDownload
+                        } else {
+                            Step::Reset
+                        })
+                    }
+                    _ => Err(unexpected(0x31, &format!("71 01 {}", hex_bytes(id)))),
+                }
+            }
+            Step::RequestDownload => {
+                let max = parse_max_block_len(response)
+                    .ok_or_else(|| unexpected(0x34, "74, a length format and the block length"))?;
+                // The announced length counts the SID and the block counter; a PDU carries
+                // at most 4095 bytes.
+                let block_len = max.min(4095).saturating_sub(2);
+                if block_len == 0 {
+                    return Err(unexpected(0x34, "a block length of 3 bytes or more"));
+                }
+                self.block_len = block_len;
+                self.offset = 0;
+                self.counter = 1;
+                self.retries_left = self.config.transfer_retries;
+                Ok(Step::TransferData)
+            }
+            Step::TransferData => match response {
+                [0x76, counter, ..] if *counter == self.counter => {
+                    self.offset = (self.offset + self.block_len).min(self.config.image.len());
+                    self.blocks += 1;
+                    // The block sequence counter wraps 0xFF → 0x00 (ISO 14229-1 14.4).
+                    self.counter = self.counter.wrapping_add(1);
+                    self.retries_left = self.config.transfer_retries;
+                    Ok(if self.offset >= self.config.image.len() {
+                        Step::TransferExit
+                    } else {
+                        Step::TransferData
+                    })
+                }
+                _ => Err(unexpected(
+                    0x36,
+                    &format!("76 {:02X} (the block counter)", self.counter),
+                )),
+            },
+            Step::TransferExit => match response {
+                [0x77, ..] => Ok(Step::Check),
+                _ => Err(unexpected(0x37, "77")),
+            },
+            Step::Reset => match response {
+                [0x51, 0x01, ..] => {
+                    self.start_waiting_for_return(now);
+                    Ok(Step::AwaitReturn)
+                }
+                _ => Err(unexpected(0x11, "51 01")),
+            },
+            _ => Ok(step),
+        }
+    }
+
+    fn start_waiting_for_return(&mut self, now: Instant) {
+        self.reset_at = Some(now);
+        self.return_deadline = Some(now.plus_micros(self.config.reset_timeout_us));
+        // The first probe waits too: an ECU still running when it arrives would answer it
+        // from the old software.
+        self.probe_at = Some(now.plus_micros(self.config.reset_probe_interval_us));
+    }
+
+    fn note_functional(&mut self, step: Step, list: &[super::FunctionalResponse]) {
+        for response in list {
+            if let Err(error) = &response.result {
+                self.notes.push(format!(
+                    "{}: {} answered: {error}",
+                    step.describe(),
+                    ecu_name(response.ecu)
+                ));
+            }
+        }
+    }
+
+    fn fail(&mut self, now: Instant, failure: FlashFailure) {
+        if self.step.is_restore() {
+            self.notes
+                .push(format!("{}: {failure}", self.step.describe()));
+            self.step = match self.step {
+                Step::CommOn => Step::DtcOn,
+                Step::DtcOn => Step::DefaultSession,
+                _ => Step::Finished,
+            };
+            return;
+        }
+        self.failure = Some((self.step.phase(), self.step, failure));
+        // Leave the car as it was: communication, DTC setting, default session.
+        self.close_phase(now);
+        self.step = Step::CommOn;
+    }
+
+    fn finish(&mut self, now: Instant) {
+        self.close_phase(now);
+        self.tester.set_tester_present(false);
+        let report = self.report(now);
+        self.result = Some(match self.failure.take() {
+            None => Ok(report),
+            Some((phase, step, failure)) => Err(FlashError {
+                ecu: self.config.ecu,
+                phase,
+                step: step.describe(),
+                failure,
+                report,
+            }),
+        });
+    }
+}
+
+/// maxNumberOfBlockLength from a RequestDownload response: `74`, the
+/// lengthFormatIdentifier (its high nibble is the number of bytes that follow), the length.
+fn parse_max_block_len(response: &[u8]) -> Option<usize> {
+    let [0x74, format, rest @ ..] = response else {
+        return None;
+    };
+    let n = usize::from(format >> 4);
+    if n == 0 || n > 8 || rest.len() < n {
+        return None;
+    }
+    let value = rest[..n]
+        .iter()
+        .fold(0u64, |acc, &b| (acc << 8) | u64::from(b));
+    usize::try_from(value).ok()
+}
+
+impl Job for FlashJob {
+    type Output = FlashReport;
+    type Error = FlashError;
+
+    fn tester(&self) -> &Tester {
+        &self.tester
+    }
+
+    fn tester_mut(&mut self) -> &mut Tester {
+        &mut self.tester
+    }
+
+    fn advance(&mut self, now: Instant) {
+        if self.result.is_some() {
+            return;
+        }
+        if self.started.is_none() {
+            self.started = Some(now);
+            self.tester.set_tester_present(true);
+            // The first TesterPresent goes out now, before the first request.
+            self.tester.poll(now);
+        }
+        loop {
+            if self.in_flight {
+                let Some(outcome) = self.tester.take_response() else {
+                    break;
+                };
+                self.in_flight = false;
+                self.on_outcome(now, outcome);
+                continue;
+            }
+            if self.step == Step::Finished {
+                self.finish(now);
+                break;
+            }
+            if self.step == Step::AwaitReturn {
+                match self.probe_at {
+                    Some(at) if now < at => break,
+                    _ => self.probe_at = None,
+                }
+            }
+            if let Err(failure) = self.issue(now) {
+                self.fail(now, failure);
+            }
+        }
+        self.report_progress();
+    }
+
+    fn own_deadline(&self) -> Option<Instant> {
+        if self.step == Step::AwaitReturn && !self.in_flight {
+            self.probe_at
+        } else {
+            None
+        }
+    }
+
+    fn take_result(&mut self) -> Option<Result<FlashReport, FlashError>> {
+        self.result.take()
+    }
+}
+
+impl fmt::Debug for FlashJob {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("FlashJob")
+            .field("ecu", &self.config.ecu)
+            .field("image_len", &self.config.image.len())
+            .field("step", &self.step)
+            .field("offset", &self.offset)
+            .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_block_length_of_a_request_download_response() {
+        assert_eq!(parse_max_block_len(&[0x74, 0x20, 0x0F, 0xFF]), Some(4095));
+        assert_eq!(parse_max_block_len(&[0x74, 0x10, 0x82]), Some(0x82));
+        assert_eq!(
+            parse_max_block_len(&[0x74, 0x40, 0x00, 0x00, 0x01, 0x02]),
+            Some(0x102)
+        );
+        assert_eq!(parse_max_block_len(&[0x74, 0x20, 0x0F]), None);
+        assert_eq!(parse_max_block_len(&[0x74, 0x00]), None);
+        assert_eq!(parse_max_block_len(&[0x75, 0x20, 0x0F, 0xFF]), None);
+    }
+
+    #[test]
+    fn a_report_shows_every_phase_and_the_throughput() {
+        let report = FlashReport {
+            ecu: Node::Cruise,
+            image_len: 65_536,
+            block_len: 4093,
+            blocks: 17,
+            phases: Phase::ALL
+                .iter()
+                .map(|&phase| PhaseTiming {
+                    phase,
+                    duration_us: if phase == Phase::Transfer {
+                        2_000_000
+                    } else {
+                        100_000
+                    },
+                    response_pending: u32::from(phase == Phase::Erase) * 2,
+                })
+                .collect(),
+            notes: vec!["something".into()],
+            total_us: 2_600_000,
+        };
+        assert_eq!(report.transfer_throughput(), Some(32_768.0));
+        let text = report.to_string();
+        for phase in Phase::ALL {
+            assert!(text.contains(phase.name()), "{text}");
+        }
+        assert!(text.contains("32768 bytes/s (32.0 KiB/s)"), "{text}");
+        assert!(text.contains("2 x response pending"), "{text}");
+        assert!(text.contains("note: something"), "{text}");
+    }
+}

@@ -1,0 +1,304 @@
+//! Reading identification: part number (F187), software version (F189), serial number
+//! (F18C) and hardware version (F191) of one ECU or all nine, in the default session.
+//!
+//! Each DID is read with a request of its own: the ECUs' identification strings have no
+//! length field, so a response to several DIDs at once could not be split where one
+//! string ends and the next identifier starts.
+
+use std::convert::Infallible;
+use std::fmt::Write as _;
+
+use autoplug_can::Node;
+use autoplug_ecu::Instant;
+use autoplug_uds::server::did;
+
+use super::{Job, Response, Tester, TesterConfig, UdsError};
+use crate::names::ecu_name;
+
+/// The DIDs read, in table order: part number, software version, serial number, hardware
+/// version.
+pub const IDENTIFICATION_DIDS: [u16; 4] = [
+    did::PART_NUMBER,
+    did::SOFTWARE_VERSION,
+    did::SERIAL_NUMBER,
+    did::HARDWARE_VERSION,
+];
+
+/// What one ECU said about itself; each value is the DID's data or why it is missing.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EcuIdentification {
+    /// The ECU.
+    pub ecu: Node,
+    /// F187, spare part number.
+    pub part_number: Result<Vec<u8>, UdsError>,
+    /// F189, application software version.
+    pub software_version: Result<Vec<u8>, UdsError>,
+    /// F18C, ECU serial number.
+    pub serial_number: Result<Vec<u8>, UdsError>,
+    /// F191, hardware version.
+    pub hardware_version: Result<Vec<u8>, UdsError>,
+}
+
+impl EcuIdentification {
+    fn new(ecu: Node) -> Self {
+        let missing = || Err(UdsError::Busy);
+        Self {
+            ecu,
+            part_number: missing(),
+            software_version: missing(),
+            serial_number: missing(),
+            hardware_version: missing(),
+        }
+    }
+
+    fn slot(&mut self, index: usize) -> &mut Result<Vec<u8>, UdsError> {
+        match index {
+            0 => &mut self.part_number,
+            1 => &mut self.software_version,
+            2 => &mut self.serial_number,
+            _ => &mut self.hardware_version,
+        }
+    }
+
+    /// The four values in [`IDENTIFICATION_DIDS`] order.
+    pub fn values(&self) -> [&Result<Vec<u8>, UdsError>; 4] {
+        [
+            &self.part_number,
+            &self.software_version,
+            &self.serial_number,
+            &self.hardware_version,
+        ]
+    }
+
+    /// Whether the ECU answered at all (a positive or a negative response).
+    pub fn answered(&self) -> bool {
+        self.values().iter().any(|v| {
+            !matches!(
+                v,
+                Err(UdsError::Timeout { .. } | UdsError::Transport { .. } | UdsError::Busy)
+            )
+        })
+    }
+}
+
+/// A DID's value as text: printable ASCII as it is, anything else in hex.
+pub fn value_text(value: &Result<Vec<u8>, UdsError>) -> String {
+    match value {
+        Ok(bytes) if bytes.iter().all(|b| (0x20..=0x7E).contains(b)) => {
+            String::from_utf8_lossy(bytes).into_owned()
+        }
+        Ok(bytes) => format!(
+            "0x{}",
+            bytes.iter().map(|b| format!("{b:02X}")).collect::<String>()
+        ),
+        Err(UdsError::Negative { nrc, name, .. }) => format!("NRC 0x{nrc:02X} {name}"),
+        Err(UdsError::Timeout { .. }) => "no response".to_string(),
+        Err(error) => format!("error: {error}"),
+    }
+}
+
+/// The identification table the `ids` command prints.
+pub fn identification_table(rows: &[EcuIdentification]) -> String {
+    let headers = [
+        "ECU",
+        "node",
+        "part number (F187)",
+        "software (F189)",
+        "serial (F18C)",
+        "hardware (F191)",
+    ];
+    let cells: Vec<[String; 6]> = rows
+        .iter()
+        .map(|row| {
+            let number = row
+                .ecu
+                .diag_node_number()
+                .map_or_else(String::new, |n| format!("0x{n:02X}"));
+            let [a, b, c, d] = row.values().map(value_text);
+            [ecu_name(row.ecu).to_string(), number, a, b, c, d]
+        })
+        .collect();
+    let mut widths = headers.map(str::len);
+    for row in &cells {
+        for (width, cell) in widths.iter_mut().zip(row) {
+            *width = (*width).max(cell.chars().count());
+        }
+    }
+    let mut out = String::new();
+    let mut line = |cells: &[&str]| {
+        let text: Vec<String> = cells
+            .iter()
+            .zip(widths)
+            .map(|(cell, width)| format!("{cell:<width$}"))
+            .collect();
+        let _ = writeln!(out, "{}", text.join("  ").trim_end());
+    };
+    line(&headers);
+    for row in &cells {
+        line(&row.iter().map(String::as_str).collect::<Vec<_>>());
+    }
+    out
+}
+
+/// Reads the identification DIDs of the given ECUs, one request at a time. An ECU that
+/// does not answer its first request is not asked the rest (each would only time out
+/// again); the job never fails as a whole, each value says what happened.
+#[derive(Debug)]
+pub struct IdentJob {
+    tester: Tester,
+    rows: Vec<EcuIdentification>,
+    ecu: usize,
+    did: usize,
+    in_flight: bool,
+    done: Option<Vec<EcuIdentification>>,
+}
+
+impl IdentJob {
+    /// A job reading `ecus` (in that order) with the given timing.
+    pub fn new(ecus: &[Node], config: TesterConfig) -> Self {
+        Self {
+            tester: Tester::new(config),
+            rows: ecus
+                .iter()
+                .map(|&ecu| EcuIdentification::new(ecu))
+                .collect(),
+            ecu: 0,
+            did: 0,
+            in_flight: false,
+            done: None,
+        }
+    }
+
+    fn next_did(&mut self) {
+        self.did += 1;
+        if self.did == IDENTIFICATION_DIDS.len() {
+            self.did = 0;
+            self.ecu += 1;
+        }
+    }
+}
+
+impl Job for IdentJob {
+    type Output = Vec<EcuIdentification>;
+    type Error = Infallible;
+
+    fn tester(&self) -> &Tester {
+        &self.tester
+    }
+
+    fn tester_mut(&mut self) -> &mut Tester {
+        &mut self.tester
+    }
+
+    fn advance(&mut self, now: Instant) {
+        loop {
+            if self.done.is_some() {
+                return;
+            }
+            if self.in_flight {
+                let Some(outcome) = self.tester.take_response() else {
+                    return;
+                };
+                self.in_flight = false;
+                let did = IDENTIFICATION_DIDS[self.did];
+                let value = match outcome {
+                    Ok(Response::Positive(response)) => match response.as_slice() {
+                        [0x62, hi, lo, data @ ..] if u16::from_be_bytes([*hi, *lo]) == did => {
+                            Ok(data.to_vec())
+                        }
+                        _ => Err(UdsError::UnexpectedResponse {
+                            service: 0x22,
+                            response,
+                            expected: format!(
+                                "62 {:02X} {:02X} and the data",
+                                did >> 8,
+                                did & 0xFF
+                            ),
+                        }),
+                    },
+                    Ok(Response::Functional(_)) => Err(UdsError::Busy),
+                    Err(error) => Err(error),
+                };
+                let silent = matches!(value, Err(UdsError::Timeout { .. }));
+                let row = &mut self.rows[self.ecu];
+                if silent {
+                    // Nobody there: the remaining DIDs get the same answer without asking.
+                    for index in self.did..IDENTIFICATION_DIDS.len() {
+                        *row.slot(index) = value.clone();
+                    }
+                    self.did = 0;
+                    self.ecu += 1;
+                } else {
+                    *row.slot(self.did) = value;
+                    self.next_did();
+                }
+                continue;
+            }
+            let Some(row) = self.rows.get(self.ecu) else {
+                self.done = Some(std::mem::take(&mut self.rows));
+                return;
+            };
+            let ecu = row.ecu;
+            let did = IDENTIFICATION_DIDS[self.did].to_be_bytes();
+            match self
+                .tester
+                .request_echoing(now, ecu, &[0x22, did[0], did[1]], 2)
+            {
+                Ok(()) => self.in_flight = true,
+                Err(error) => {
+                    *self.rows[self.ecu].slot(self.did) = Err(error);
+                    self.next_did();
+                }
+            }
+        }
+    }
+
+    fn take_result(&mut self) -> Option<Result<Vec<EcuIdentification>, Infallible>> {
+        self.done.take().map(Ok)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_table_shows_text_hex_and_errors() {
+        let rows = vec![
+            EcuIdentification {
+                ecu: Node::Cruise,
+                part_number: Ok(b"AP-CRUISE-0001".to_vec()),
+                software_version: Ok(b"1.2.0".to_vec()),
+                serial_number: Ok(vec![0x0D, 0x00, 0x42]),
+                hardware_version: Err(UdsError::negative(0x22, 0x31)),
+            },
+            EcuIdentification {
+                ecu: Node::ABS,
+                part_number: Err(UdsError::Timeout {
+                    service: 0x22,
+                    waited_us: 50_000,
+                    pending: 0,
+                }),
+                software_version: Err(UdsError::Timeout {
+                    service: 0x22,
+                    waited_us: 50_000,
+                    pending: 0,
+                }),
+                serial_number: Err(UdsError::Busy),
+                hardware_version: Err(UdsError::Busy),
+            },
+        ];
+        let table = identification_table(&rows);
+        let lines: Vec<&str> = table.lines().collect();
+        assert_eq!(lines.len(), 3, "{table}");
+        assert!(lines[0].starts_with("ECU"), "{table}");
+        assert!(lines[1].contains("cruise"), "{table}");
+        assert!(lines[1].contains("0x0D"), "{table}");
+        assert!(lines[1].contains("AP-CRUISE-0001"), "{table}");
+        assert!(lines[1].contains("0x0D0042"), "{table}");
+        assert!(lines[1].contains("NRC 0x31 requestOutOfRange"), "{table}");
+        assert!(lines[2].contains("no response"), "{table}");
+        assert!(rows[0].answered());
+        assert!(!rows[1].answered());
+    }
+}
