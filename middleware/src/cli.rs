@@ -14,6 +14,7 @@ use autoplug_image::{ImageHeader, SoftwareVariant, Version, BUILD_ID_LEN};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::demo::Demo;
 use crate::driver::{self, DriveError};
 use crate::image_tool::{self, BuildOptions, ImageToolError, PayloadKind, SignatureCheck};
 use crate::names::{ecu_label, parse_ecu, ECUS, ECU_NAME_LIST};
@@ -22,6 +23,7 @@ use crate::tester::{
 };
 use crate::transport::{self, TransportError, Via};
 use crate::DEV_SECURITY_SECRET;
+use autoplug_virtual_car::scenario::Scenario;
 
 /// The `autoplug` command line.
 #[derive(Debug, Parser)]
@@ -90,6 +92,26 @@ pub enum Command {
         #[command(flatten)]
         timing: TimingArgs,
     },
+    /// Run one of the report's demonstrations on the virtual car, the flashing done over
+    /// CAN by this tool: `cruise` (scenario 1, the broken cruise control) or `abs`
+    /// (scenario 2, the broken ABS). Run from the repository root (it reads
+    /// scenarios/demo-*.toml).
+    Demo {
+        /// Which demonstration: cruise or abs.
+        #[arg(value_parser = parse_demo)]
+        which: Demo,
+        /// Also write the run's trace, bus log, summary and plots here.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
+}
+
+fn parse_demo(text: &str) -> Result<Demo, String> {
+    match text {
+        "cruise" => Ok(Demo::Cruise),
+        "abs" => Ok(Demo::Abs),
+        other => Err(format!("no demonstration '{other}': cruise or abs")),
+    }
 }
 
 /// `image` subcommands.
@@ -256,11 +278,14 @@ pub enum CliError {
     NoAnswer(String),
     /// Writing the output failed.
     Output(io::Error),
+    /// A demonstration could not run.
+    Demo(String),
 }
 
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
+            CliError::Demo(why) => write!(f, "demonstration: {why}"),
             CliError::Image(error) => error.fmt(f),
             CliError::Transport(error) => error.fmt(f),
             CliError::Flash(error) => error.fmt(f),
@@ -418,7 +443,55 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             timing,
             out,
         ),
+        Command::Demo { which, out: dir } => demo(which, dir.as_deref(), out),
     }
+}
+
+/// Runs a demonstration and reports what it showed.
+fn demo(which: Demo, dir: Option<&Path>, out: &mut dyn Write) -> Result<(), CliError> {
+    let path = Path::new(which.scenario_file());
+    let scenario = Scenario::load(path).map_err(|e| CliError::Demo(e.to_string()))?;
+    let report = crate::demo::run(which, &scenario).map_err(|e| CliError::Demo(e.to_string()))?;
+    let w = |out: &mut dyn Write, text: String| writeln!(out, "{text}").map_err(CliError::Output);
+    w(
+        out,
+        format!("{} ({})", scenario.name, which.scenario_file()),
+    )?;
+    for (variant, version, flash) in &report.flashes {
+        w(
+            out,
+            format!(
+                "flashed {variant} software {version} into the {} ECU over CAN:",
+                which.ecu().name()
+            ),
+        )?;
+        w(out, format!("{flash}"))?;
+    }
+    let s = report.symptom;
+    match which {
+        Demo::Cruise => w(
+            out,
+            format!(
+                "cruise at 90 km/h, rms speed error around the set speed: faulty software {:.2} km/h, correct software {:.2} km/h",
+                s.faulty, s.fixed
+            ),
+        )?,
+        Demo::Abs => w(
+            out,
+            format!(
+                "full braking on split friction, heading change: faulty software {:.1} deg, correct software {:.1} deg",
+                s.faulty, s.fixed
+            ),
+        )?,
+    }
+    if let Some(dir) = dir {
+        let dir = dir.join(&scenario.name);
+        std::fs::create_dir_all(&dir).map_err(CliError::Output)?;
+        autoplug_virtual_car::report::write_outputs(&dir, &report.record)
+            .map_err(CliError::Output)?;
+        w(out, format!("written to {}", dir.display()))?;
+    }
+    Ok(())
 }
 
 /// Checks an image file against the ECU before anything is sent: a header, the right

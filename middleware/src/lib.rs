@@ -35,9 +35,11 @@
 #![forbid(unsafe_code)]
 
 pub mod cli;
+pub mod demo;
 pub mod driver;
 pub mod image_tool;
 pub mod names;
+pub mod on_car;
 pub mod tester;
 pub mod transport;
 

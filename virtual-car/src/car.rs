@@ -125,6 +125,12 @@ where
                 self.sent_since_boot = self.sent_since_boot.saturating_add(1);
             }
         }
+        // Responses to the requests handled at delivery go out first; then the stack's
+        // timers and a programming slice, which stalls the core (what it produces goes
+        // out once the stall is over).
+        for frame in self.diag.poll_transmit(t_us) {
+            let _ = bus.send(self.node, frame, t_us * 1000);
+        }
         let reset = self.diag.poll(t_us, self.ecu.dtcs_mut(), live);
         for frame in self.diag.poll_transmit(t_us) {
             let _ = bus.send(self.node, frame, t_us * 1000);
@@ -507,7 +513,10 @@ impl VirtualCar {
     /// The frames the external node (a tester in the process) received since the last
     /// call, when captured.
     pub fn take_external_rx(&mut self) -> Vec<Frame> {
-        self.external_rx.as_mut().map(std::mem::take).unwrap_or_default()
+        self.external_rx
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
     }
 
     /// The diagnostic half of an ECU: what it runs, whether it is stalled...

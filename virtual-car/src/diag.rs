@@ -400,10 +400,14 @@ impl VirtualDiag {
 
     fn live_values(&self, t_us: u64, mut live: LiveValues) -> LiveValues {
         if self.node != Node::Cruise {
-            // Stale after 3 periods of VehicleSpeedMsg (10 ms), like every CAN input.
+            // Stale after 3 periods of VehicleSpeedMsg (10 ms), like every CAN input;
+            // except while the tester has switched normal communication off (UDS 0x28):
+            // then the bus is silent on purpose and the last speed stands.
+            let server = self.stack.server();
+            let silenced = !server.normal_tx_enabled() || !server.normal_rx_enabled();
             live.speed_kmh = self
                 .speed_frame
-                .filter(|(at, _)| t_us.saturating_sub(*at) <= 30_000)
+                .filter(|(at, _)| silenced || t_us.saturating_sub(*at) <= 30_000)
                 .map(|(_, v)| v);
         }
         live

@@ -128,19 +128,22 @@ where
     );
     // The backend of one diagnostic call, from the loop's state.
     macro_rules! backend {
-        () => {
+        () => {{
+            // Stale after 3 periods of VehicleSpeedMsg, like every input; except while the
+            // tester has switched normal communication off (0x28): the bus is silent on
+            // purpose and the last speed stands.
+            let silenced = !diag.server().normal_tx_enabled() || !diag.server().normal_rx_enabled();
             FirmwareBackend {
                 node: E::NODE,
                 flash: &mut ecu_flash,
                 dtcs: ecu.dtcs_mut(),
-                // Stale after 3 periods of VehicleSpeedMsg, like every input.
                 speed_kmh: speed
-                    .filter(|(at, _)| now().as_micros().saturating_sub(*at) <= 30_000)
+                    .filter(|(at, _)| silenced || now().as_micros().saturating_sub(*at) <= 30_000)
                     .map(|(_, v)| v),
                 now_us: now().as_micros(),
                 seed_counter: &mut seed_counter,
             }
-        };
+        }};
     }
     loop {
         match select3(ticker.next(), RX_QUEUE.receive(), diag_ticker.next()).await {
