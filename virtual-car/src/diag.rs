@@ -24,6 +24,7 @@ use autoplug_image::{
     dev, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant, Version,
     F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
 };
+use autoplug_uds::obd::{self, ObdValues};
 use autoplug_uds::{Backend, DiagNode, FlashError, Identification, DEV_SECURITY_SECRET};
 use embassy_boot::{AlignedBuffer, BlockingFirmwareState, BootLoader, BootLoaderConfig, State};
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
@@ -108,9 +109,6 @@ pub struct LiveValues {
     /// Fuel level, litres (engine ECU).
     pub fuel_l: Option<f32>,
 }
-
-/// Tank capacity for OBD-II PID 0x2F (fuel level in percent): the EVO VI's 48 L.
-pub const FUEL_TANK_L: f32 = 48.0;
 
 /// The diagnostic half of one virtual ECU.
 pub struct VirtualDiag {
@@ -570,34 +568,16 @@ impl Backend for EcuBackend<'_> {
     }
 
     fn obd_pids(&self) -> &'static [u8] {
-        match self.node {
-            Node::Engine => &[0x0C, 0x2F],
-            Node::Cruise => &[0x0D],
-            _ => &[],
-        }
+        obd::pids_of(self.node)
     }
 
     fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
-        match pid {
-            // Engine speed: (256 A + B) / 4 rpm.
-            0x0C => {
-                let quarter_rpm = (self.live.engine_rpm? * 4.0).clamp(0.0, 65_535.0) as u16;
-                out[..2].copy_from_slice(&quarter_rpm.to_be_bytes());
-                Some(2)
-            }
-            // Vehicle speed: A km/h.
-            0x0D => {
-                out[0] = self.live.speed_kmh?.clamp(0.0, 255.0).round() as u8;
-                Some(1)
-            }
-            // Fuel tank level: 100 A / 255 %.
-            0x2F => {
-                let fraction = self.live.fuel_l? / FUEL_TANK_L;
-                out[0] = (fraction.clamp(0.0, 1.0) * 255.0).round() as u8;
-                Some(1)
-            }
-            _ => None,
-        }
+        let values = ObdValues {
+            engine_rpm: self.live.engine_rpm,
+            fuel_l: self.live.fuel_l,
+            speed_kmh: self.live.speed_kmh,
+        };
+        obd::encode(pid, &values, out)
     }
 }
 

@@ -9,12 +9,13 @@
 
 use core::cell::RefCell;
 
-use autoplug_can::Node;
+use autoplug_can::{EngineMsg, Frame, Node, VehicleSpeedMsg};
 use autoplug_ecu::Dtcs;
 use autoplug_flash::{ACTIVE, BOOT_STATE, DFU, ECU_DATA, SLOT_ERASE_SIZE};
 use autoplug_image::{
     dev, Expectations, ImageHeader, Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
 };
+use autoplug_uds::obd::{self, ObdValues};
 use autoplug_uds::{Backend, FlashError, Identification};
 use embassy_boot::{BlockingFirmwareState, State};
 use embassy_embedded_hal::flash::partition::BlockingPartition;
@@ -271,6 +272,50 @@ fn set_watchdog(timeout_us: u32) {
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
 }
 
+/// The last data of each message the ECU itself sends: the live DIDs (0x0100 + CAN
+/// identifier) and, for the ECUs that own one, the OBD-II values (taken from the ECU's own
+/// EngineMsg and VehicleSpeedMsg, what it measured and reported).
+pub struct SentFrames {
+    frames: [Option<Frame>; MAX_OWN_MESSAGES],
+}
+
+/// More than any ECU of the catalogue sends.
+const MAX_OWN_MESSAGES: usize = 8;
+
+/// Live data DIDs: 0x0100 + a CAN identifier the ECU sends = that message's last data.
+const LIVE_DID_BASE: u16 = 0x0100;
+
+impl SentFrames {
+    /// None sent yet.
+    pub const fn new() -> Self {
+        Self {
+            frames: [None; MAX_OWN_MESSAGES],
+        }
+    }
+
+    /// Notes a frame the ECU sent.
+    pub fn note(&mut self, frame: &Frame) {
+        let slot = self
+            .frames
+            .iter()
+            .position(|f| f.is_some_and(|f| f.id() == frame.id()))
+            .or_else(|| self.frames.iter().position(Option::is_none));
+        if let Some(slot) = slot {
+            self.frames[slot] = Some(*frame);
+        }
+    }
+
+    fn get(&self, id: u16) -> Option<&Frame> {
+        self.frames.iter().flatten().find(|f| f.id() == id)
+    }
+}
+
+impl Default for SentFrames {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// The ECU as its UDS server sees it, for one call.
 pub struct FirmwareBackend<'a> {
     /// The ECU's node.
@@ -285,6 +330,8 @@ pub struct FirmwareBackend<'a> {
     pub now_us: u64,
     /// Counter mixed into seeds.
     pub seed_counter: &'a mut u32,
+    /// What the ECU last sent.
+    pub sent: &'a SentFrames,
 }
 
 impl Backend for FirmwareBackend<'_> {
@@ -303,8 +350,35 @@ impl Backend for FirmwareBackend<'_> {
         }
     }
 
-    fn read_live_data(&mut self, _did: u16, _out: &mut [u8]) -> Option<usize> {
-        None
+    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
+        let frame = self.sent.get(did.checked_sub(LIVE_DID_BASE)?)?;
+        let data = frame.data();
+        (data.len() <= out.len()).then(|| {
+            out[..data.len()].copy_from_slice(data);
+            data.len()
+        })
+    }
+
+    fn obd_pids(&self) -> &'static [u8] {
+        obd::pids_of(self.node)
+    }
+
+    fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
+        // What the ECU measured, as it reported it on the bus.
+        let engine = self
+            .sent
+            .get(EngineMsg::ID)
+            .and_then(|f| EngineMsg::decode(f.data()).ok());
+        let speed = self
+            .sent
+            .get(VehicleSpeedMsg::ID)
+            .and_then(|f| VehicleSpeedMsg::decode(f.data()).ok());
+        let values = ObdValues {
+            engine_rpm: engine.map(|e| e.engine_rpm),
+            fuel_l: engine.map(|e| e.fuel_level),
+            speed_kmh: speed.map(|s| s.vehicle_speed),
+        };
+        obd::encode(pid, &values, out)
     }
 
     fn vehicle_speed_kmh(&self) -> Option<f32> {

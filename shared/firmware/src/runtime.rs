@@ -24,7 +24,7 @@ use embassy_stm32::Peri;
 use embassy_time::{Duration, Ticker, Timer};
 
 use crate::can_io::{self, RxQueue, TxQueue};
-use crate::diag::{EcuFlash, FirmwareBackend};
+use crate::diag::{EcuFlash, FirmwareBackend, SentFrames};
 use crate::reset::{ResetCause, ResetFlags};
 
 static RX_QUEUE: RxQueue = RxQueue::new();
@@ -110,6 +110,7 @@ where
     let mut diag = DiagNode::new(E::NODE, DEV_SECURITY_SECRET, now()).expect("an ECU");
     let mut speed: Option<(u64, f32)> = None;
     let mut seed_counter = 0u32;
+    let mut sent_frames = SentFrames::new();
 
     let timeout_us = WATCHDOG_TIMEOUT_PERIODS * E::STEP_PERIOD_US;
     let mut watchdog = IndependentWatchdog::new(watchdog, timeout_us as u32);
@@ -142,6 +143,7 @@ where
                     .map(|(_, v)| v),
                 now_us: now().as_micros(),
                 seed_counter: &mut seed_counter,
+                sent: &sent_frames,
             }
         }};
     }
@@ -183,6 +185,7 @@ where
         let tx_enabled = diag.server().normal_tx_enabled();
         while let Some(frame) = ecu.poll_transmit(now()) {
             note_speed(&frame, &mut speed);
+            sent_frames.note(&frame);
             if tx_enabled {
                 can_io::queue_for_transmit(&TX_QUEUE, frame);
                 sent = sent.wrapping_add(1);
