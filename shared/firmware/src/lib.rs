@@ -32,6 +32,26 @@ pub mod io;
 #[cfg(target_os = "none")]
 pub mod runtime;
 
+/// The entry point of an ECU firmware binary: brings up the board (the binary's `board`
+/// module: `init() -> (Platform, impl Io<E>)`) and runs the ECU built by `$new_ecu`
+/// (`fn(Instant) -> E`) with [`runtime::run`].
+///
+/// ```ignore
+/// #[cfg(target_os = "none")]
+/// autoplug_firmware::ecu_main!(ecu_pedals::PedalsEcu::new);
+/// ```
+#[cfg(target_os = "none")]
+#[macro_export]
+macro_rules! ecu_main {
+    ($new_ecu:expr) => {
+        #[embassy_executor::main]
+        async fn main(spawner: embassy_executor::Spawner) {
+            let (platform, board) = board::init();
+            $crate::runtime::run(spawner, platform, board, $new_ecu).await
+        }
+    };
+}
+
 // The defmt transport: RTT, read by probe-rs.
 #[cfg(target_os = "none")]
 use defmt_rtt as _;

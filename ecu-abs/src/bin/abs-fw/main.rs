@@ -20,11 +20,4 @@ fn main() {
 mod board;
 
 #[cfg(target_os = "none")]
-#[embassy_executor::main]
-async fn main(spawner: embassy_executor::Spawner) {
-    let (platform, board) = board::init();
-    autoplug_firmware::runtime::run(spawner, platform, board, |now| {
-        ecu_abs::AbsEcu::new(ecu_abs::BUILD_VARIANT, now)
-    })
-    .await
-}
+autoplug_firmware::ecu_main!(|now| ecu_abs::AbsEcu::new(ecu_abs::BUILD_VARIANT, now));

@@ -19,8 +19,4 @@ fn main() {
 mod board;
 
 #[cfg(target_os = "none")]
-#[embassy_executor::main]
-async fn main(spawner: embassy_executor::Spawner) {
-    let (platform, board) = board::init();
-    autoplug_firmware::runtime::run(spawner, platform, board, ecu_pedals::PedalsEcu::new).await
-}
+autoplug_firmware::ecu_main!(ecu_pedals::PedalsEcu::new);

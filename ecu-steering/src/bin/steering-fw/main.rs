@@ -20,8 +20,4 @@ fn main() {
 mod board;
 
 #[cfg(target_os = "none")]
-#[embassy_executor::main]
-async fn main(spawner: embassy_executor::Spawner) {
-    let (platform, board) = board::init();
-    autoplug_firmware::runtime::run(spawner, platform, board, ecu_steering::SteeringEcu::new).await
-}
+autoplug_firmware::ecu_main!(ecu_steering::SteeringEcu::new);
