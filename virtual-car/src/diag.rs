@@ -114,7 +114,12 @@ pub struct LiveValues {
 pub struct VirtualDiag {
     node: Node,
     flash: RefCell<SimFlash>,
-    stack: DiagNode,
+    /// Boxed: its buffers (8 KiB) would otherwise spread the car's per-tick data over
+    /// many cache lines.
+    stack: Box<DiagNode>,
+    /// `stack.quiescent()` as of the last call into the stack: read every tick, so kept
+    /// here, next to the rest of the tick's data.
+    quiet: bool,
     installed: ImageHeader,
     floor: Version,
     serial: String,
@@ -150,11 +155,13 @@ impl VirtualDiag {
         let flash = RefCell::new(flash);
         write_floor(&flash, FACTORY_VERSION).expect("factory floor");
         let number = node.diag_node_number().expect("an ECU");
-        let stack = DiagNode::new(node, DEV_SECURITY_SECRET, Instant::ZERO).expect("an ECU");
+        let stack =
+            Box::new(DiagNode::new(node, DEV_SECURITY_SECRET, Instant::ZERO).expect("an ECU"));
         let mut diag = Self {
             node,
             flash,
             stack,
+            quiet: true,
             installed: ImageHeader::parse(&image).expect("factory header"),
             floor: FACTORY_VERSION,
             serial: format!("AP{number:02X}{:08X}", (seed as u32) ^ u32::from(number)),
@@ -253,13 +260,14 @@ impl VirtualDiag {
         self.stack.on_frame(now, frame, &mut backend);
         let busy = backend.busy_us;
         self.stall(t_us, busy);
+        self.quiet = self.stack.quiescent();
         true
     }
 
     /// Timers and a slice of pending programming; returns a reset request once its
     /// response is out.
     pub fn poll(&mut self, t_us: u64, dtcs: &mut Dtcs, live: LiveValues) -> bool {
-        if self.stalled(t_us) || self.stack.quiescent() {
+        if self.quiet || self.stalled(t_us) {
             return false;
         }
         let live = self.live_values(t_us, live);
@@ -267,13 +275,15 @@ impl VirtualDiag {
         self.stack.poll(Instant::from_micros(t_us), &mut backend);
         let busy = backend.busy_us;
         self.stall(t_us, busy);
-        self.stack.take_reset().is_some()
+        let reset = self.stack.take_reset().is_some();
+        self.quiet = self.stack.quiescent();
+        reset
     }
 
     /// The diagnostic frames to send now (sent at once: the stack is told so).
     pub fn poll_transmit(&mut self, t_us: u64) -> Vec<Frame> {
         let mut frames = Vec::new();
-        if self.stalled(t_us) || self.stack.quiescent() {
+        if self.quiet || self.stalled(t_us) {
             return frames;
         }
         let now = Instant::from_micros(t_us);
@@ -281,6 +291,7 @@ impl VirtualDiag {
             self.stack.confirm_transmit(now);
             frames.push(frame);
         }
+        self.quiet = self.stack.quiescent();
         frames
     }
 
@@ -362,8 +373,9 @@ impl VirtualDiag {
                 .get_state()
                 .unwrap_or(State::Boot);
         self.unconfirmed = now_state == State::Swap;
-        self.stack = DiagNode::new(self.node, DEV_SECURITY_SECRET, Instant::from_micros(t_us))
+        *self.stack = DiagNode::new(self.node, DEV_SECURITY_SECRET, Instant::from_micros(t_us))
             .expect("an ECU");
+        self.quiet = true;
         self.speed_frame = None;
         self.last_sent.clear();
         self.stalled_frames = 0;
