@@ -24,7 +24,10 @@ fn main() {
 mod boot {
     use core::cell::RefCell;
 
-    use autoplug_flash::{ACTIVE, APP_VECTOR_TABLE, BOOT_STATE, BOOT_SWAP_BUFFER_SIZE, DFU};
+    use autoplug_flash::{
+        ACTIVE, APP_VECTOR_TABLE, BOOT_STATE, BOOT_SWAP_BUFFER_SIZE, DFU, LARGE_SECTORS,
+        SMALL_SECTORS,
+    };
     use cortex_m_rt::{entry, exception, ExceptionFrame};
     use defmt_rtt as _;
     use embassy_boot_stm32::{BootLoader, BootLoaderConfig, State};
@@ -38,11 +41,6 @@ mod boot {
     /// Watchdog timeout while the bootloader works: above the F446's worst-case 128 KiB
     /// sector erase (2 s, DS10693), so a running watchdog never fires mid-erase.
     pub const WATCHDOG_TIMEOUT_US: u32 = 4_000_000;
-
-    /// Where the flash regions of embassy-stm32 start: region 1 (16 KiB sectors) at the
-    /// flash base, region 3 (128 KiB sectors) at sector 5.
-    const REGION1_BASE: u32 = 0x0800_0000;
-    const REGION3_BASE: u32 = 0x0802_0000;
 
     /// A flash region that feeds the watchdog before each operation.
     struct Fed<F>(F);
@@ -97,9 +95,13 @@ mod boot {
         let small = Mutex::<NoopRawMutex, _>::new(RefCell::new(Fed(layout.bank1_region1)));
         let large = Mutex::<NoopRawMutex, _>::new(RefCell::new(Fed(layout.bank1_region3)));
         let config = BootLoaderConfig {
-            active: BlockingPartition::new(&large, ACTIVE.start - REGION3_BASE, ACTIVE.size),
-            dfu: BlockingPartition::new(&large, DFU.start - REGION3_BASE, DFU.size),
-            state: BlockingPartition::new(&small, BOOT_STATE.start - REGION1_BASE, BOOT_STATE.size),
+            active: BlockingPartition::new(&large, ACTIVE.start - LARGE_SECTORS.start, ACTIVE.size),
+            dfu: BlockingPartition::new(&large, DFU.start - LARGE_SECTORS.start, DFU.size),
+            state: BlockingPartition::new(
+                &small,
+                BOOT_STATE.start - SMALL_SECTORS.start,
+                BOOT_STATE.size,
+            ),
         };
         let loader = BootLoader::prepare::<_, _, _, { BOOT_SWAP_BUFFER_SIZE }>(config);
         match loader.state {

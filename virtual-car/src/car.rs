@@ -6,7 +6,7 @@
 //! Time advances in 1 ms ticks of simulated time. The ECUs are not synchronised: each has
 //! a fixed phase offset, as independent boards would, which also spreads the bus traffic.
 
-use crate::diag::{LiveValues, VirtualDiag};
+use crate::diag::VirtualDiag;
 use crate::driver::{DriverControls, Timeline};
 use crate::scenario::{Activation, Event, GearName, Scenario, Software};
 use autoplug_can::{Frame, Gear as CanGear, Node};
@@ -81,7 +81,7 @@ where
         }
     }
 
-    fn deliver(&mut self, bus: &mut VirtualBus, live: LiveValues) {
+    fn deliver(&mut self, bus: &mut VirtualBus) {
         while let Some(delivered) = bus.recv(self.node) {
             let t_us = delivered.t_ns / 1000;
             // A stalled core (flash busy) loses what its receive FIFO cannot hold.
@@ -89,7 +89,7 @@ where
                 continue;
             }
             let dtcs = self.ecu.dtcs_mut();
-            if self.diag.on_frame(t_us, &delivered.frame, dtcs, live) {
+            if self.diag.on_frame(t_us, &delivered.frame, dtcs) {
                 continue;
             }
             if self.diag.normal_rx_enabled() {
@@ -109,7 +109,7 @@ where
         }
     }
 
-    fn transmit(&mut self, bus: &mut VirtualBus, t_us: u64, live: LiveValues) {
+    fn transmit(&mut self, bus: &mut VirtualBus, t_us: u64) {
         if self.diag.stalled(t_us) {
             return;
         }
@@ -121,7 +121,7 @@ where
             }
             // A full transmit queue is counted by the bus; the ECU's next period resends.
             if bus.send(self.node, frame, t_us * 1000).is_ok() {
-                self.diag.note_sent(&frame);
+                self.diag.note_sent(t_us, &frame);
                 self.sent_since_boot = self.sent_since_boot.saturating_add(1);
             }
         }
@@ -131,7 +131,7 @@ where
         for frame in self.diag.poll_transmit(t_us) {
             let _ = bus.send(self.node, frame, t_us * 1000);
         }
-        let reset = self.diag.poll(t_us, self.ecu.dtcs_mut(), live);
+        let reset = self.diag.poll(t_us, self.ecu.dtcs_mut());
         for frame in self.diag.poll_transmit(t_us) {
             let _ = bus.send(self.node, frame, t_us * 1000);
         }
@@ -628,29 +628,16 @@ impl VirtualCar {
         // Frames that completed by now reach their receivers.
         self.bus.run_until(t_us * 1000);
         self.collect_log();
-        // What the engine and cruise ECUs read from their own sensors, for the OBD-II
-        // values their diagnostic servers report.
-        let s = self.vehicle.state();
-        let quiet = LiveValues::default();
-        let engine_live = LiveValues {
-            engine_rpm: Some(s.engine_rpm as f32),
-            fuel_l: Some(s.fuel_l as f32),
-            ..quiet
-        };
-        let cruise_live = LiveValues {
-            speed_kmh: Some(s.speed_kmh()),
-            ..quiet
-        };
         let e = &mut self.ecus;
-        e.pedals.deliver(&mut self.bus, quiet);
-        e.steering.deliver(&mut self.bus, quiet);
-        e.console.deliver(&mut self.bus, quiet);
-        e.engine.deliver(&mut self.bus, engine_live);
-        e.trans.deliver(&mut self.bus, quiet);
-        e.cabin.deliver(&mut self.bus, quiet);
-        e.diff.deliver(&mut self.bus, quiet);
-        e.cruise.deliver(&mut self.bus, cruise_live);
-        e.abs.deliver(&mut self.bus, quiet);
+        e.pedals.deliver(&mut self.bus);
+        e.steering.deliver(&mut self.bus);
+        e.console.deliver(&mut self.bus);
+        e.engine.deliver(&mut self.bus);
+        e.trans.deliver(&mut self.bus);
+        e.cabin.deliver(&mut self.bus);
+        e.diff.deliver(&mut self.bus);
+        e.cruise.deliver(&mut self.bus);
+        e.abs.deliver(&mut self.bus);
         while let Some(delivered) = self.bus.recv(self.external) {
             if let Some(rx) = &mut self.external_rx {
                 rx.push(delivered.frame);
@@ -658,6 +645,7 @@ impl VirtualCar {
         }
 
         // Each ECU's control step, when due, on its own sensors.
+        let s = self.vehicle.state();
         let c = self.controls;
         e.pedals.step_if_due(t_us, || ecu_pedals::Sensors {
             accelerator_pedal: c.accelerator as f32,
@@ -697,15 +685,15 @@ impl VirtualCar {
         });
 
         // Frames due now go to the ECUs' transmit queues.
-        e.pedals.transmit(&mut self.bus, t_us, quiet);
-        e.steering.transmit(&mut self.bus, t_us, quiet);
-        e.console.transmit(&mut self.bus, t_us, quiet);
-        e.engine.transmit(&mut self.bus, t_us, engine_live);
-        e.trans.transmit(&mut self.bus, t_us, quiet);
-        e.cabin.transmit(&mut self.bus, t_us, quiet);
-        e.diff.transmit(&mut self.bus, t_us, quiet);
-        e.cruise.transmit(&mut self.bus, t_us, cruise_live);
-        e.abs.transmit(&mut self.bus, t_us, quiet);
+        e.pedals.transmit(&mut self.bus, t_us);
+        e.steering.transmit(&mut self.bus, t_us);
+        e.console.transmit(&mut self.bus, t_us);
+        e.engine.transmit(&mut self.bus, t_us);
+        e.trans.transmit(&mut self.bus, t_us);
+        e.cabin.transmit(&mut self.bus, t_us);
+        e.diff.transmit(&mut self.bus, t_us);
+        e.cruise.transmit(&mut self.bus, t_us);
+        e.abs.transmit(&mut self.bus, t_us);
 
         // The actuators drive the car for the next tick.
         let actuators = self.actuators();

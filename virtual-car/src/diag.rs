@@ -21,10 +21,9 @@ use autoplug_ecu::{Dtcs, Instant};
 use autoplug_flash::sim::{SimFlash, SlotPartition, SmallPartition};
 use autoplug_flash::{ACTIVE, BOOT_SWAP_BUFFER_SIZE, DFU, ECU_DATA, SECTORS, WRITE_SIZE};
 use autoplug_image::{
-    dev, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant, Version,
-    F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
+    dev, floor, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant,
+    Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
 };
-use autoplug_uds::obd::{self, ObdValues};
 use autoplug_uds::{Backend, DiagNode, FlashError, Identification, DEV_SECURITY_SECRET};
 use embassy_boot::{AlignedBuffer, BlockingFirmwareState, BootLoader, BootLoaderConfig, State};
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
@@ -42,11 +41,6 @@ pub const FACTORY_VERSION: Version = Version::new(1, 0, 0);
 /// Bytes of a factory image's payload: about what the real firmwares take (issue 4's
 /// size table), so a download of one takes as long as a download of those would.
 pub const FACTORY_PAYLOAD_LEN: usize = 30 * 1024;
-
-/// Marks a version-floor record in the ECU data sector.
-const FLOOR_RECORD_MAGIC: [u8; 2] = [0xA5, 0x5A];
-/// Bytes of a version-floor record: magic, major, minor, patch (2), check, pad.
-const FLOOR_RECORD_LEN: usize = 8;
 
 /// The part number of an ECU's software (UDS F187).
 pub fn part_number(node: Node) -> PartNumber {
@@ -99,17 +93,6 @@ pub struct Boot {
     pub took_us: u64,
 }
 
-/// The live values the diagnostic server reports, filled by the car from the ECU.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct LiveValues {
-    /// Vehicle speed as the ECU knows it (received, or its own sensor), km/h.
-    pub speed_kmh: Option<f32>,
-    /// Engine speed, rpm (engine ECU).
-    pub engine_rpm: Option<f32>,
-    /// Fuel level, litres (engine ECU).
-    pub fuel_l: Option<f32>,
-}
-
 /// The diagnostic half of one virtual ECU.
 pub struct VirtualDiag {
     node: Node,
@@ -132,10 +115,6 @@ pub struct VirtualDiag {
     stalled_frames: usize,
     /// Frames lost to a full receive FIFO during stalls.
     overruns: u64,
-    /// Last VehicleSpeedMsg received, and when.
-    speed_frame: Option<(u64, f32)>,
-    /// The data bytes each of the ECU's own messages last carried (live DIDs 0x0100 + ID).
-    last_sent: Vec<(u16, Frame)>,
     key: [u8; 32],
     booted_at_us: u64,
     /// Mixed into security seeds (the simulation has no entropy source).
@@ -170,8 +149,6 @@ impl VirtualDiag {
             stalled_until_us: 0,
             stalled_frames: 0,
             overruns: 0,
-            speed_frame: None,
-            last_sent: Vec::new(),
             key: dev::PUBLIC_KEY,
             booted_at_us: 0,
             seed_counter: number.into(),
@@ -236,27 +213,19 @@ impl VirtualDiag {
     }
 
     /// Offers a received frame to the diagnostic half; returns whether it was a
-    /// diagnostic frame (the vehicle speed, which it notes, goes on to the application).
-    pub fn on_frame(
-        &mut self,
-        t_us: u64,
-        frame: &Frame,
-        dtcs: &mut Dtcs,
-        live: LiveValues,
-    ) -> bool {
-        if frame.id() == VehicleSpeedMsg::ID && self.node != Node::Cruise {
-            if let Ok(message) = VehicleSpeedMsg::decode(frame.data()) {
-                self.speed_frame = Some((t_us, message.vehicle_speed));
-            }
-            // The application may use the speed too.
-            return false;
-        }
-        if !self.stack.accepts(frame.id()) {
-            return false;
-        }
+    /// diagnostic frame (others, the vehicle speed among them, go on to the application).
+    pub fn on_frame(&mut self, t_us: u64, frame: &Frame, dtcs: &mut Dtcs) -> bool {
         let now = Instant::from_micros(t_us);
-        let live = self.live_values(t_us, live);
-        let mut backend = backend!(self, dtcs, live);
+        // Decided here, without touching the boxed stack: most frames are the
+        // application's, and this runs for each of them.
+        let id = frame.id();
+        if id != DIAG_FUNCTIONAL_REQUEST_ID && Some(id) != self.node.diag_request_id() {
+            if id == VehicleSpeedMsg::ID {
+                self.stack.observe(now, frame);
+            }
+            return false;
+        }
+        let mut backend = backend!(self, dtcs);
         self.stack.on_frame(now, frame, &mut backend);
         let busy = backend.busy_us;
         self.stall(t_us, busy);
@@ -266,12 +235,11 @@ impl VirtualDiag {
 
     /// Timers and a slice of pending programming; returns a reset request once its
     /// response is out.
-    pub fn poll(&mut self, t_us: u64, dtcs: &mut Dtcs, live: LiveValues) -> bool {
+    pub fn poll(&mut self, t_us: u64, dtcs: &mut Dtcs) -> bool {
         if self.quiet || self.stalled(t_us) {
             return false;
         }
-        let live = self.live_values(t_us, live);
-        let mut backend = backend!(self, dtcs, live);
+        let mut backend = backend!(self, dtcs);
         self.stack.poll(Instant::from_micros(t_us), &mut backend);
         let busy = backend.busy_us;
         self.stall(t_us, busy);
@@ -295,12 +263,10 @@ impl VirtualDiag {
         frames
     }
 
-    /// Records one of the application's own frames for the live DIDs.
-    pub fn note_sent(&mut self, frame: &Frame) {
-        match self.last_sent.iter_mut().find(|(id, _)| *id == frame.id()) {
-            Some(slot) => slot.1 = *frame,
-            None => self.last_sent.push((frame.id(), *frame)),
-        }
+    /// One of the application's own frames, as it goes out (live data, OBD-II values and
+    /// the vehicle speed the stack knows).
+    pub fn note_sent(&mut self, t_us: u64, frame: &Frame) {
+        self.stack.note_sent(Instant::from_micros(t_us), frame);
     }
 
     /// The self-test passed (CAN up, control loop running): an image booted unconfirmed
@@ -376,8 +342,6 @@ impl VirtualDiag {
         *self.stack = DiagNode::new(self.node, DEV_SECURITY_SECRET, Instant::from_micros(t_us))
             .expect("an ECU");
         self.quiet = true;
-        self.speed_frame = None;
-        self.last_sent.clear();
         self.stalled_frames = 0;
         self.stalled_until_us = t_us + took_us + BOOT_TIME_US;
         self.booted_at_us = self.stalled_until_us;
@@ -407,38 +371,21 @@ impl VirtualDiag {
             self.stalled_until_us = from + busy_us;
         }
     }
-
-    fn live_values(&self, t_us: u64, mut live: LiveValues) -> LiveValues {
-        if self.node != Node::Cruise {
-            // Stale after 3 periods of VehicleSpeedMsg (10 ms), like every CAN input;
-            // except while the tester has switched normal communication off (UDS 0x28):
-            // then the bus is silent on purpose and the last speed stands.
-            let server = self.stack.server();
-            let silenced = !server.normal_tx_enabled() || !server.normal_rx_enabled();
-            live.speed_kmh = self
-                .speed_frame
-                .filter(|(at, _)| silenced || t_us.saturating_sub(*at) <= 30_000)
-                .map(|(_, v)| v);
-        }
-        live
-    }
 }
 
 /// The ECU's side of its UDS server for one call, from the fields of a [`VirtualDiag`]
 /// other than its stack (a macro, so the borrows stay per field).
 macro_rules! backend {
-    ($diag:expr, $dtcs:expr, $live:expr) => {
+    ($diag:expr, $dtcs:expr) => {
         EcuBackend {
             node: $diag.node,
             flash: &$diag.flash,
             dtcs: $dtcs,
-            live: $live,
             installed: &$diag.installed,
             software_version: &$diag.software_version,
             serial: &$diag.serial,
             floor: $diag.floor,
             key: $diag.key,
-            last_sent: &$diag.last_sent,
             random: &mut $diag.seed_counter,
             busy_us: 0,
         }
@@ -451,13 +398,11 @@ struct EcuBackend<'a> {
     node: Node,
     flash: &'a RefCell<SimFlash>,
     dtcs: &'a mut Dtcs,
-    live: LiveValues,
     installed: &'a ImageHeader,
     software_version: &'a str,
     serial: &'a str,
     floor: Version,
     key: [u8; 32],
-    last_sent: &'a [(u16, Frame)],
     /// Entropy for seeds: the simulation is deterministic, so seeds come from the flash's
     /// busy time and a counter, which differ from request to request.
     random: &'a mut usize,
@@ -481,9 +426,6 @@ impl EcuBackend<'_> {
     }
 }
 
-/// Live data DIDs: 0x0100 + a CAN identifier the ECU sends = that message's last data.
-const LIVE_DID_BASE: u16 = 0x0100;
-
 impl Backend for EcuBackend<'_> {
     fn identification(&self) -> Identification<'_> {
         Identification {
@@ -492,20 +434,6 @@ impl Backend for EcuBackend<'_> {
             serial_number: self.serial.as_bytes(),
             hardware_version: b"NUCLEO-F446RE",
         }
-    }
-
-    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
-        let id = did.checked_sub(LIVE_DID_BASE)?;
-        let (_, frame) = self.last_sent.iter().find(|(sent, _)| *sent == id)?;
-        let data = frame.data();
-        (data.len() <= out.len()).then(|| {
-            out[..data.len()].copy_from_slice(data);
-            data.len()
-        })
-    }
-
-    fn vehicle_speed_kmh(&self) -> Option<f32> {
-        self.live.speed_kmh
     }
 
     fn dtcs(&mut self) -> &mut Dtcs {
@@ -578,19 +506,6 @@ impl Backend for EcuBackend<'_> {
                 .map_err(|_| FlashError)
         })
     }
-
-    fn obd_pids(&self) -> &'static [u8] {
-        obd::pids_of(self.node)
-    }
-
-    fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
-        let values = ObdValues {
-            engine_rpm: self.live.engine_rpm,
-            fuel_l: self.live.fuel_l,
-            speed_kmh: self.live.speed_kmh,
-        };
-        obd::encode(pid, &values, out)
-    }
 }
 
 fn busy_us(flash: &RefCell<SimFlash>) -> u64 {
@@ -606,31 +521,27 @@ fn pad_to_words(image: &[u8]) -> Vec<u8> {
 
 /// Appends a version-floor record to the ECU data sector (erasing it when full).
 fn write_floor(flash: &RefCell<SimFlash>, version: Version) -> Result<(), FlashError> {
-    let mut record = [0u8; FLOOR_RECORD_LEN];
-    record[..2].copy_from_slice(&FLOOR_RECORD_MAGIC);
-    record[2] = version.major;
-    record[3] = version.minor;
-    record[4..6].copy_from_slice(&version.patch.to_le_bytes());
-    record[6] = record[..6].iter().fold(0u8, |a, b| a.wrapping_add(*b)) ^ 0xFF;
-    record[7] = 0;
     let mut partition = SmallPartition::ecu_data(flash);
-    let capacity = ECU_DATA.size as usize / FLOOR_RECORD_LEN;
-    let used = (0..capacity)
-        .take_while(|&i| {
-            let mut bytes = [0u8; FLOOR_RECORD_LEN];
-            partition
-                .read((i * FLOOR_RECORD_LEN) as u32, &mut bytes)
-                .is_ok()
-                && bytes != [0xFF; FLOOR_RECORD_LEN]
-        })
-        .count();
-    let slot = if used == capacity {
-        partition.erase(0, ECU_DATA.size).map_err(|_| FlashError)?;
-        0
-    } else {
-        used
+    let capacity = ECU_DATA.size as usize / floor::RECORD_LEN;
+    let mut slot = None;
+    for i in 0..capacity {
+        let mut bytes = [0u8; floor::RECORD_LEN];
+        partition
+            .read((i * floor::RECORD_LEN) as u32, &mut bytes)
+            .map_err(|_| FlashError)?;
+        if floor::decode(&bytes) == floor::Record::Erased {
+            slot = Some(i);
+            break;
+        }
+    }
+    let slot = match slot {
+        Some(slot) => slot,
+        None => {
+            partition.erase(0, ECU_DATA.size).map_err(|_| FlashError)?;
+            0
+        }
     };
     partition
-        .write((slot * FLOOR_RECORD_LEN) as u32, &record)
+        .write((slot * floor::RECORD_LEN) as u32, &floor::encode(version))
         .map_err(|_| FlashError)
 }

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant as WallInstant};
 
-use autoplug_can::{Frame, Node};
+use autoplug_can::{Frame, Node, VehicleSpeedMsg};
 use autoplug_ecu::{Dtcs, Instant};
 use autoplug_image::{
     Expectations, ImageBuilder, PartNumber, SigningKey, Version, F446RE_LOAD_ADDRESS, NUCLEO_F446RE,
@@ -86,14 +86,6 @@ impl Backend for MemEcu {
             serial_number: &self.serial_number,
             hardware_version: b"NUCLEO-F446RE",
         }
-    }
-
-    fn read_live_data(&mut self, _did: u16, _out: &mut [u8]) -> Option<usize> {
-        None
-    }
-
-    fn vehicle_speed_kmh(&self) -> Option<f32> {
-        self.speed
     }
 
     fn dtcs(&mut self) -> &mut Dtcs {
@@ -213,6 +205,16 @@ impl SimEcu {
 
     fn running(&self) -> bool {
         self.diag.is_some() && !self.absent
+    }
+}
+
+/// The vehicle speed the car broadcasts (VehicleSpeedMsg), as every ECU hears it (these
+/// test buses carry only the diagnostic traffic); `None`: nobody sends it.
+pub fn hear_vehicle_speed(diag: &mut DiagNode, now: Instant, kmh: Option<f32>) {
+    if let Some(kmh) = kmh {
+        let data = VehicleSpeedMsg { vehicle_speed: kmh }.encode();
+        let frame = Frame::new(u32::from(VehicleSpeedMsg::ID), &data).expect("a catalogue frame");
+        diag.observe(now, &frame);
     }
 }
 
@@ -444,6 +446,7 @@ impl SimBus {
                 continue;
             }
             let Some(diag) = &mut ecu.diag else { continue };
+            hear_vehicle_speed(diag, now, ecu.backend.speed);
             while let Some(frame) = ecu.rx.pop_front() {
                 diag.on_frame(now, &frame, &mut ecu.backend);
             }
@@ -554,6 +557,7 @@ pub fn serve_ecus(server: &SocketcandServer, nodes: &[Node], stop: &AtomicBool) 
                 *diag = DiagNode::new(backend.node, DEV_SECURITY_SECRET, t);
             }
             let Some(node) = diag else { continue };
+            hear_vehicle_speed(node, t, backend.speed);
             node.poll(t, backend);
             while let Some(frame) = node.poll_transmit(t) {
                 server.broadcast(t.as_micros(), &frame, None);

@@ -9,13 +9,14 @@
 
 use core::cell::RefCell;
 
-use autoplug_can::{EngineMsg, Frame, Node, VehicleSpeedMsg};
+use autoplug_can::Node;
 use autoplug_ecu::Dtcs;
-use autoplug_flash::{ACTIVE, BOOT_STATE, DFU, ECU_DATA, SLOT_ERASE_SIZE};
-use autoplug_image::{
-    dev, Expectations, ImageHeader, Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
+use autoplug_flash::{
+    ACTIVE, BOOT_STATE, DFU, ECU_DATA, LARGE_SECTORS, SLOT_ERASE_SIZE, SMALL_SECTORS,
 };
-use autoplug_uds::obd::{self, ObdValues};
+use autoplug_image::{
+    dev, floor, Expectations, ImageHeader, Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
+};
 use autoplug_uds::{Backend, FlashError, Identification};
 use embassy_boot::{BlockingFirmwareState, State};
 use embassy_embedded_hal::flash::partition::BlockingPartition;
@@ -27,15 +28,6 @@ use embassy_sync::blocking_mutex::Mutex;
 /// Watchdog timeout during a flash operation: above the datasheet's worst 128 KiB sector
 /// erase (2 s).
 pub const FLASH_WATCHDOG_TIMEOUT_US: u32 = 4_000_000;
-
-/// Flash regions of embassy-stm32: region 1 (16 KiB sectors) from the flash base, region
-/// 3 (128 KiB sectors) from sector 5.
-const REGION1_BASE: u32 = 0x0800_0000;
-const REGION3_BASE: u32 = 0x0802_0000;
-
-/// A version-floor record in the ECU data sector: magic, major, minor, patch (LE), check.
-const FLOOR_RECORD_MAGIC: [u8; 2] = [0xA5, 0x5A];
-const FLOOR_RECORD_LEN: usize = 8;
 
 /// The version a firmware flashed by a probe (without an image header) reports.
 const UNSIGNED_VERSION: Version = Version::new(0, 0, 0);
@@ -69,7 +61,7 @@ impl EcuFlash {
         let mut bytes = [0u8; HEADER_LEN];
         let read = flash.large.lock(|r| {
             r.borrow_mut()
-                .blocking_read(ACTIVE.start - REGION3_BASE, &mut bytes)
+                .blocking_read(ACTIVE.start - LARGE_SECTORS.start, &mut bytes)
         });
         flash.header = read.ok().and_then(|()| ImageHeader::parse(&bytes).ok());
         let version = flash.header.map_or(UNSIGNED_VERSION, |h| h.version);
@@ -128,73 +120,65 @@ impl EcuFlash {
     ) -> T {
         let mut state = BlockingPartition::new(
             &self.small,
-            BOOT_STATE.start - REGION1_BASE,
+            BOOT_STATE.start - SMALL_SECTORS.start,
             BOOT_STATE.size,
         );
         op(&mut state)
     }
 
+    /// The last valid floor record of the ECU data sector.
     fn read_floor(&self) -> Option<Version> {
         let mut last = None;
-        let mut record = [0u8; FLOOR_RECORD_LEN];
-        for i in 0..ECU_DATA.size as usize / FLOOR_RECORD_LEN {
-            let at = ECU_DATA.start - REGION1_BASE + (i * FLOOR_RECORD_LEN) as u32;
-            self.small
-                .lock(|r| r.borrow_mut().blocking_read(at, &mut record))
-                .ok()?;
-            if record[..2] != FLOOR_RECORD_MAGIC {
-                break;
-            }
-            if record[6] == record_check(&record) {
-                last = Some(Version::new(
-                    record[2],
-                    record[3],
-                    u16::from_le_bytes([record[4], record[5]]),
-                ));
+        for slot in 0..ECU_DATA.size / floor::RECORD_LEN as u32 {
+            match floor::decode(&self.floor_record(slot)?) {
+                floor::Record::Erased => break,
+                floor::Record::Floor(version) => last = Some(version),
+                floor::Record::Invalid => {}
             }
         }
         last
     }
 
+    fn floor_record(&self, slot: u32) -> Option<[u8; floor::RECORD_LEN]> {
+        let at = ECU_DATA.start - SMALL_SECTORS.start + slot * floor::RECORD_LEN as u32;
+        let mut record = [0u8; floor::RECORD_LEN];
+        self.small
+            .lock(|r| r.borrow_mut().blocking_read(at, &mut record))
+            .ok()?;
+        Some(record)
+    }
+
+    /// Appends a floor record, erasing the sector first when it is full.
     fn write_floor(&self, version: Version) -> Result<(), FlashError> {
-        let mut record = [0u8; FLOOR_RECORD_LEN];
-        record[..2].copy_from_slice(&FLOOR_RECORD_MAGIC);
-        record[2] = version.major;
-        record[3] = version.minor;
-        record[4..6].copy_from_slice(&version.patch.to_le_bytes());
-        record[6] = record_check(&record);
-        let base = ECU_DATA.start - REGION1_BASE;
-        let capacity = ECU_DATA.size as usize / FLOOR_RECORD_LEN;
-        let mut slot = None;
-        let mut probe = [0u8; FLOOR_RECORD_LEN];
-        for i in 0..capacity {
-            let at = base + (i * FLOOR_RECORD_LEN) as u32;
-            self.small
-                .lock(|r| r.borrow_mut().blocking_read(at, &mut probe))
-                .map_err(|_| FlashError)?;
-            if probe == [0xFF; FLOOR_RECORD_LEN] {
-                slot = Some(at);
+        let base = ECU_DATA.start - SMALL_SECTORS.start;
+        let slots = ECU_DATA.size / floor::RECORD_LEN as u32;
+        let mut free = None;
+        for slot in 0..slots {
+            let record = self.floor_record(slot).ok_or(FlashError)?;
+            if floor::decode(&record) == floor::Record::Erased {
+                free = Some(slot);
                 break;
             }
         }
         self.small.lock(|r| {
             let mut region = r.borrow_mut();
-            let at = match slot {
-                Some(at) => at,
+            let slot = match free {
+                Some(slot) => slot,
                 None => {
                     region
                         .blocking_erase(base, base + ECU_DATA.size)
                         .map_err(|_| FlashError)?;
-                    base
+                    0
                 }
             };
-            region.blocking_write(at, &record).map_err(|_| FlashError)
+            region
+                .blocking_write(
+                    base + slot * floor::RECORD_LEN as u32,
+                    &floor::encode(version),
+                )
+                .map_err(|_| FlashError)
         })
     }
-}
-
-fn record_check(record: &[u8; FLOOR_RECORD_LEN]) -> u8 {
-    record[..6].iter().fold(0u8, |a, b| a.wrapping_add(*b)) ^ 0xFF
 }
 
 /// The MCU's 96-bit unique ID in hex: the ECU serial number (UDS F18C).
@@ -272,50 +256,6 @@ fn set_watchdog(timeout_us: u32) {
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
 }
 
-/// The last data of each message the ECU itself sends: the live DIDs (0x0100 + CAN
-/// identifier) and, for the ECUs that own one, the OBD-II values (taken from the ECU's own
-/// EngineMsg and VehicleSpeedMsg, what it measured and reported).
-pub struct SentFrames {
-    frames: [Option<Frame>; MAX_OWN_MESSAGES],
-}
-
-/// More than any ECU of the catalogue sends.
-const MAX_OWN_MESSAGES: usize = 8;
-
-/// Live data DIDs: 0x0100 + a CAN identifier the ECU sends = that message's last data.
-const LIVE_DID_BASE: u16 = 0x0100;
-
-impl SentFrames {
-    /// None sent yet.
-    pub const fn new() -> Self {
-        Self {
-            frames: [None; MAX_OWN_MESSAGES],
-        }
-    }
-
-    /// Notes a frame the ECU sent.
-    pub fn note(&mut self, frame: &Frame) {
-        let slot = self
-            .frames
-            .iter()
-            .position(|f| f.is_some_and(|f| f.id() == frame.id()))
-            .or_else(|| self.frames.iter().position(Option::is_none));
-        if let Some(slot) = slot {
-            self.frames[slot] = Some(*frame);
-        }
-    }
-
-    fn get(&self, id: u16) -> Option<&Frame> {
-        self.frames.iter().flatten().find(|f| f.id() == id)
-    }
-}
-
-impl Default for SentFrames {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
 /// The ECU as its UDS server sees it, for one call.
 pub struct FirmwareBackend<'a> {
     /// The ECU's node.
@@ -324,14 +264,10 @@ pub struct FirmwareBackend<'a> {
     pub flash: &'a mut EcuFlash,
     /// The logic's DTCs.
     pub dtcs: &'a mut Dtcs,
-    /// Vehicle speed as last received (or measured), km/h.
-    pub speed_kmh: Option<f32>,
     /// Time in µs, mixed into security seeds with the UID (the F446 has no RNG).
     pub now_us: u64,
     /// Counter mixed into seeds.
     pub seed_counter: &'a mut u32,
-    /// What the ECU last sent.
-    pub sent: &'a SentFrames,
 }
 
 impl Backend for FirmwareBackend<'_> {
@@ -348,41 +284,6 @@ impl Backend for FirmwareBackend<'_> {
             serial_number: &self.flash.serial,
             hardware_version: b"NUCLEO-F446RE",
         }
-    }
-
-    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
-        let frame = self.sent.get(did.checked_sub(LIVE_DID_BASE)?)?;
-        let data = frame.data();
-        (data.len() <= out.len()).then(|| {
-            out[..data.len()].copy_from_slice(data);
-            data.len()
-        })
-    }
-
-    fn obd_pids(&self) -> &'static [u8] {
-        obd::pids_of(self.node)
-    }
-
-    fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
-        // What the ECU measured, as it reported it on the bus.
-        let engine = self
-            .sent
-            .get(EngineMsg::ID)
-            .and_then(|f| EngineMsg::decode(f.data()).ok());
-        let speed = self
-            .sent
-            .get(VehicleSpeedMsg::ID)
-            .and_then(|f| VehicleSpeedMsg::decode(f.data()).ok());
-        let values = ObdValues {
-            engine_rpm: engine.map(|e| e.engine_rpm),
-            fuel_l: engine.map(|e| e.fuel_level),
-            speed_kmh: speed.map(|s| s.vehicle_speed),
-        };
-        obd::encode(pid, &values, out)
-    }
-
-    fn vehicle_speed_kmh(&self) -> Option<f32> {
-        self.speed_kmh
     }
 
     fn dtcs(&mut self) -> &mut Dtcs {
@@ -427,7 +328,7 @@ impl Backend for FirmwareBackend<'_> {
         if self.flash.boot_state() != State::Boot {
             return Err(FlashError);
         }
-        let from = DFU.start - REGION3_BASE + step * SLOT_ERASE_SIZE;
+        let from = DFU.start - LARGE_SECTORS.start + step * SLOT_ERASE_SIZE;
         let large = &self.flash.large;
         stretched(|| {
             large.lock(|r| {
@@ -439,7 +340,7 @@ impl Backend for FirmwareBackend<'_> {
     }
 
     fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
-        let at = DFU.start - REGION3_BASE + offset;
+        let at = DFU.start - LARGE_SECTORS.start + offset;
         self.flash.large.lock(|r| {
             r.borrow_mut()
                 .blocking_write(at, data)
@@ -448,7 +349,7 @@ impl Backend for FirmwareBackend<'_> {
     }
 
     fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError> {
-        let at = DFU.start - REGION3_BASE + offset;
+        let at = DFU.start - LARGE_SECTORS.start + offset;
         self.flash.large.lock(|r| {
             r.borrow_mut()
                 .blocking_read(at, out)

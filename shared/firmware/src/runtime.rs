@@ -9,7 +9,6 @@
 //!   `poll_transmit` hands out;
 //! - CAN1 → RX queue, TX queue → CAN1 mailboxes, and the error monitor ([`can_io`]).
 
-use autoplug_can::{Frame, VehicleSpeedMsg};
 use autoplug_ecu::{EcuLogic, Instant};
 use autoplug_uds::{DiagNode, DEV_SECURITY_SECRET};
 use embassy_boot::State;
@@ -24,7 +23,7 @@ use embassy_stm32::Peri;
 use embassy_time::{Duration, Ticker, Timer};
 
 use crate::can_io::{self, RxQueue, TxQueue};
-use crate::diag::{EcuFlash, FirmwareBackend, SentFrames};
+use crate::diag::{EcuFlash, FirmwareBackend};
 use crate::reset::{ResetCause, ResetFlags};
 
 static RX_QUEUE: RxQueue = RxQueue::new();
@@ -108,9 +107,7 @@ where
     let mut ecu_flash = EcuFlash::new(layout.bank1_region1, layout.bank1_region3);
     let mut unconfirmed = ecu_flash.boot_state() == State::Swap;
     let mut diag = DiagNode::new(E::NODE, DEV_SECURITY_SECRET, now()).expect("an ECU");
-    let mut speed: Option<(u64, f32)> = None;
     let mut seed_counter = 0u32;
-    let mut sent_frames = SentFrames::new();
 
     let timeout_us = WATCHDOG_TIMEOUT_PERIODS * E::STEP_PERIOD_US;
     let mut watchdog = IndependentWatchdog::new(watchdog, timeout_us as u32);
@@ -129,23 +126,15 @@ where
     );
     // The backend of one diagnostic call, from the loop's state.
     macro_rules! backend {
-        () => {{
-            // Stale after 3 periods of VehicleSpeedMsg, like every input; except while the
-            // tester has switched normal communication off (0x28): the bus is silent on
-            // purpose and the last speed stands.
-            let silenced = !diag.server().normal_tx_enabled() || !diag.server().normal_rx_enabled();
+        () => {
             FirmwareBackend {
                 node: E::NODE,
                 flash: &mut ecu_flash,
                 dtcs: ecu.dtcs_mut(),
-                speed_kmh: speed
-                    .filter(|(at, _)| silenced || now().as_micros().saturating_sub(*at) <= 30_000)
-                    .map(|(_, v)| v),
                 now_us: now().as_micros(),
                 seed_counter: &mut seed_counter,
-                sent: &sent_frames,
             }
-        }};
+        };
     }
     loop {
         match select3(ticker.next(), RX_QUEUE.receive(), diag_ticker.next()).await {
@@ -169,11 +158,13 @@ where
                 }
             }
             Either3::Second(frame) => {
-                note_speed(&frame, &mut speed);
                 if diag.accepts(frame.id()) {
                     diag.on_frame(now(), &frame, &mut backend!());
-                } else if diag.server().normal_rx_enabled() {
-                    ecu.on_frame(now(), &frame);
+                } else {
+                    diag.observe(now(), &frame);
+                    if diag.server().normal_rx_enabled() {
+                        ecu.on_frame(now(), &frame);
+                    }
                 }
             }
             Either3::Third(()) => {
@@ -184,8 +175,7 @@ where
         }
         let tx_enabled = diag.server().normal_tx_enabled();
         while let Some(frame) = ecu.poll_transmit(now()) {
-            note_speed(&frame, &mut speed);
-            sent_frames.note(&frame);
+            diag.note_sent(now(), &frame);
             if tx_enabled {
                 can_io::queue_for_transmit(&TX_QUEUE, frame);
                 sent = sent.wrapping_add(1);
@@ -218,16 +208,6 @@ async fn can_tx(tx: CanTx<'static>) {
 #[embassy_executor::task]
 async fn can_monitor() {
     can_io::monitor().await
-}
-
-/// Notes the vehicle speed from a VehicleSpeedMsg seen on the bus (received, or sent by
-/// this ECU): programming is allowed only while the car stands.
-fn note_speed(frame: &Frame, speed: &mut Option<(u64, f32)>) {
-    if frame.id() == VehicleSpeedMsg::ID {
-        if let Ok(message) = VehicleSpeedMsg::decode(frame.data()) {
-            *speed = Some((now().as_micros(), message.vehicle_speed));
-        }
-    }
 }
 
 /// Reads the reset flags and clears them, so the next reset's flags stand alone.

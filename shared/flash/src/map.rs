@@ -139,6 +139,11 @@ impl Region {
         address >= self.start && address < self.end()
     }
 
+    /// Whether `other` lies wholly in this region.
+    pub const fn contains_region(&self, other: Region) -> bool {
+        other.start >= self.start && other.end() <= self.end()
+    }
+
     /// Offset of `address` from the region's start, if it lies in the region.
     pub const fn offset_of(&self, address: u32) -> Option<u32> {
         if self.contains(address) {
@@ -258,6 +263,20 @@ pub const DFU: Region = Region {
     size: 2 * LARGE_SECTOR_SIZE,
 };
 
+/// The 16 KiB sectors 0–3: embassy-stm32's flash region 1 of the F446 (`bank1_region1`),
+/// whose offsets count from its start. The boot state and the ECU data are in it.
+pub const SMALL_SECTORS: Region = Region {
+    start: FLASH_BASE,
+    size: 4 * SMALL_SECTOR_SIZE,
+};
+
+/// The 128 KiB sectors 5–7: embassy-stm32's flash region 3 of the F446 (`bank1_region3`),
+/// whose offsets count from its start. The active and DFU slots are in it.
+pub const LARGE_SECTORS: Region = Region {
+    start: FLASH_BASE + 4 * SMALL_SECTOR_SIZE + MEDIUM_SECTOR_SIZE,
+    size: 3 * LARGE_SECTOR_SIZE,
+};
+
 /// Every partition of the map with a name for messages, in address order.
 pub const PARTITIONS: [(&str, Region); 6] = [
     ("bootloader", BOOTLOADER),
@@ -331,6 +350,15 @@ const fn unwrap_size(size: Option<u32>) -> u32 {
 }
 
 // The sector table tiles the flash exactly, in order.
+// embassy-stm32's regions are where the sectors say, and hold the partitions the
+// bootloader and the application address through them.
+const _: () = {
+    assert!(SMALL_SECTORS.start == SECTORS[0].start);
+    assert!(LARGE_SECTORS.start == SECTORS[5].start);
+    assert!(SMALL_SECTORS.contains_region(BOOT_STATE) && SMALL_SECTORS.contains_region(ECU_DATA));
+    assert!(LARGE_SECTORS.contains_region(ACTIVE) && LARGE_SECTORS.contains_region(DFU));
+};
+
 const _: () = {
     assert!(SECTORS[0].start == FLASH_BASE);
     let mut i = 0;

@@ -64,6 +64,7 @@
 use core::fmt;
 use core::str::FromStr;
 
+pub mod floor;
 #[cfg(feature = "std")]
 mod host;
 #[cfg(feature = "std")]

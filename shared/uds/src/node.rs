@@ -4,12 +4,118 @@
 //! response identifier. The firmware and the virtual car feed it frames and time the same
 //! way they feed the ECU's logic.
 
-use autoplug_can::{Frame, Node, DIAG_FUNCTIONAL_REQUEST_ID};
-use autoplug_ecu::Instant;
+use autoplug_can::{EngineMsg, Frame, Node, VehicleSpeedMsg, DIAG_FUNCTIONAL_REQUEST_ID};
+use autoplug_ecu::{Dtcs, Instant, STALE_AFTER_PERIODS};
+use autoplug_image::Expectations;
 use autoplug_isotp::{Channel, Config as IsoTpConfig, Event, StMin};
 
-use crate::obd::answer_mode01;
-use crate::server::{Backend, Config, Reply, ResetKind, Server};
+use crate::obd::{self, answer_mode01, ObdValues};
+use crate::server::{Backend, Config, FlashError, Identification, Reply, ResetKind, Server};
+
+/// Live data DIDs: 0x0100 + a CAN identifier the ECU sends = that message's last data.
+pub const LIVE_DID_BASE: u16 = 0x0100;
+
+/// More messages than any ECU of the catalogue sends.
+const MAX_OWN_MESSAGES: usize = 8;
+
+/// The last frame of each message the ECU itself sent: its live data DIDs, and the
+/// OBD-II values of the ECUs that own one (what they measured, as they reported it).
+#[derive(Clone, Copy, Debug, Default)]
+struct SentFrames {
+    frames: [Option<Frame>; MAX_OWN_MESSAGES],
+}
+
+impl SentFrames {
+    fn note(&mut self, frame: &Frame) {
+        let slot = self
+            .frames
+            .iter()
+            .position(|f| f.is_some_and(|f| f.id() == frame.id()))
+            .or_else(|| self.frames.iter().position(Option::is_none));
+        if let Some(slot) = slot {
+            self.frames[slot] = Some(*frame);
+        }
+    }
+
+    fn get(&self, id: u16) -> Option<&Frame> {
+        self.frames.iter().flatten().find(|f| f.id() == id)
+    }
+
+    fn obd_values(&self) -> ObdValues {
+        let engine = self
+            .get(EngineMsg::ID)
+            .and_then(|f| EngineMsg::decode(f.data()).ok());
+        let speed = self
+            .get(VehicleSpeedMsg::ID)
+            .and_then(|f| VehicleSpeedMsg::decode(f.data()).ok());
+        ObdValues {
+            engine_rpm: engine.map(|e| e.engine_rpm),
+            fuel_l: engine.map(|e| e.fuel_level),
+            speed_kmh: speed.map(|s| s.vehicle_speed),
+        }
+    }
+}
+
+/// How long a VehicleSpeedMsg counts, µs: 3 of its periods, as every CAN input.
+const SPEED_VALID_US: u64 = VehicleSpeedMsg::CYCLE_TIME_MS as u64 * 1000 * STALE_AFTER_PERIODS;
+
+/// The ECU's backend as the server sees it through the stack: what the stack knows itself
+/// (vehicle speed, the ECU's own frames for live data and OBD-II) comes from the stack,
+/// the rest from the ECU.
+struct WithStack<'a, B: Backend> {
+    ecu: &'a mut B,
+    node: Node,
+    sent: SentFrames,
+    speed_kmh: Option<f32>,
+}
+
+impl<B: Backend> Backend for WithStack<'_, B> {
+    fn identification(&self) -> Identification<'_> {
+        self.ecu.identification()
+    }
+    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
+        let data = self.sent.get(did.checked_sub(LIVE_DID_BASE)?)?.data();
+        let target = out.get_mut(..data.len())?;
+        target.copy_from_slice(data);
+        Some(data.len())
+    }
+    fn vehicle_speed_kmh(&self) -> Option<f32> {
+        self.speed_kmh
+    }
+    fn dtcs(&mut self) -> &mut Dtcs {
+        self.ecu.dtcs()
+    }
+    fn fill_random(&mut self, out: &mut [u8]) {
+        self.ecu.fill_random(out)
+    }
+    fn image_expectations(&self) -> Expectations {
+        self.ecu.image_expectations()
+    }
+    fn public_key(&self) -> [u8; 32] {
+        self.ecu.public_key()
+    }
+    fn dfu_erase_steps(&self) -> u32 {
+        self.ecu.dfu_erase_steps()
+    }
+    fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
+        self.ecu.dfu_erase(step)
+    }
+    fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
+        self.ecu.dfu_write(offset, data)
+    }
+    fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError> {
+        self.ecu.dfu_read(offset, out)
+    }
+    fn mark_updated(&mut self) -> Result<(), FlashError> {
+        self.ecu.mark_updated()
+    }
+    fn obd_pids(&self) -> &'static [u8] {
+        obd::pids_of(self.node)
+    }
+    fn obd_read(&mut self, pid: u8, out: &mut [u8]) -> Option<usize> {
+        obd::encode(pid, &self.sent.obd_values(), out)
+    }
+}
 
 /// Byte that pads every frame the ECU sends to 8 bytes (ISO 15765-4 requires DLC 8).
 pub const PADDING: u8 = 0xCC;
@@ -61,6 +167,9 @@ pub struct DiagNode {
     resume_after_send: bool,
     obd_frame: Option<Frame>,
     handed: Handed,
+    sent: SentFrames,
+    /// The last VehicleSpeedMsg on the bus (received, or sent by this ECU), and when.
+    speed: Option<(Instant, f32)>,
 }
 
 impl DiagNode {
@@ -79,6 +188,8 @@ impl DiagNode {
             resume_after_send: false,
             obd_frame: None,
             handed: Handed::Nothing,
+            sent: SentFrames::default(),
+            speed: None,
         })
     }
 
@@ -107,22 +218,62 @@ impl DiagNode {
         Some(id) == self.node.diag_request_id() || id == DIAG_FUNCTIONAL_REQUEST_ID
     }
 
+    /// A frame the ECU received that is not diagnostic: the stack notes the vehicle speed
+    /// (no programming while the car moves).
+    pub fn observe(&mut self, now: Instant, frame: &Frame) {
+        if frame.id() == VehicleSpeedMsg::ID {
+            if let Ok(message) = VehicleSpeedMsg::decode(frame.data()) {
+                self.speed = Some((now, message.vehicle_speed));
+            }
+        }
+    }
+
+    /// A frame of the ECU's own application, as it goes out: its data is the ECU's live
+    /// data (DIDs 0x0100 + identifier) and, for the engine and cruise ECUs, their OBD-II
+    /// values; a VehicleSpeedMsg is also the speed the ECU knows.
+    pub fn note_sent(&mut self, now: Instant, frame: &Frame) {
+        self.sent.note(frame);
+        self.observe(now, frame);
+    }
+
+    /// The vehicle speed the ECU knows, km/h: the last VehicleSpeedMsg, stale after 3 of
+    /// its periods like every input, except while the tester has switched normal
+    /// communication off (0x28): the bus is silent on purpose and the last speed stands.
+    pub fn vehicle_speed_kmh(&self, now: Instant) -> Option<f32> {
+        let server = &self.server;
+        let silenced = !server.normal_tx_enabled() || !server.normal_rx_enabled();
+        self.speed
+            .filter(|(at, _)| silenced || now.micros_since(*at) <= SPEED_VALID_US)
+            .map(|(_, v)| v)
+    }
+
     /// A frame received on one of [`DiagNode::accepts`]' identifiers (others are ignored).
-    pub fn on_frame(&mut self, now: Instant, frame: &Frame, backend: &mut impl Backend) {
+    pub fn on_frame(&mut self, now: Instant, frame: &Frame, ecu: &mut impl Backend) {
         if !self.accepts(frame.id()) {
             return;
         }
-        if frame.id() == DIAG_FUNCTIONAL_REQUEST_ID && self.answer_obd(frame, backend) {
+        let mut backend = self.with_stack(now, ecu);
+        if frame.id() == DIAG_FUNCTIONAL_REQUEST_ID && self.answer_obd(frame, &mut backend) {
             return;
         }
         if let Some(event) = self.channel.on_frame(now, frame) {
-            self.on_event(now, event, backend);
+            self.on_event(now, event, &mut backend);
+        }
+    }
+
+    fn with_stack<'a, B: Backend>(&self, now: Instant, ecu: &'a mut B) -> WithStack<'a, B> {
+        WithStack {
+            ecu,
+            node: self.node,
+            sent: self.sent,
+            speed_kmh: self.vehicle_speed_kmh(now),
         }
     }
 
     /// Timeouts, the session timer, a slice of programming, the next step of a long
     /// operation. Call often (every millisecond in the virtual car, every loop on the MCU).
-    pub fn poll(&mut self, now: Instant, backend: &mut impl Backend) {
+    pub fn poll(&mut self, now: Instant, ecu: &mut impl Backend) {
+        let backend = &mut self.with_stack(now, ecu);
         while let Some(event) = self.channel.poll(now) {
             self.on_event(now, event, backend);
         }

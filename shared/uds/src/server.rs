@@ -81,10 +81,16 @@ pub trait Backend {
     /// Identification data.
     fn identification(&self) -> Identification<'_>;
     /// Live data: writes DID `did` into `out` and returns its length, or `None` for a DID
-    /// this ECU does not have.
-    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize>;
-    /// Vehicle speed as the ECU last received it, km/h; `None` while unknown.
-    fn vehicle_speed_kmh(&self) -> Option<f32>;
+    /// this ECU does not have. [`crate::DiagNode`] answers it from the ECU's own frames.
+    fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
+        let _ = (did, out);
+        None
+    }
+    /// Vehicle speed as the ECU knows it, km/h; `None` while unknown (which counts as
+    /// moving). [`crate::DiagNode`] answers it from the VehicleSpeedMsg it sees.
+    fn vehicle_speed_kmh(&self) -> Option<f32> {
+        None
+    }
     /// The ECU's DTCs.
     fn dtcs(&mut self) -> &mut Dtcs;
     /// Unpredictable bytes for a security seed.
@@ -104,7 +110,8 @@ pub trait Backend {
     fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError>;
     /// Marks the verified image in the DFU partition for the swap at the next reset.
     fn mark_updated(&mut self) -> Result<(), FlashError>;
-    /// The OBD-II mode 01 PIDs this ECU owns (not counting the support bitmaps).
+    /// The OBD-II mode 01 PIDs this ECU owns (not counting the support bitmaps);
+    /// [`crate::DiagNode`] answers them from the ECU's own frames.
     fn obd_pids(&self) -> &'static [u8] {
         &[]
     }

@@ -721,6 +721,8 @@ impl Wire {
         let end = self.now.plus_micros(limit_ms * 1000);
         while self.now.as_micros() < end.as_micros() {
             self.now = self.now.plus_micros(250);
+            // The car's VehicleSpeedMsg, as the ECU hears it: standing.
+            self.ecu_node.observe(self.now, &speed_frame(0.0));
             self.ecu_node.poll(self.now, &mut self.ecu);
             if let Some(frame) = self.tester.poll_transmit(self.now) {
                 self.tester.confirm_transmit(self.now);
@@ -788,9 +790,13 @@ fn obd_requests_on_0x7df_are_answered_on_the_iso_15765_4_identifier() {
     let mut node =
         DiagNode::new(autoplug_can::Node::Cruise, SECRET, Instant::from_micros(0)).unwrap();
     let mut ecu = TestEcu::new();
-    ecu.speed = Some(87.0);
     let now = Instant::from_micros(1000);
     let request = autoplug_can::Frame::new(0x7DF, &[0x02, 0x01, 0x0D, 0, 0, 0, 0, 0]).unwrap();
+    // Before the cruise ECU has reported a speed, it has no value to give: silent.
+    node.on_frame(now, &request, &mut ecu);
+    assert!(node.poll_transmit(now).is_none());
+    // It reports what it sent itself on VehicleSpeedMsg (its own measurement).
+    node.note_sent(now, &speed_frame(87.0));
     node.on_frame(now, &request, &mut ecu);
     let response = node.poll_transmit(now).expect("an OBD-II response");
     assert_eq!(response.id(), 0x7E9);
@@ -808,4 +814,56 @@ fn obd_requests_on_0x7df_are_answered_on_the_iso_15765_4_identifier() {
     let response = abs.poll_transmit(now).expect("tester present answered");
     assert_eq!(response.id(), 0x78E);
     assert_eq!(response.data()[..3], [0x02, 0x7E, 0x00]);
+}
+
+/// A VehicleSpeedMsg frame.
+fn speed_frame(kmh: f32) -> autoplug_can::Frame {
+    let data = autoplug_can::VehicleSpeedMsg { vehicle_speed: kmh }.encode();
+    autoplug_can::Frame::new(u32::from(autoplug_can::VehicleSpeedMsg::ID), &data).unwrap()
+}
+
+#[test]
+fn the_stack_knows_the_speed_from_the_bus_and_keeps_it_while_the_bus_is_silenced() {
+    let mut node = DiagNode::new(autoplug_can::Node::ABS, SECRET, Instant::ZERO).unwrap();
+    let mut ecu = TestEcu::new();
+    let t = |ms: u64| Instant::from_millis(ms);
+    assert_eq!(node.vehicle_speed_kmh(t(0)), None, "nothing heard: unknown");
+    node.observe(t(0), &speed_frame(0.0));
+    assert_eq!(node.vehicle_speed_kmh(t(30)), Some(0.0));
+    assert_eq!(
+        node.vehicle_speed_kmh(t(31)),
+        None,
+        "stale after 3 periods of 10 ms"
+    );
+    // Normal communication off (functional extended session, then 0x28 03 01): the
+    // silence is the tester's doing, the last speed stands.
+    node.observe(t(40), &speed_frame(0.0));
+    for request in [[0x02, 0x10, 0x03], [0x03, 0x28, 0x03]] {
+        let mut data = [0u8; 8];
+        data[..3].copy_from_slice(&request);
+        data[3] = 0x01;
+        let frame = autoplug_can::Frame::new(0x7DF, &data).unwrap();
+        node.on_frame(t(41), &frame, &mut ecu);
+    }
+    assert!(!node.server().normal_tx_enabled());
+    assert_eq!(node.vehicle_speed_kmh(t(5_000)), Some(0.0));
+    // Live data: what the ECU last sent on a message, at DID 0x0100 + its identifier.
+    let trac = autoplug_can::Frame::new(0x00F, &[42]).unwrap();
+    node.note_sent(t(41), &trac);
+    let request = autoplug_can::Frame::new(0x70E, &[0x03, 0x22, 0x01, 0x0F, 0, 0, 0, 0]).unwrap();
+    node.on_frame(t(42), &request, &mut ecu);
+    let mut responses = Vec::new();
+    for _ in 0..10 {
+        node.poll(t(42), &mut ecu);
+        while let Some(frame) = node.poll_transmit(t(42)) {
+            node.confirm_transmit(t(42));
+            responses.push(frame);
+        }
+    }
+    let live = responses
+        .iter()
+        .find(|f| f.data()[1] == 0x62)
+        .expect("a 0x22 response");
+    assert_eq!(live.id(), 0x78E);
+    assert_eq!(live.data()[..5], [0x04, 0x62, 0x01, 0x0F, 42]);
 }
