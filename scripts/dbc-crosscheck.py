@@ -7,7 +7,7 @@
 The vectors file holds what the codec believes (layouts) and what it produces (frames).
 For every message this checks that cantools reads the DBC the same way (identifier,
 length, period, senders, and each signal's bits, sign, factor, offset, range, unit,
-receivers, value table and start value), that every frame the codec encoded decodes in
+receivers, value table, start value and VSS path), that every frame the codec encoded decodes in
 cantools to the same raw values and to the same physical values (to a thousandth of a
 quantisation step: the codec computes in f32 for the MCU, cantools in f64), and that
 cantools encodes those values back to the very same bytes. Exits non-zero, naming each
@@ -165,6 +165,10 @@ def check_layout(db, entry: dict, problem) -> None:
             "start value (raw)": (
                 ours["start_raw"],
                 0 if sig.raw_initial is None else int(sig.raw_initial),
+            ),
+            "VSS path (attribute VssPath)": (
+                ours["vss"],
+                sig.dbc.attributes["VssPath"].value if sig.dbc and "VssPath" in sig.dbc.attributes else "",
             ),
         }
         for what, (a, b) in checks.items():

@@ -71,7 +71,7 @@ fn main() {
                        "raw_min": s.scale.raw_min(), "raw_max": s.scale.raw_max(),
                        "physical_min": s.scale.physical_min() as f64,
                        "physical_max": s.scale.physical_max() as f64,
-                       "unit": s.unit, "start_raw": s.start_raw,
+                       "unit": s.unit, "start_raw": s.start_raw, "vss": s.vss,
                        "kind": format!("{:?}", s.kind),
                        "receivers": s.receivers.iter().map(|n| n.name()).collect::<Vec<_>>(),
                        "values": s.values.iter().map(|(v, t)| json!([v, t])).collect::<Vec<_>>()})

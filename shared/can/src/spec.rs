@@ -28,6 +28,8 @@ pub trait CanMessage: Sized + Copy + Default {
     fn frame(&self) -> crate::Frame;
     /// The message in the catalogue-wide enum.
     fn into_message(self) -> crate::Message;
+    /// This message out of the catalogue-wide enum, if it is this one.
+    fn from_message(message: &crate::Message) -> Option<Self>;
 }
 
 /// How a signal's raw value is interpreted.
@@ -67,6 +69,11 @@ pub struct SignalSpec {
     pub values: &'static [(i64, &'static str)],
     /// Raw value assumed before the first frame.
     pub start_raw: i64,
+    /// The signal's COVESA VSS path (DBC attribute `VssPath`): a standard path such as
+    /// `Vehicle.Speed`, or one under the private branch `Vehicle.Private.AutoPlug` for
+    /// what VSS has no path for. Empty for the diagnostic transport messages. The value
+    /// keeps the DBC's unit and encoding.
+    pub vss: &'static str,
     /// Nodes that use it.
     pub receivers: &'static [Node],
     /// DBC comment.

@@ -47,6 +47,8 @@ struct Field<'a> {
     raw_min: i64,
     raw_max: i64,
     start_raw: i64,
+    /// COVESA VSS path (attribute `VssPath`).
+    vss: String,
 }
 
 /// Generates the codec source for a validated database.
@@ -73,6 +75,7 @@ pub fn generate(db: &Database) -> Result<String, GenerateError> {
         emit_message(db, m, &fields, w)?;
         specs.push((m, fields));
     }
+    check_vss_paths(db, &specs)?;
     emit_message_table(&specs, w)?;
     emit_message_enum(&specs, w);
     Ok(out)
@@ -266,6 +269,13 @@ fn fields_of<'a>(
                 ));
             }
         }
+        let vss = match db.signal_attribute(s, "VssPath") {
+            Some(AttributeValue::Str(path)) => path.clone(),
+            _ => String::new(),
+        };
+        if !vss.is_empty() && !is_vss_path(&vss) {
+            return Err(gen_err(s.line, format!("{what}: VssPath {vss:?} is not a VSS path (Vehicle.Branch.Leaf, letters and digits only)")));
+        }
         let ident = snake_case(&s.name);
         fields.push(Field {
             signal: s,
@@ -275,9 +285,52 @@ fn fields_of<'a>(
             raw_min,
             raw_max,
             start_raw,
+            vss,
         });
     }
     Ok(fields)
+}
+
+/// Where the DBC defines the `VssPath` attribute, every application signal has a path of
+/// its own: a gateway publishing by VSS name must never merge two signals into one.
+fn check_vss_paths(
+    db: &Database,
+    specs: &[(&Message, Vec<Field<'_>>)],
+) -> Result<(), GenerateError> {
+    if db
+        .attribute_definition(AttributeObject::Signal, "VssPath")
+        .is_none()
+    {
+        return Ok(());
+    }
+    let mut seen: BTreeMap<&str, String> = BTreeMap::new();
+    for (m, fields) in specs {
+        for f in fields {
+            let what = format!("signal {}.{}", m.name, f.signal.name);
+            if f.vss.is_empty() {
+                return Err(gen_err(f.signal.line, format!("{what} has no VssPath: give it a VSS path, or one under Vehicle.Private.AutoPlug")));
+            }
+            if let Some(other) = seen.insert(&f.vss, what.clone()) {
+                return Err(gen_err(
+                    f.signal.line,
+                    format!("{what}: VssPath {:?} is already {other}'s", f.vss),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether a text is a VSS path: `Vehicle` and at least one more dot-separated element,
+/// each an ASCII letter followed by letters and digits.
+fn is_vss_path(path: &str) -> bool {
+    let mut parts = path.split('.');
+    parts.next() == Some("Vehicle")
+        && path.contains('.')
+        && parts.all(|p| {
+            p.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+                && p.chars().all(|c| c.is_ascii_alphanumeric())
+        })
 }
 
 /// The message attribute `DiagKind` of the catalogue: what a diagnostic transport message
@@ -983,6 +1036,10 @@ fn emit_message(
         w,
         &format!("    fn into_message(self) -> Message {{ Message::{ty}(self) }}"),
     );
+    line(
+        w,
+        &format!("    fn from_message(message: &Message) -> Option<Self> {{ match message {{ Message::{ty}(m) => Some(*m), #[allow(unreachable_patterns)] _ => None }} }}"),
+    );
     line(w, "}");
     line(w, "");
     line(w, &format!("impl Default for {ty} {{"));
@@ -1094,6 +1151,7 @@ fn emit_message_table(
                 &format!("                values: &[{}],", values.join(", ")),
             );
             line(w, &format!("                start_raw: {},", f.start_raw));
+            line(w, &format!("                vss: {},", rust_str(&f.vss)));
             line(
                 w,
                 &format!("                receivers: &[{}],", receivers.join(", ")),

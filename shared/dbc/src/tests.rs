@@ -192,6 +192,24 @@ fn generator_refuses_what_it_cannot_express() {
 }
 
 #[test]
+fn every_signal_has_its_own_vss_path_where_the_dbc_defines_them() {
+    let head = "BU_: A\nBA_DEF_ \"Baudrate\" INT 0 1000000;\nBA_ \"Baudrate\" 500000;\nBA_DEF_ SG_ \"VssPath\" STRING ;\nBA_DEF_DEF_ \"VssPath\" \"\";\nBO_ 1 M: 2 A\n SG_ S : 0|8@1+ (1,0) [0|255] \"\" A\n SG_ T : 8|8@1+ (1,0) [0|255] \"\" A\n";
+    let ok = format!("{head}BA_ \"VssPath\" SG_ 1 S \"Vehicle.Speed\";\nBA_ \"VssPath\" SG_ 1 T \"Vehicle.Private.X.T\";\n");
+    let code = compile(&ok).expect("valid");
+    assert!(code.contains("vss: \"Vehicle.Speed\""), "{code}");
+    for (text, expected) in [
+        (format!("{head}BA_ \"VssPath\" SG_ 1 S \"Vehicle.Speed\";\n"), "M.T has no VssPath"),
+        (format!("{head}BA_ \"VssPath\" SG_ 1 S \"Vehicle.Speed\";\nBA_ \"VssPath\" SG_ 1 T \"Vehicle.Speed\";\n"), "already signal M.S's"),
+        (format!("{head}BA_ \"VssPath\" SG_ 1 S \"Speed\";\nBA_ \"VssPath\" SG_ 1 T \"Vehicle.T\";\n"), "is not a VSS path"),
+    ] {
+        match compile(&text) {
+            Err(Error::Generate(e)) => assert!(e.to_string().contains(expected), "{e}"),
+            other => panic!("expected {expected:?}, got {other:?}"),
+        }
+    }
+}
+
+#[test]
 fn motorola_bits_walk_across_bytes() {
     let s = Signal {
         start_bit: 7,
