@@ -2,7 +2,6 @@
 //! logic (the same code the firmware runs), driven by scenario files.
 #![deny(missing_docs)]
 
-pub mod candump;
 pub mod car;
 pub mod diag;
 pub mod driver;

@@ -2,7 +2,6 @@
 //! Every number is written with a fixed precision and no wall-clock time, so the same
 //! scenario gives byte-identical files.
 
-use crate::candump;
 use crate::car::{LoggedFrame, TraceRow, VirtualCar};
 use crate::plot::{Axis, Plot, Series};
 use crate::scenario::Scenario;
@@ -417,10 +416,16 @@ pub fn write_trace(out: &mut impl Write, trace: &[TraceRow]) -> io::Result<()> {
     Ok(())
 }
 
-/// Writes the bus log in candump format.
+/// Writes the bus log in candump format (`(seconds.micros) can0 ID#DATA`, as
+/// `candump -l` writes it), which `autoplug_logs` reads back.
 pub fn write_bus_log(out: &mut impl Write, log: &[LoggedFrame]) -> io::Result<()> {
+    let mut writer = autoplug_logs::CandumpWriter::new(out);
     for entry in log {
-        candump::write_record(out, entry.t_us, "can0", &entry.frame)?;
+        writer.write(&autoplug_logs::LogFrame::from_can(
+            entry.t_us,
+            0,
+            &entry.frame,
+        ))?;
     }
     Ok(())
 }

@@ -1,0 +1,112 @@
+//! Converts a CAN log (candump, ASC or BLF) to ASC or candump, or dumps it as JSON lines.
+//!
+//! ```text
+//! cargo run -p autoplug-logs --example convert -- IN OUT.asc
+//! cargo run -p autoplug-logs --example convert -- [--direction] IN OUT.log
+//! cargo run -p autoplug-logs --example convert -- --json IN
+//! ```
+//!
+//! `--direction` appends python-can's ` R` / ` T` to candump lines. `--json` prints one
+//! object per frame (`{"t_us":..,"channel":..,"id":..,"extended":..,"kind":"data",
+//! "direction":"rx","len":..,"data":"0A14"}`) or error (`{"error":"..","line":..,
+//! "fatal":..}`), which tests/check_with_python.py compares with python-can and cantools.
+//! Malformed lines are skipped and counted; the exit status is 1 on a fatal error.
+
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::Path;
+use std::process::ExitCode;
+
+use autoplug_logs::write::{export_asc, export_candump, ExportError};
+use autoplug_logs::{Direction, FrameKind, LogFormat};
+
+fn usage() -> ExitCode {
+    eprintln!("usage: convert [--direction] IN OUT.asc|OUT.log\n       convert --json IN");
+    ExitCode::from(2)
+}
+
+fn json(input: &Path) -> Result<(), String> {
+    let reader = autoplug_logs::open(input).map_err(|e| e.to_string())?;
+    let stdout = io::stdout();
+    let mut out = BufWriter::new(stdout.lock());
+    let mut fatal = None;
+    for item in reader {
+        let line = match item {
+            Ok(f) => {
+                let data: String = f.data().iter().map(|b| format!("{b:02X}")).collect();
+                let kind = match f.kind {
+                    FrameKind::Data => "data",
+                    FrameKind::Remote => "remote",
+                    FrameKind::Error => "error",
+                };
+                let direction = match f.direction {
+                    Direction::Rx => "rx",
+                    Direction::Tx => "tx",
+                };
+                format!(
+                    "{{\"t_us\":{},\"channel\":{},\"id\":{},\"extended\":{},\"kind\":\"{kind}\",\"direction\":\"{direction}\",\"len\":{},\"data\":\"{data}\"}}",
+                    f.t_us,
+                    f.channel,
+                    f.id,
+                    f.extended,
+                    f.len()
+                )
+            }
+            Err(e) => {
+                let text = e.to_string().replace('\\', "\\\\").replace('"', "\\\"");
+                if e.fatal {
+                    fatal = Some(e.to_string());
+                }
+                format!(
+                    "{{\"error\":\"{text}\",\"line\":{},\"fatal\":{}}}",
+                    e.line, e.fatal
+                )
+            }
+        };
+        writeln!(out, "{line}").map_err(|e| e.to_string())?;
+    }
+    out.flush().map_err(|e| e.to_string())?;
+    fatal.map_or(Ok(()), Err)
+}
+
+fn convert(input: &Path, output: &Path, direction: bool) -> Result<(), String> {
+    let reader = autoplug_logs::open(input).map_err(|e| e.to_string())?;
+    let format = LogFormat::from_extension(output)
+        .ok_or_else(|| format!("{}: name it .asc or .log", output.display()))?;
+    let out =
+        BufWriter::new(File::create(output).map_err(|e| format!("{}: {e}", output.display()))?);
+    let summary = match format {
+        LogFormat::Asc => export_asc(reader, out),
+        LogFormat::Candump => export_candump(reader, out, direction),
+        LogFormat::Blf => return Err("BLF is not written: convert to .asc".into()),
+    }
+    .map_err(|e| match e {
+        ExportError::Read(e) => format!("{}: {e}", input.display()),
+        ExportError::Write(e) => format!("{}: {e}", output.display()),
+    })?;
+    eprint!("{} frames written to {}", summary.frames, output.display());
+    match summary.first_skipped {
+        Some(first) => eprintln!("; {} malformed skipped (first: {})", summary.skipped, first),
+        None => eprintln!(),
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let json_mode = args.iter().any(|a| a == "--json");
+    let direction = args.iter().any(|a| a == "--direction");
+    args.retain(|a| a != "--json" && a != "--direction");
+    let result = match (json_mode, args.as_slice()) {
+        (true, [input]) => json(Path::new(input)),
+        (false, [input, output]) => convert(Path::new(input), Path::new(output), direction),
+        _ => return usage(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("convert: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,444 @@
+//! The candump log format of linux-can's can-utils (`candump -l`), which canplayer,
+//! python-can, cantools and SavvyCAN read: one frame per line,
+//! `(1436509052.249713) can0 044#2A366C2BBA`.
+//!
+//! - 3 hex digits of identifier: standard frame; 8: extended, or an error frame when the
+//!   `CAN_ERR_FLAG` bit (0x20000000) is set, as candump writes them.
+//! - `123#R` / `123#R4`: remote frame (with its DLC).
+//! - `123##1...`: CAN FD, refused (classic CAN only).
+//! - python-can appends ` R` (received) or ` T` (transmitted); plain candump says
+//!   nothing and the frame counts as received.
+//! - Data may hold `.` separators (`11.22.33`), and an 8-byte frame may carry candump's
+//!   `_X` raw DLC suffix, which is ignored.
+
+use std::io::BufRead;
+
+use super::lines::{Line, Lines};
+use super::LogError;
+use crate::frame::{Direction, FrameKind, LogFrame, MAX_EXTENDED_ID, MAX_STANDARD_ID};
+use crate::time::parse_seconds;
+
+/// SocketCAN's error frame flag in a candump identifier.
+pub const CAN_ERR_FLAG: u32 = 0x2000_0000;
+
+/// Most interface names a log may use: channels are a `u8`.
+const MAX_INTERFACES: usize = 256;
+
+/// One parsed line: the frame (on channel 0) and the interface it names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CandumpLine<'a> {
+    /// The interface name (`can0`, `vcan1`).
+    pub interface: &'a str,
+    /// The frame; its channel is 0 (the reader numbers interfaces).
+    pub frame: LogFrame,
+}
+
+/// Parses one line (`line` is its number, for the error). Blank lines are errors here;
+/// [`CandumpReader`] skips them.
+pub fn parse_line(text: &str, line: u64) -> Result<CandumpLine<'_>, LogError> {
+    let err = |message: String| LogError::at_line(line, message);
+    let mut parts = text.split_whitespace();
+    let (Some(stamp), Some(interface), Some(body)) = (parts.next(), parts.next(), parts.next())
+    else {
+        return Err(err(format!(
+            "expected \"(seconds.micros) interface ID#DATA\", found \"{}\"",
+            text.trim()
+        )));
+    };
+    let direction = match parts.next() {
+        None | Some("R" | "r") => Direction::Rx,
+        Some("T" | "t") => Direction::Tx,
+        Some(extra) => return Err(err(format!("unexpected \"{extra}\" after the frame"))),
+    };
+    if let Some(extra) = parts.next() {
+        return Err(err(format!("unexpected \"{extra}\" after the frame")));
+    }
+    let stamp = stamp
+        .strip_prefix('(')
+        .and_then(|s| s.strip_suffix(')'))
+        .ok_or_else(|| err(format!("timestamp \"{stamp}\" is not in parentheses")))?;
+    let t_us = parse_seconds(stamp)
+        .ok_or_else(|| err(format!("timestamp \"{stamp}\" is not seconds.fraction")))?;
+    let (id_text, data_text) = body.split_once('#').ok_or_else(|| {
+        err(format!(
+            "frame \"{body}\" has no '#' between identifier and data"
+        ))
+    })?;
+    if data_text.starts_with('#') {
+        return Err(err(format!(
+            "CAN FD frame \"{body}\" (\"##\") is not supported: classic CAN only"
+        )));
+    }
+    if id_text.is_empty() || !id_text.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return Err(err(format!("identifier \"{id_text}\" is not hexadecimal")));
+    }
+    // Only 3 or 8 hex digits are parsed: both fit a u32.
+    let (id, extended, kind) = match id_text.len() {
+        3 => {
+            let id = u32::from_str_radix(id_text, 16).unwrap_or(u32::MAX);
+            if id > MAX_STANDARD_ID {
+                return Err(err(format!(
+                    "identifier \"{id_text}\" does not fit 11 bits (3 digits mean a standard identifier, 000 to 7FF)"
+                )));
+            }
+            (id, false, FrameKind::Data)
+        }
+        8 => {
+            let raw = u32::from_str_radix(id_text, 16).unwrap_or(u32::MAX);
+            if raw & CAN_ERR_FLAG != 0 {
+                (raw & MAX_EXTENDED_ID, false, FrameKind::Error)
+            } else if raw > MAX_EXTENDED_ID {
+                return Err(err(format!(
+                    "identifier \"{id_text}\" does not fit 29 bits"
+                )));
+            } else {
+                (raw, true, FrameKind::Data)
+            }
+        }
+        n => {
+            return Err(err(format!(
+                "identifier \"{id_text}\" has {n} digits: 3 for a standard identifier, 8 for an extended one"
+            )))
+        }
+    };
+    let frame = if let Some(dlc_text) = data_text
+        .strip_prefix('R')
+        .or_else(|| data_text.strip_prefix('r'))
+    {
+        if kind == FrameKind::Error {
+            return Err(err("an error frame cannot be a remote frame".into()));
+        }
+        let dlc = match dlc_text {
+            "" => 0,
+            d if d.len() == 1 && matches!(d.as_bytes()[0], b'0'..=b'8') => d.as_bytes()[0] - b'0',
+            d => {
+                return Err(err(format!(
+                    "remote frame length \"{d}\" is not a digit 0 to 8"
+                )))
+            }
+        };
+        LogFrame::remote(t_us, 0, id, extended, dlc)
+    } else {
+        let data = parse_data(data_text).map_err(err)?;
+        LogFrame::new(t_us, 0, id, extended, kind, &data.bytes[..data.len])
+    }
+    .map_err(|e| err(e.to_string()))?;
+    Ok(CandumpLine {
+        interface,
+        frame: frame.with_direction(direction),
+    })
+}
+
+struct Data {
+    bytes: [u8; 8],
+    len: usize,
+}
+
+/// `2A366C2BBA`, `2A.36.6C`, `0102030405060708_9`.
+fn parse_data(text: &str) -> Result<Data, String> {
+    let (hex, raw_dlc) = match text.split_once('_') {
+        Some((hex, dlc)) => (hex, Some(dlc)),
+        None => (text, None),
+    };
+    let mut data = Data {
+        bytes: [0; 8],
+        len: 0,
+    };
+    let mut digits = hex.bytes().filter(|&b| b != b'.');
+    while let Some(hi) = digits.next() {
+        let Some(lo) = digits.next() else {
+            return Err(format!("data \"{text}\" has an odd number of hex digits"));
+        };
+        let (Some(hi), Some(lo)) = (hex_value(hi), hex_value(lo)) else {
+            return Err(format!("data \"{text}\" is not hexadecimal"));
+        };
+        if data.len == 8 {
+            let count = hex.bytes().filter(|&b| b != b'.').count() / 2;
+            return Err(format!(
+                "{count} data bytes: a classic CAN frame carries at most 8"
+            ));
+        }
+        data.bytes[data.len] = hi << 4 | lo;
+        data.len += 1;
+    }
+    if let Some(dlc) = raw_dlc {
+        // candump's raw DLC 9..F of an 8-byte frame: nothing the frame keeps.
+        let ok = data.len == 8 && dlc.len() == 1 && dlc.bytes().all(|b| b.is_ascii_hexdigit());
+        if !ok {
+            return Err(format!(
+                "data \"{text}\": '_' must be followed by one hex digit after 8 bytes"
+            ));
+        }
+    }
+    Ok(data)
+}
+
+fn hex_value(b: u8) -> Option<u8> {
+    (b as char).to_digit(16).map(|v| v as u8)
+}
+
+/// Reads a candump log line by line; see the [module](self) for the format. Interface
+/// names become channels in order of first appearance (the first name is channel 0).
+pub struct CandumpReader<R> {
+    lines: Lines<R>,
+    interfaces: Vec<String>,
+    done: bool,
+}
+
+impl<R: BufRead> CandumpReader<R> {
+    /// A reader of this input.
+    pub fn new(input: R) -> Self {
+        Self {
+            lines: Lines::new(input),
+            interfaces: Vec::new(),
+            done: false,
+        }
+    }
+
+    /// The interface names seen so far; channel `n` is `interfaces()[n]`.
+    pub fn interfaces(&self) -> &[String] {
+        &self.interfaces
+    }
+}
+
+impl<R: BufRead> Iterator for CandumpReader<R> {
+    type Item = Result<LogFrame, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        loop {
+            let number = self.lines.number() + 1;
+            let line = match self.lines.next_line() {
+                None => {
+                    self.done = true;
+                    return None;
+                }
+                Some(Err(e)) => {
+                    self.done = true;
+                    return Some(Err(LogError::io(number, &e)));
+                }
+                Some(Ok(line)) => line,
+            };
+            let text = match line {
+                Line::Bad(message) => return Some(Err(LogError::at_line(number, message))),
+                Line::Text(text) if text.trim().is_empty() => continue,
+                Line::Text(text) => text,
+            };
+            let parsed = match parse_line(text, number) {
+                Ok(parsed) => parsed,
+                Err(e) => return Some(Err(e)),
+            };
+            let channel = match self.interfaces.iter().position(|n| n == parsed.interface) {
+                Some(i) => i,
+                None if self.interfaces.len() < MAX_INTERFACES => {
+                    self.interfaces.push(parsed.interface.to_string());
+                    self.interfaces.len() - 1
+                }
+                None => {
+                    return Some(Err(LogError::at_line(
+                        number,
+                        format!(
+                            "interface \"{}\" is one more than the {MAX_INTERFACES} channels a log may use",
+                            parsed.interface
+                        ),
+                    )))
+                }
+            };
+            let mut frame = parsed.frame;
+            frame.channel = channel as u8;
+            return Some(Ok(frame));
+        }
+    }
+}
+
+impl<R> std::fmt::Debug for CandumpReader<R> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CandumpReader")
+            .field("line", &self.lines.number())
+            .field("interfaces", &self.interfaces)
+            .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn read(text: &str) -> Vec<Result<LogFrame, LogError>> {
+        CandumpReader::new(text.as_bytes()).collect()
+    }
+
+    fn frame(t_us: u64, id: u32, data: &[u8]) -> LogFrame {
+        LogFrame::new(t_us, 0, id, false, FrameKind::Data, data).unwrap()
+    }
+
+    #[test]
+    fn plain_lines() {
+        let l = parse_line("(1436509052.249713) can0 044#2A366C2BBA", 1).unwrap();
+        assert_eq!(l.interface, "can0");
+        assert_eq!(
+            l.frame,
+            frame(1_436_509_052_249_713, 0x44, &[0x2A, 0x36, 0x6C, 0x2B, 0xBA])
+        );
+        assert_eq!(l.frame.direction, Direction::Rx);
+        assert_eq!(parse_line("(1.5) vcan0 123#", 1).unwrap().frame.len(), 0);
+        assert_eq!(
+            parse_line("(0.000001) can0 7ff#aa.bb", 1).unwrap().frame,
+            frame(1, 0x7FF, &[0xAA, 0xBB])
+        );
+    }
+
+    #[test]
+    fn python_can_direction_suffix() {
+        let rx = parse_line("(1.000000) can0 044#01 R", 1).unwrap().frame;
+        let tx = parse_line("(1.000000) can0 044#01 T", 1).unwrap().frame;
+        assert_eq!(rx.direction, Direction::Rx);
+        assert_eq!(tx.direction, Direction::Tx);
+        assert_eq!(rx.data(), tx.data());
+    }
+
+    #[test]
+    fn extended_remote_and_error_frames() {
+        let ext = parse_line("(2.0) can0 1ABCDEF0#0102", 1).unwrap().frame;
+        assert!(ext.extended);
+        assert_eq!(
+            (ext.id, ext.kind, ext.data()),
+            (0x1ABC_DEF0, FrameKind::Data, &[1u8, 2][..])
+        );
+        // An extended identifier below 0x800 keeps its 8 digits and its kind.
+        assert!(
+            parse_line("(2.0) can0 00000123#", 1)
+                .unwrap()
+                .frame
+                .extended
+        );
+
+        let rtr = parse_line("(2.0) can0 123#R", 1).unwrap().frame;
+        assert_eq!((rtr.kind, rtr.len()), (FrameKind::Remote, 0));
+        let rtr = parse_line("(2.0) can0 123#R4 T", 1).unwrap().frame;
+        assert_eq!(
+            (rtr.kind, rtr.len(), rtr.direction),
+            (FrameKind::Remote, 4, Direction::Tx)
+        );
+        let rtr = parse_line("(2.0) can0 1ABCDEF0#R8", 1).unwrap().frame;
+        assert!(rtr.extended && rtr.kind == FrameKind::Remote && rtr.len() == 8);
+
+        // candump -l with error frames enabled; python-can's way (no data, no R/T).
+        let e = parse_line("(3.0) can0 20000004#0004000000000000", 1)
+            .unwrap()
+            .frame;
+        assert_eq!((e.kind, e.id, e.extended), (FrameKind::Error, 0x4, false));
+        assert_eq!(e.data(), &[0, 4, 0, 0, 0, 0, 0, 0]);
+        let e = parse_line("(3.0) can0 20000080#", 1).unwrap().frame;
+        assert_eq!((e.kind, e.id, e.len()), (FrameKind::Error, 0x80, 0));
+        // The raw DLC suffix of an 8-byte frame.
+        let f = parse_line("(3.0) can0 123#0102030405060708_C", 1)
+            .unwrap()
+            .frame;
+        assert_eq!(f.len(), 8);
+    }
+
+    #[test]
+    fn broken_lines_are_named() {
+        let cases = [
+            ("(1.0) can0 12345#00", "has 5 digits"),
+            ("(1.0) can0 123#0", "odd number of hex digits"),
+            (
+                "(1.0) can0 123#000102030405060708",
+                "9 data bytes: a classic CAN frame carries at most 8",
+            ),
+            (
+                "(1.0) can0 123##100",
+                "CAN FD frame \"123##100\" (\"##\") is not supported",
+            ),
+            ("(1.0) can0 123#R9", "remote frame length \"9\""),
+            ("(1.0) can0 20000004#R", "cannot be a remote frame"),
+            ("1.0 can0 123#00", "not in parentheses"),
+            ("(1.x) can0 123#00", "not seconds.fraction"),
+            ("(-1.0) can0 123#00", "not seconds.fraction"),
+            ("(1.0) can0 12G#00", "identifier \"12G\" is not hexadecimal"),
+            ("(1.0) can0 +12#00", "not hexadecimal"),
+            ("(1.0) can0 #00", "not hexadecimal"),
+            ("(1.0) can0 123#0G", "not hexadecimal"),
+            ("(1.0) can0 123#01_2", "'_' must be followed"),
+            ("(1.0) can0", "expected"),
+            ("(1.0) can0 123#00 X", "unexpected \"X\""),
+            ("(1.0) can0 123#00 R R", "unexpected \"R\""),
+            ("(1.0) can0 123", "no '#'"),
+            ("(1.0) can0 800#00", "does not fit 11 bits"),
+            ("(1.0) can0 C0000000#00", "does not fit 29 bits"),
+        ];
+        for (line, expected) in cases {
+            let e = parse_line(line, 7).unwrap_err();
+            assert_eq!(e.line, 7);
+            assert!(!e.is_fatal());
+            assert!(e.message.contains(expected), "{line}: {e}");
+        }
+        assert_eq!(
+            parse_line("(1.0) can0 12G#00", 17).unwrap_err().to_string(),
+            "line 17: identifier \"12G\" is not hexadecimal"
+        );
+    }
+
+    #[test]
+    fn a_bad_line_in_the_middle_is_reported_and_reading_goes_on() {
+        let got =
+            read("(1.0) can0 001#00\n\n(2.0) can0 002#01\n(3.0) can0 zz\n(4.0) can0 004#00\n");
+        assert_eq!(got.len(), 4);
+        assert_eq!(got[1].as_ref().unwrap().id, 2);
+        let e = got[2].as_ref().unwrap_err();
+        assert_eq!(e.line, 4, "blank lines count");
+        assert_eq!(got[3].as_ref().unwrap().id, 4);
+    }
+
+    #[test]
+    fn empty_blank_and_crlf() {
+        assert!(read("").is_empty());
+        assert!(read("\n\n   \r\n").is_empty());
+        let got = read("(1.0) can0 001#00\r\n(2.0) can0 002#0102\r\n");
+        assert_eq!(got.len(), 2);
+        assert_eq!(got[1].as_ref().unwrap().data(), &[1, 2]);
+    }
+
+    #[test]
+    fn interfaces_become_channels_in_order_of_appearance() {
+        let mut r =
+            CandumpReader::new("(1.0) vcan1 001#\n(2.0) can0 002#\n(3.0) vcan1 003#\n".as_bytes());
+        let channels: Vec<u8> = r.by_ref().map(|f| f.unwrap().channel).collect();
+        assert_eq!(channels, [0, 1, 0]);
+        assert_eq!(r.interfaces(), ["vcan1", "can0"]);
+    }
+
+    #[test]
+    fn time_going_backwards_is_not_judged() {
+        let got: Vec<u64> = read("(5.0) can0 001#\n(1.0) can0 001#\n(3.0) can0 001#\n")
+            .into_iter()
+            .map(|f| f.unwrap().t_us)
+            .collect();
+        assert_eq!(got, [5_000_000, 1_000_000, 3_000_000]);
+    }
+
+    #[test]
+    fn io_errors_are_fatal_and_end_the_read() {
+        struct Failing(u8);
+        impl std::io::Read for Failing {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                if self.0 == 0 {
+                    return Err(std::io::Error::other("device gone"));
+                }
+                self.0 -= 1;
+                let line = b"(1.0) can0 001#00\n";
+                buf[..line.len()].copy_from_slice(line);
+                Ok(line.len())
+            }
+        }
+        let mut r = CandumpReader::new(std::io::BufReader::with_capacity(64, Failing(1)));
+        assert!(r.next().unwrap().is_ok());
+        let e = r.next().unwrap().unwrap_err();
+        assert!(e.is_fatal());
+        assert_eq!(e.to_string(), "line 2: cannot read the file: device gone");
+        assert!(r.next().is_none());
+    }
+}

@@ -1,0 +1,125 @@
+//! The readers against files python-can 4.6 wrote (tests/data/make_fixtures.py): the same
+//! eight messages as candump, ASC and three kinds of BLF.
+
+use std::path::PathBuf;
+
+use autoplug_logs::{open, Direction, FrameKind, LogError, LogFormat, LogFrame, Place};
+
+const T0: u64 = 1_700_000_000_000_000;
+
+fn data(path: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(path)
+}
+
+fn read(name: &str, format: LogFormat) -> Vec<Result<LogFrame, LogError>> {
+    let reader = open(data(name)).unwrap();
+    assert_eq!(reader.format(), format);
+    reader.collect()
+}
+
+fn frame(t_us: u64, channel: u8, id: u32, extended: bool, bytes: &[u8]) -> LogFrame {
+    LogFrame::new(t_us, channel, id, extended, FrameKind::Data, bytes).unwrap()
+}
+
+/// What every format gives, with `t0` its time base, `remote_dlc` the remote frame's
+/// length as the format keeps it and `error_id` its error frame's identifier.
+fn expected(t0: u64, remote_dlc: u8, error_id: u32) -> Vec<LogFrame> {
+    vec![
+        frame(t0, 0, 0x00C, false, &[0x0A, 0x14, 0x1E, 0x28]),
+        frame(t0 + 1_234, 0, 0x7FF, false, &[]),
+        frame(t0 + 12_345, 1, 0x1ABC_DEF0, true, &[1, 2, 3, 4, 5, 6, 7, 8])
+            .with_direction(Direction::Tx),
+        LogFrame::remote(t0 + 100_000, 0, 0x123, false, remote_dlc).unwrap(),
+        LogFrame::new(t0 + 200_000, 0, error_id, false, FrameKind::Error, &[]).unwrap(),
+        frame(t0 + 400_001, 0, 0x003, false, &[0x64]),
+        frame(t0 + 1_500_000, 0, 0x123, true, &[0xFF]).with_direction(Direction::Tx),
+    ]
+}
+
+/// Splits the items at the CAN FD message (the sixth), which must be the one error.
+fn check(got: Vec<Result<LogFrame, LogError>>, expected: Vec<LogFrame>, fd_at: u64, place: Place) {
+    assert_eq!(got.len(), 8, "{got:?}");
+    let error = got[5].as_ref().unwrap_err();
+    assert_eq!(
+        (error.line, error.place, error.fatal),
+        (fd_at, place, false)
+    );
+    assert!(
+        error.message.contains("CAN FD frame") && error.message.contains("not supported"),
+        "{error}"
+    );
+    let frames: Vec<LogFrame> = got
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| *i != 5)
+        .map(|(_, f)| f.unwrap())
+        .collect();
+    assert_eq!(frames, expected);
+}
+
+#[test]
+fn python_can_candump() {
+    // CanutilsLogWriter writes remote frames without their DLC and error frames as
+    // CAN_ERR_FLAG | CAN_ERR_BUSERROR.
+    check(
+        read("python-can.log", LogFormat::Candump),
+        expected(T0, 0, 0x80),
+        6,
+        Place::Line,
+    );
+}
+
+#[test]
+fn python_can_asc() {
+    // ASC times count from the start of the measurement; the CANFD line is line 11.
+    check(
+        read("python-can.asc", LogFormat::Asc),
+        expected(0, 4, 0),
+        11,
+        Place::Line,
+    );
+}
+
+#[test]
+fn python_can_blf() {
+    for name in [
+        "python-can.blf",
+        "python-can-stored.blf",
+        "python-can-split.blf",
+    ] {
+        // python-can's error frame has its default `is_extended_id=True`, which BLF keeps.
+        let mut expected = expected(T0, 4, 0);
+        expected[4].extended = true;
+        check(read(name, LogFormat::Blf), expected, 6, Place::Object);
+    }
+}
+
+#[test]
+fn truncated_and_corrupted_blf_give_a_clear_error() {
+    let good = std::fs::read(data("python-can.blf")).unwrap();
+    for cut in 0..good.len() {
+        let bytes = good[..cut].to_vec();
+        match autoplug_logs::LogReader::new(LogFormat::Blf, Box::new(std::io::Cursor::new(bytes))) {
+            Err(e) => assert!(cut < 144, "{cut}: {e}"),
+            Ok(reader) => {
+                let got: Vec<_> = reader.collect();
+                if let Some(Err(e)) = got.last() {
+                    if e.fatal {
+                        assert!(e.message.contains("truncated"), "{cut}: {e}");
+                    }
+                }
+            }
+        }
+    }
+    for at in 144..good.len() {
+        let mut bytes = good.clone();
+        bytes[at] ^= 0x55;
+        let reader =
+            autoplug_logs::LogReader::new(LogFormat::Blf, Box::new(std::io::Cursor::new(bytes)))
+                .unwrap();
+        let errors: Vec<LogError> = reader.filter_map(|f| f.err()).collect();
+        assert!(errors.iter().filter(|e| e.fatal).count() <= 1);
+    }
+}
