@@ -421,7 +421,14 @@ impl VirtualCar {
             node_names,
             external_rx: None,
         };
-        car.controls = car.timeline.advance(0.0, |_| {});
+        // Road and fault changes at t = 0 take effect from the first tick, like any other.
+        let mut at_start = Vec::new();
+        car.controls = car
+            .timeline
+            .advance(0.0, |event| at_start.push(event.clone()));
+        for event in at_start {
+            car.apply_event(&event);
+        }
         car
     }
 
