@@ -1,0 +1,119 @@
+//! The AutoPlug gateway's diagnostics: one routine per ECU, judged from the CAN traffic
+//! alone, live or on a recorded log alike (they are [`Observer`]s of the one pipeline and
+//! use only frame timestamps, so the same frames give the same verdicts).
+//!
+//! Each routine gives a [`Finding`]: a [`Verdict`] (ok, suspect, faulty, no data) with its
+//! number, unit, thresholds and the time window that justifies it. Each routine's module
+//! documentation says what it measures and why its thresholds are where they are. Every
+//! ECU also gets the [`presence`] routine (its messages at their periods); an ECU whose
+//! messages never arrived is "no data", whatever its other routines say.
+//!
+//! | module | ECU | measures |
+//! |---|---|---|
+//! | [`presence`] | all nine | longest gap between frames, in periods |
+//! | [`cruise`] | cruise control | rms tracking error against the latched set speed |
+//! | [`abs`] | ABS | longest wheel lock while braking |
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod abs;
+pub mod cruise;
+pub mod presence;
+mod verdict;
+
+pub use verdict::{EcuDiagnosis, Finding, Verdict, Window};
+
+use autoplug_can::Node;
+use autoplug_gateway::{CarState, Observer, Update};
+use autoplug_logs::LogFrame;
+
+/// A diagnostic routine: watches frames, then says what it found about its ECU.
+pub trait Routine {
+    /// The ECU it judges.
+    fn ecu(&self) -> Node;
+    /// A frame, after the car state took it.
+    fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState);
+    /// What it found so far (callable at any time, live).
+    fn findings(&self, state: &CarState) -> Vec<Finding>;
+}
+
+/// The nine ECUs, in node-number order.
+pub const ECUS: [Node; 9] = [
+    Node::Engine,
+    Node::Pedals,
+    Node::Steering,
+    Node::Transmission,
+    Node::Cabin,
+    Node::Console,
+    Node::Differential,
+    Node::Cruise,
+    Node::ABS,
+];
+
+/// Every routine, as an observer of the pipeline.
+pub struct Diagnostics {
+    routines: Vec<Box<dyn Routine + Send>>,
+}
+
+impl Default for Diagnostics {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Diagnostics {
+    /// The standard set: presence for every ECU and each ECU's own routines.
+    pub fn new() -> Self {
+        let mut routines: Vec<Box<dyn Routine + Send>> = Vec::new();
+        for node in ECUS {
+            routines.push(Box::new(presence::Presence::new(node)));
+        }
+        routines.push(Box::new(cruise::Cruise::default()));
+        routines.push(Box::new(abs::Abs::default()));
+        Self { routines }
+    }
+
+    /// The diagnosis of every ECU at this moment.
+    pub fn report(&self, state: &CarState) -> Vec<EcuDiagnosis> {
+        ECUS.iter()
+            .map(|&ecu| {
+                let mut findings: Vec<Finding> = self
+                    .routines
+                    .iter()
+                    .filter(|r| r.ecu() == ecu)
+                    .flat_map(|r| r.findings(state))
+                    .collect();
+                let silent = findings.iter().any(|f| f.verdict == Verdict::NoData);
+                // No data first (it overrides), then the worst.
+                findings.sort_by_key(|f| match f.verdict {
+                    Verdict::NoData => 0,
+                    Verdict::Faulty => 1,
+                    Verdict::Suspect => 2,
+                    Verdict::Ok => 3,
+                });
+                let verdict = if silent {
+                    Verdict::NoData
+                } else {
+                    findings
+                        .iter()
+                        .map(|f| f.verdict)
+                        .max()
+                        .unwrap_or(Verdict::Ok)
+                };
+                EcuDiagnosis {
+                    ecu,
+                    verdict,
+                    findings,
+                }
+            })
+            .collect()
+    }
+}
+
+impl Observer for Diagnostics {
+    fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        for routine in &mut self.routines {
+            routine.on_frame(frame, update, state);
+        }
+    }
+}

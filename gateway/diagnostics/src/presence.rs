@@ -1,0 +1,211 @@
+//! Every ECU: its messages present at their periods.
+//!
+//! For each cyclic message the ECU is the first sender of, the routine measures the longest
+//! gap between two frames, in periods of that message. A gap is not held against the ECU
+//! when diagnostic traffic to it (or to all ECUs) was seen during the gap or in the second
+//! before it: a tester silences normal traffic (UDS 0x28) and resets ECUs while flashing,
+//! and that is not a fault.
+//!
+//! Thresholds: a receiver declares an input stale after 3 periods (spec section 2), so a
+//! gap over 3 periods already put the ECU's receivers into their safe states: suspect.
+//! Over 10 periods the ECU is taken to have stopped: faulty. An ECU none of whose messages
+//! ever arrived, or all of whose messages stopped for good, is reported as no data.
+
+use autoplug_can::{Node, DIAG_FUNCTIONAL_REQUEST_ID, MESSAGES};
+use autoplug_gateway::{CarState, Update};
+use autoplug_logs::LogFrame;
+
+use crate::{Finding, Routine, Verdict, Window};
+
+/// Gaps over this many periods: suspect.
+pub const GAP_SUSPECT_PERIODS: f64 = 3.0;
+/// Gaps over this many periods: faulty.
+pub const GAP_FAULTY_PERIODS: f64 = 10.0;
+/// Diagnostic traffic this long before a gap still explains it, µs.
+const DIAG_EXPLAINS_US: u64 = 1_000_000;
+
+struct Tracked {
+    id: u16,
+    name: &'static str,
+    period_us: u64,
+    count: u64,
+    last_us: Option<u64>,
+    longest_gap_periods: f64,
+    longest_gap: Option<Window>,
+}
+
+/// The presence routine of one ECU.
+pub struct Presence {
+    node: Node,
+    tracked: Vec<Tracked>,
+    last_diag_us: Option<u64>,
+}
+
+impl Presence {
+    /// The routine for `node`'s cyclic messages.
+    pub fn new(node: Node) -> Self {
+        let tracked = MESSAGES
+            .iter()
+            .filter(|m| m.senders.first() == Some(&node) && m.cycle_time_ms > 0)
+            .map(|m| Tracked {
+                id: m.id,
+                name: m.name,
+                period_us: u64::from(m.cycle_time_ms) * 1000,
+                count: 0,
+                last_us: None,
+                longest_gap_periods: 0.0,
+                longest_gap: None,
+            })
+            .collect();
+        Self {
+            node,
+            tracked,
+            last_diag_us: None,
+        }
+    }
+
+    fn is_diag_for_node(&self, id: u32) -> bool {
+        let Ok(id) = u16::try_from(id) else {
+            return false;
+        };
+        id == DIAG_FUNCTIONAL_REQUEST_ID
+            || self.node.diag_request_id() == Some(id)
+            || self.node.diag_response_id() == Some(id)
+    }
+
+    fn explained(&self, from_us: u64) -> bool {
+        self.last_diag_us
+            .is_some_and(|d| d + DIAG_EXPLAINS_US >= from_us)
+    }
+}
+
+impl Routine for Presence {
+    fn ecu(&self) -> Node {
+        self.node
+    }
+
+    fn on_frame(&mut self, frame: &LogFrame, update: Update, _state: &CarState) {
+        match update {
+            Update::Diagnostic if self.is_diag_for_node(frame.id) => {
+                self.last_diag_us = Some(frame.t_us);
+            }
+            Update::Message { index, .. } => {
+                let id = MESSAGES[index].id;
+                let Some(i) = self.tracked.iter().position(|t| t.id == id) else {
+                    return;
+                };
+                let t_us = frame.t_us;
+                if let Some(last) = self.tracked[i].last_us {
+                    let gap = t_us.saturating_sub(last);
+                    let periods = gap as f64 / self.tracked[i].period_us as f64;
+                    let track = &self.tracked[i];
+                    if periods > track.longest_gap_periods
+                        && periods > GAP_SUSPECT_PERIODS
+                        && !self.explained(last)
+                    {
+                        let track = &mut self.tracked[i];
+                        track.longest_gap_periods = periods;
+                        track.longest_gap = Some(Window {
+                            from_us: last,
+                            to_us: t_us,
+                        });
+                    }
+                }
+                let track = &mut self.tracked[i];
+                track.count += 1;
+                track.last_us = Some(track.last_us.map_or(t_us, |l| l.max(t_us)));
+            }
+            _ => {}
+        }
+    }
+
+    fn findings(&self, state: &CarState) -> Vec<Finding> {
+        let now = state.now_us();
+        let finding = |verdict, value, window, evidence| Finding {
+            routine: "messages at their periods",
+            verdict,
+            value,
+            unit: "periods",
+            suspect_above: GAP_SUSPECT_PERIODS,
+            faulty_above: GAP_FAULTY_PERIODS,
+            window,
+            evidence,
+        };
+        let names = || {
+            self.tracked
+                .iter()
+                .map(|t| t.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if self.tracked.iter().all(|t| t.count == 0) {
+            return vec![finding(
+                Verdict::NoData,
+                None,
+                None,
+                format!("none of its messages ({}) was received", names()),
+            )];
+        }
+        let silent_since = self
+            .tracked
+            .iter()
+            .map(|t| t.last_us.unwrap_or(0))
+            .max()
+            .unwrap_or(0);
+        let all_silent = self.tracked.iter().all(|t| {
+            t.last_us.is_none_or(|l| {
+                now.saturating_sub(l) as f64 > GAP_SUSPECT_PERIODS * t.period_us as f64
+            })
+        });
+        if all_silent && !self.explained(silent_since) {
+            return vec![finding(
+                Verdict::NoData,
+                None,
+                Some(Window {
+                    from_us: silent_since,
+                    to_us: now,
+                }),
+                format!(
+                    "its messages ({}) stopped at {:.2} s",
+                    names(),
+                    silent_since as f64 * 1e-6
+                ),
+            )];
+        }
+        if let Some(missing) = self.tracked.iter().find(|t| t.count == 0) {
+            return vec![finding(
+                Verdict::Faulty,
+                None,
+                None,
+                format!(
+                    "{} (0x{:03X}) never received while its other messages were",
+                    missing.name, missing.id
+                ),
+            )];
+        }
+        let worst = self
+            .tracked
+            .iter()
+            .max_by(|a, b| a.longest_gap_periods.total_cmp(&b.longest_gap_periods));
+        let Some(worst) = worst.filter(|w| w.longest_gap.is_some()) else {
+            return vec![finding(
+                Verdict::Ok,
+                Some(0.0),
+                None,
+                format!("{} all present, no gap over 3 periods", names()),
+            )];
+        };
+        let value = worst.longest_gap_periods;
+        vec![finding(
+            Verdict::of(value, GAP_SUSPECT_PERIODS, GAP_FAULTY_PERIODS),
+            Some(value),
+            worst.longest_gap,
+            format!(
+                "{} missed {:.1} periods of {} ms with no diagnostic session to explain it",
+                worst.name,
+                value,
+                worst.period_us / 1000
+            ),
+        )]
+    }
+}
