@@ -37,18 +37,12 @@ pub trait Routine {
     fn findings(&self, state: &CarState) -> Vec<Finding>;
 }
 
-/// The nine ECUs, in node-number order.
-pub const ECUS: [Node; 9] = [
-    Node::Engine,
-    Node::Pedals,
-    Node::Steering,
-    Node::Transmission,
-    Node::Cabin,
-    Node::Console,
-    Node::Differential,
-    Node::Cruise,
-    Node::ABS,
-];
+/// The nine ECUs (the catalogue's nodes with a diagnostic address), in node-number order.
+pub fn ecus() -> impl Iterator<Item = Node> {
+    Node::ALL
+        .into_iter()
+        .filter(|n| n.diag_node_number().is_some())
+}
 
 /// Every routine, as an observer of the pipeline.
 pub struct Diagnostics {
@@ -65,7 +59,7 @@ impl Diagnostics {
     /// The standard set: presence for every ECU and each ECU's own routines.
     pub fn new() -> Self {
         let mut routines: Vec<Box<dyn Routine + Send>> = Vec::new();
-        for node in ECUS {
+        for node in ecus() {
             routines.push(Box::new(presence::Presence::new(node)));
         }
         routines.push(Box::new(cruise::Cruise::default()));
@@ -75,8 +69,8 @@ impl Diagnostics {
 
     /// The diagnosis of every ECU at this moment.
     pub fn report(&self, state: &CarState) -> Vec<EcuDiagnosis> {
-        ECUS.iter()
-            .map(|&ecu| {
+        ecus()
+            .map(|ecu| {
                 let mut findings: Vec<Finding> = self
                     .routines
                     .iter()

@@ -48,6 +48,7 @@ fn every_shipped_scenario_gets_the_right_verdicts() {
     paths.sort();
     assert!(paths.len() >= 17, "{paths:?}");
     let mut judged = 0;
+    assert_eq!(autoplug_diagnostics::ecus().count(), 9);
     for path in paths {
         let scenario = Scenario::load(&path).unwrap();
         let report = diagnose(&scenario);
@@ -86,7 +87,7 @@ fn every_shipped_scenario_gets_the_right_verdicts() {
 #[test]
 fn a_silenced_ecu_is_no_data_for_exactly_that_ecu() {
     let base = Scenario::load(&scenarios_dir().join("socketcand-smoke.toml")).unwrap();
-    for node in autoplug_diagnostics::ECUS {
+    for node in autoplug_diagnostics::ecus() {
         let mut scenario = base.clone();
         let text = format!(
             "name = \"silenced\"\nduration_s = 1.0\n[[at]]\nt_s = 0.0\nfault = {{ silence = \"{}\" }}\n",
