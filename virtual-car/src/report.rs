@@ -113,7 +113,8 @@ pub struct Summary {
     pub final_speed_kmh: f64,
     /// Fuel used, L.
     pub fuel_used_l: f64,
-    /// Gear changes.
+    /// Shifts: changes of engaged gear (reverse or a forward gear) to another; the pass
+    /// through neutral inside a shift, and engaging a gear from neutral, are not shifts.
     pub shifts: usize,
     /// Engaged gears in order (-1 reverse, 0 neutral).
     pub gear_sequence: Vec<i32>,
@@ -139,6 +140,23 @@ pub struct Summary {
     pub error_frames: u64,
     /// DTCs each ECU recorded ("U0126-87 status 0x2F").
     pub dtcs: BTreeMap<String, Vec<String>>,
+}
+
+/// Shifts in a sequence of gears (-1 reverse, 0 neutral, 1..6): a change from one engaged
+/// gear to another, whatever neutral lies between them.
+pub fn shifts(gears: &[i32]) -> usize {
+    let mut engaged = gears.iter().filter(|g| **g != 0);
+    let Some(mut last) = engaged.next() else {
+        return 0;
+    };
+    let mut count = 0;
+    for gear in engaged {
+        if gear != last {
+            count += 1;
+            last = gear;
+        }
+    }
+    count
 }
 
 fn round(x: f64, decimals: i32) -> f64 {
@@ -193,7 +211,7 @@ impl Summary {
             max_speed_kmh: round(trace.iter().map(|r| r.speed_kmh).fold(0.0, f64::max), 2),
             final_speed_kmh: round(last.speed_kmh, 2),
             fuel_used_l: round(first.fuel_l - last.fuel_l, 3),
-            shifts: gear_sequence.len() - 1,
+            shifts: shifts(&gear_sequence),
             gear_sequence,
             stops: stops(trace, mu),
             cruise: cruise(trace),

@@ -524,3 +524,14 @@ fn the_faulty_software_a_scenario_installs_is_what_the_ecu_reports() {
         "a standing car's cruise is off"
     );
 }
+
+#[test]
+fn a_pass_through_neutral_is_not_a_shift() {
+    use crate::report::shifts;
+    assert_eq!(shifts(&[0, 1, 0, 2, 0, 3]), 2);
+    assert_eq!(shifts(&[0, 1, 2, 1]), 2);
+    assert_eq!(shifts(&[2, 0, 2]), 0, "back into the same gear");
+    assert_eq!(shifts(&[0, -1, 0, 1]), 1);
+    assert_eq!(shifts(&[0]), 0);
+    assert_eq!(shifts(&[]), 0);
+}
