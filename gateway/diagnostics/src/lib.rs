@@ -13,11 +13,15 @@
 //! | [`presence`] | all nine | longest gap between frames, in periods |
 //! | [`cruise`] | cruise control | rms tracking error against the latched set speed |
 //! | [`abs`] | ABS | longest wheel lock while braking |
+//! | [`console`] | console | longest disagreement of the brake lights with the brake |
+//! | [`engine`] | engine | fuel never rising while driving |
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 pub mod abs;
+pub mod console;
 pub mod cruise;
+pub mod engine;
 pub mod presence;
 mod verdict;
 
@@ -64,6 +68,8 @@ impl Diagnostics {
         }
         routines.push(Box::new(cruise::Cruise::default()));
         routines.push(Box::new(abs::Abs::default()));
+        routines.push(Box::new(console::Console::default()));
+        routines.push(Box::new(engine::Engine::default()));
         Self { routines }
     }
 

@@ -1,0 +1,113 @@
+//! Console: do the brake lights follow the brake?
+//!
+//! The console drives the brake lights from the brake command on PedalBrake, on above
+//! `ecu_console::BRAKE_LIGHTS_ON_PCT`, off at or below `BRAKE_LIGHTS_OFF_PCT` (in
+//! between either is right), and reports them in AccMsg bit 1, sent at once on a change.
+//! The routine compares AccMsg's brake lights with what PedalBrake asks for, while
+//! PedalBrake is fresh (when it is stale the console's safe state is lights on, which is
+//! right), and measures the longest continuous disagreement.
+//!
+//! Thresholds: the console steps every 10 ms and AccMsg goes out on a change no later than
+//! its 5 ms minimum gap, so a working console agrees again within about 20 ms. Over
+//! [`SUSPECT_S`] the drivers behind see a late light: suspect; over [`FAULTY_S`], faulty.
+
+use autoplug_can::{AccMsg, Node, PedalBrake, MESSAGES};
+use autoplug_gateway::{CarState, Update};
+use autoplug_logs::LogFrame;
+use ecu_console::{BRAKE_LIGHTS_OFF_PCT, BRAKE_LIGHTS_ON_PCT};
+
+use crate::{Finding, Routine, Verdict, Window};
+
+/// Longest disagreement above which the console is suspect, s.
+pub const SUSPECT_S: f64 = 0.1;
+/// Longest disagreement above which the console is faulty, s.
+pub const FAULTY_S: f64 = 0.3;
+
+/// The console routine.
+#[derive(Default)]
+pub struct Console {
+    since: Option<u64>,
+    longest: Option<Window>,
+    compared: u64,
+}
+
+impl Console {
+    fn end(&mut self, t: u64) {
+        if let Some(since) = self.since.take() {
+            let len = t.saturating_sub(since);
+            if self.longest.is_none_or(|w| len > w.to_us - w.from_us) {
+                self.longest = Some(Window {
+                    from_us: since,
+                    to_us: t,
+                });
+            }
+        }
+    }
+}
+
+impl Routine for Console {
+    fn ecu(&self) -> Node {
+        Node::Console
+    }
+
+    fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        let Update::Message { index, .. } = update else {
+            return;
+        };
+        let id = MESSAGES[index].id;
+        if id != PedalBrake::ID && id != AccMsg::ID {
+            return;
+        }
+        let t = frame.t_us;
+        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
+        if !fresh("PedalBrake.BrakeCmd") || !fresh("AccMsg.BrakeLights") {
+            self.end(t);
+            return;
+        }
+        self.compared += 1;
+        let brake = state.get::<PedalBrake>().brake_cmd;
+        let lights = state.get::<AccMsg>().brake_lights;
+        let wrong =
+            (brake > BRAKE_LIGHTS_ON_PCT && !lights) || (brake <= BRAKE_LIGHTS_OFF_PCT && lights);
+        match (wrong, self.since) {
+            (true, None) => self.since = Some(t),
+            (false, Some(_)) => self.end(t),
+            _ => {}
+        }
+    }
+
+    fn findings(&self, state: &CarState) -> Vec<Finding> {
+        let mut me = Console {
+            since: self.since,
+            longest: self.longest,
+            compared: self.compared,
+        };
+        me.end(state.now_us());
+        let value = me
+            .longest
+            .map_or(0.0, |w| (w.to_us - w.from_us) as f64 * 1e-6);
+        let evidence = match me.longest {
+            _ if me.compared == 0 => {
+                "not exercised: PedalBrake and AccMsg never fresh together".to_string()
+            }
+            None => format!(
+                "brake lights agreed with the brake command in all {} comparisons",
+                me.compared
+            ),
+            Some(w) => format!(
+                "brake lights disagreed with the brake command for {value:.3} s from {:.2} s",
+                w.from_us as f64 * 1e-6
+            ),
+        };
+        vec![Finding {
+            routine: "brake lights against the brake",
+            verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
+            value: (me.compared > 0).then_some(value),
+            unit: "s",
+            suspect_above: SUSPECT_S,
+            faulty_above: FAULTY_S,
+            window: me.longest,
+            evidence,
+        }]
+    }
+}
