@@ -30,7 +30,7 @@ use autoplug_virtual_car::scenario::Scenario;
 #[command(
     name = "autoplug",
     version,
-    about = "AutoPlug middleware: sign firmware images, read ECU identification and flash ECUs over CAN (UDS on ISO-TP)",
+    about = "AutoPlug middleware: sign firmware images, read ECU identification and flash ECUs over CAN (UDS on ISO-TP), replay and diagnose recorded logs",
     after_help = "Transports (--via): socketcand://HOST:PORT/BUS (the virtual car's --socketcand server, or socketcand next to a real bus), socketcan://IFACE (Linux SocketCAN, e.g. a USB-CAN adapter)."
 )]
 pub struct Cli {
@@ -92,6 +92,34 @@ pub enum Command {
         #[command(flatten)]
         timing: TimingArgs,
     },
+    /// Run the gateway on a recorded log (candump .log, Vector .asc or .blf): the car
+    /// state, the bus statistics and every ECU's diagnosis, as on a live bus.
+    Replay {
+        /// The log file.
+        #[arg(value_name = "LOG")]
+        log: PathBuf,
+        /// Pace the replay at this multiple of the log's own time (1 = as recorded);
+        /// default: as fast as the machine goes.
+        #[arg(long, value_name = "X", value_parser = parse_speed)]
+        speed: Option<f64>,
+        /// Skip malformed lines and count them, instead of stopping at the first.
+        #[arg(long)]
+        lenient: bool,
+    },
+    /// Judge every ECU from a recorded log: verdict (ok, suspect, faulty, no data), number,
+    /// unit, thresholds and evidence window. Exit status 0 when no ECU is faulty, 3 when
+    /// one is (1 for an error, 2 for a wrong command line).
+    Diagnose {
+        /// The log file (candump .log, Vector .asc or .blf).
+        #[arg(value_name = "LOG")]
+        log: PathBuf,
+        /// Print JSON for scripts instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Skip malformed lines and count them, instead of stopping at the first.
+        #[arg(long)]
+        lenient: bool,
+    },
     /// Run one of the report's demonstrations on the virtual car, the flashing done over
     /// CAN by this tool: `cruise` (scenario 1, the broken cruise control) or `abs`
     /// (scenario 2, the broken ABS). Run from the repository root (it reads
@@ -104,6 +132,21 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
     },
+}
+
+fn parse_speed(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 && x <= 10_000.0 => Ok(x),
+        _ => Err(format!("'{text}' is not a speed factor in (0, 10000]")),
+    }
+}
+
+fn strictness(lenient: bool) -> autoplug_gateway::Strictness {
+    if lenient {
+        autoplug_gateway::Strictness::Lenient
+    } else {
+        autoplug_gateway::Strictness::Strict
+    }
 }
 
 fn parse_demo(text: &str) -> Result<Demo, String> {
@@ -280,12 +323,19 @@ pub enum CliError {
     Output(io::Error),
     /// A demonstration could not run.
     Demo(String),
+    /// A log could not be replayed.
+    Log(String),
+    /// The diagnosis judged at least one ECU faulty (exit status 3; the report was
+    /// printed).
+    FaultyEcu(String),
 }
 
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             CliError::Demo(why) => write!(f, "demonstration: {why}"),
+            CliError::Log(why) => f.write_str(why),
+            CliError::FaultyEcu(which) => write!(f, "faulty: {which}"),
             CliError::Image(error) => error.fmt(f),
             CliError::Transport(error) => error.fmt(f),
             CliError::Flash(error) => error.fmt(f),
@@ -444,6 +494,49 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             out,
         ),
         Command::Demo { which, out: dir } => demo(which, dir.as_deref(), out),
+        Command::Replay {
+            log,
+            speed,
+            lenient,
+        } => {
+            let run =
+                crate::gateway::run_log(&log, strictness(lenient), speed).map_err(CliError::Log)?;
+            let state = run.pipeline.state();
+            writeln!(out, "{}", log.display())?;
+            crate::gateway::bus_summary(state, run.pipeline.malformed(), out)?;
+            writeln!(out)?;
+            crate::gateway::signal_table(state, out)?;
+            writeln!(out)?;
+            crate::gateway::verdict_table(&run.diagnoses, out)?;
+            Ok(())
+        }
+        Command::Diagnose { log, json, lenient } => {
+            let run =
+                crate::gateway::run_log(&log, strictness(lenient), None).map_err(CliError::Log)?;
+            if json {
+                writeln!(out, "{}", crate::gateway::verdict_json(&log, &run))?;
+            } else {
+                crate::gateway::verdict_table(&run.diagnoses, out)?;
+                if let Some(first) = run.pipeline.first_malformed() {
+                    writeln!(
+                        out,
+                        "{} malformed line(s) skipped, the first: {first}",
+                        run.pipeline.malformed()
+                    )?;
+                }
+            }
+            let faulty: Vec<&str> = run
+                .diagnoses
+                .iter()
+                .filter(|d| d.verdict == autoplug_diagnostics::Verdict::Faulty)
+                .map(|d| crate::names::ecu_name(d.ecu))
+                .collect();
+            if faulty.is_empty() {
+                Ok(())
+            } else {
+                Err(CliError::FaultyEcu(faulty.join(", ")))
+            }
+        }
     }
 }
 
@@ -622,6 +715,11 @@ pub fn main() -> ExitCode {
     let mut out = stdout.lock();
     match run(cli, &mut out) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(CliError::FaultyEcu(which)) => {
+            let _ = out.flush();
+            eprintln!("autoplug: judged faulty: {which}");
+            ExitCode::from(3)
+        }
         Err(error) => {
             let _ = out.flush();
             eprintln!("autoplug: error: {error}");

@@ -85,11 +85,16 @@ impl Diagnostics {
                     .collect();
                 let silent = findings.iter().any(|f| f.verdict == Verdict::NoData);
                 // No data first (it overrides), then the worst.
-                findings.sort_by_key(|f| match f.verdict {
-                    Verdict::NoData => 0,
-                    Verdict::Faulty => 1,
-                    Verdict::Suspect => 2,
-                    Verdict::Ok => 3,
+                // Among equals, the ECU's own routines before the presence check: they
+                // say more about it.
+                findings.sort_by_key(|f| {
+                    let rank = match f.verdict {
+                        Verdict::NoData => 0,
+                        Verdict::Faulty => 1,
+                        Verdict::Suspect => 2,
+                        Verdict::Ok => 3,
+                    };
+                    (rank, f.routine == presence::ROUTINE)
                 });
                 let verdict = if silent {
                     Verdict::NoData

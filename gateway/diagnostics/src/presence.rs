@@ -17,6 +17,8 @@ use autoplug_logs::LogFrame;
 
 use crate::{Finding, Routine, Verdict, Window};
 
+/// The routine's name in findings.
+pub const ROUTINE: &str = "messages at their periods";
 /// Gaps over this many periods: suspect.
 pub const GAP_SUSPECT_PERIODS: f64 = 3.0;
 /// Gaps over this many periods: faulty.
@@ -29,6 +31,7 @@ struct Tracked {
     name: &'static str,
     period_us: u64,
     count: u64,
+    first_us: Option<u64>,
     last_us: Option<u64>,
     longest_gap_periods: f64,
     longest_gap: Option<Window>,
@@ -52,6 +55,7 @@ impl Presence {
                 name: m.name,
                 period_us: u64::from(m.cycle_time_ms) * 1000,
                 count: 0,
+                first_us: None,
                 last_us: None,
                 longest_gap_periods: 0.0,
                 longest_gap: None,
@@ -113,6 +117,7 @@ impl Routine for Presence {
                 }
                 let track = &mut self.tracked[i];
                 track.count += 1;
+                track.first_us.get_or_insert(t_us);
                 track.last_us = Some(track.last_us.map_or(t_us, |l| l.max(t_us)));
             }
             _ => {}
@@ -122,7 +127,7 @@ impl Routine for Presence {
     fn findings(&self, state: &CarState) -> Vec<Finding> {
         let now = state.now_us();
         let finding = |verdict, value, window, evidence| Finding {
-            routine: "messages at their periods",
+            routine: ROUTINE,
             verdict,
             value,
             unit: "periods",
@@ -172,7 +177,18 @@ impl Routine for Presence {
                 ),
             )];
         }
-        if let Some(missing) = self.tracked.iter().find(|t| t.count == 0) {
+        // A message absent since the ECU's first frame counts once that is longer than
+        // the faulty gap; a short log cannot tell.
+        let first_heard = self
+            .tracked
+            .iter()
+            .filter_map(|t| t.first_us)
+            .min()
+            .unwrap_or(now);
+        if let Some(missing) = self.tracked.iter().find(|t| {
+            t.count == 0
+                && now.saturating_sub(first_heard) as f64 > GAP_FAULTY_PERIODS * t.period_us as f64
+        }) {
             return vec![finding(
                 Verdict::Faulty,
                 None,
