@@ -9,6 +9,7 @@
 //! | [`driver`] | runs a job over a transport with the wall clock |
 //! | [`image_tool`] | key files, building an image from a raw binary or an ELF file, inspecting one |
 //! | [`names`] | NRC and service names (ISO 14229-1), ECU names of the command line |
+//! | [`live`] | live frame sources for the gateway (the in-process virtual car) |
 //! | [`gateway`] | the gateway on recorded logs: `replay` and `diagnose` |
 //! | [`cli`] | the `autoplug` command |
 //!
@@ -40,6 +41,7 @@ pub mod demo;
 pub mod driver;
 pub mod gateway;
 pub mod image_tool;
+pub mod live;
 pub mod names;
 pub mod on_car;
 pub mod tester;

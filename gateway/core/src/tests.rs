@@ -279,3 +279,34 @@ fn a_missing_log_is_a_clear_error() {
         .to_string();
     assert!(error.contains("/nonexistent/drive.log"), "{error}");
 }
+
+#[test]
+fn a_full_disk_stops_the_recording_and_not_the_pipeline() {
+    use crate::sinks::RecordingSink;
+    use autoplug_logs::{Recorder, RotatePolicy};
+    let dir = tempfile::tempdir().unwrap();
+    // Writes to /dev/full fail with ENOSPC, as on a full disk.
+    let recorder = Recorder::start_with(
+        dir.path(),
+        "full",
+        RotatePolicy::default(),
+        Box::new(|_| std::fs::OpenOptions::new().write(true).open("/dev/full")),
+    )
+    .unwrap();
+    let mut sink = RecordingSink::new(recorder);
+    // More than the recorder buffers before it writes.
+    let frames: Vec<LogFrame> = (0..20_000).map(|i| speed(i, 50.0)).collect();
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    pipeline
+        .run(
+            &mut VecSource::new("test", frames),
+            &mut [&mut sink],
+            &mut || false,
+        )
+        .unwrap();
+    assert!(!sink.is_recording());
+    let failure = sink.failure().expect("the recording stopped");
+    assert!(failure.is_disk_full(), "{failure}");
+    assert!(failure.to_string().contains("disk full"), "{failure}");
+    assert_eq!(pipeline.state().counters().frames, 20_000);
+}
