@@ -15,6 +15,7 @@
 //! | [`abs`] | ABS | longest wheel lock while braking |
 //! | [`console`] | console | longest disagreement of the brake lights with the brake |
 //! | [`engine`] | engine | fuel never rising while driving |
+//! | [`pedals`] | pedals | brake override of the accelerator; commands follow the cruise command |
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -22,6 +23,7 @@ pub mod abs;
 pub mod console;
 pub mod cruise;
 pub mod engine;
+pub mod pedals;
 pub mod presence;
 mod verdict;
 
@@ -70,6 +72,7 @@ impl Diagnostics {
         routines.push(Box::new(abs::Abs::default()));
         routines.push(Box::new(console::Console::default()));
         routines.push(Box::new(engine::Engine::default()));
+        routines.push(Box::new(pedals::Pedals::default()));
         Self { routines }
     }
 
@@ -122,3 +125,6 @@ impl Observer for Diagnostics {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,177 @@
+//! Pedals: do the commands follow the rules?
+//!
+//! The driver's pedals are not on the bus, but two of the pedals ECU's rules can be judged
+//! from what is:
+//!
+//! - **Brake override.** A brake command above `ecu_pedals::PEDAL_PRESSED_THRESHOLD`
+//!   forces the accelerator command to 0 (PedalBrake against PedalAccel).
+//! - **Cruise command.** While cruise is on (CruiseModeMsg) and its command is known
+//!   (CruiseAccelMsg fresh), the commands are the cruise command's: accelerator =
+//!   command × (1 − traction cut) when positive, brake = −command when negative. A
+//!   driver's pedal press overrides this but cancels cruise in the same step, so a
+//!   disagreement that lasts while cruise stays on breaks the rule.
+//!
+//! Each rule is judged only while its inputs are fresh. The number is the longest
+//! continuous violation. Thresholds: the commands follow their inputs within one 10 ms
+//! step after the 20 ms CruiseAccelMsg arrives, and the cancel of a pedal press reaches
+//! the bus within a few milliseconds; [`SUSPECT_S`] leaves room for both, several times
+//! over; [`FAULTY_S`] is a rule plainly not applied. A command within [`TOLERANCE_PCT`]
+//! of the expected value (rounding to the bus's 1 % steps, traction cut applied to a
+//! value already rounded) agrees.
+
+use autoplug_can::{
+    CruiseAccelMsg, CruiseMode, CruiseModeMsg, Node, PedalAccel, PedalBrake, TracMsg, MESSAGES,
+};
+use autoplug_gateway::{CarState, Update};
+use autoplug_logs::LogFrame;
+use ecu_pedals::PEDAL_PRESSED_THRESHOLD;
+
+use crate::{Finding, Routine, Verdict, Window};
+
+/// Longest violation above which the pedals ECU is suspect, s.
+pub const SUSPECT_S: f64 = 0.1;
+/// Longest violation above which the pedals ECU is faulty, s.
+pub const FAULTY_S: f64 = 0.5;
+/// Difference from the expected command still taken as agreement, %.
+pub const TOLERANCE_PCT: f32 = 2.0;
+
+#[derive(Default)]
+struct Rule {
+    since: Option<u64>,
+    longest: Option<Window>,
+    judged: u64,
+}
+
+impl Rule {
+    fn observe(&mut self, t: u64, judged: bool, violated: bool) {
+        if judged {
+            self.judged += 1;
+        }
+        match (judged && violated, self.since) {
+            (true, None) => self.since = Some(t),
+            (false, Some(_)) => self.end(t),
+            _ => {}
+        }
+    }
+
+    fn end(&mut self, t: u64) {
+        if let Some(since) = self.since.take() {
+            if self
+                .longest
+                .is_none_or(|w| t.saturating_sub(since) > w.to_us - w.from_us)
+            {
+                self.longest = Some(Window {
+                    from_us: since,
+                    to_us: t,
+                });
+            }
+        }
+    }
+
+    fn seconds(&self) -> f64 {
+        self.longest
+            .map_or(0.0, |w| (w.to_us - w.from_us) as f64 * 1e-6)
+    }
+}
+
+/// The pedals routine.
+#[derive(Default)]
+pub struct Pedals {
+    override_rule: Rule,
+    cruise_rule: Rule,
+}
+
+impl Routine for Pedals {
+    fn ecu(&self) -> Node {
+        Node::Pedals
+    }
+
+    fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        let Update::Message { index, .. } = update else {
+            return;
+        };
+        let id = MESSAGES[index].id;
+        if ![
+            PedalAccel::ID,
+            PedalBrake::ID,
+            CruiseAccelMsg::ID,
+            CruiseModeMsg::ID,
+        ]
+        .contains(&id)
+        {
+            return;
+        }
+        let t = frame.t_us;
+        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
+        let accel = state.get::<PedalAccel>().accel_cmd;
+        let brake = state.get::<PedalBrake>().brake_cmd;
+        let commands_fresh = fresh("PedalAccel.AccelCmd") && fresh("PedalBrake.BrakeCmd");
+        self.override_rule.observe(
+            t,
+            commands_fresh,
+            brake > PEDAL_PRESSED_THRESHOLD && accel > TOLERANCE_PCT,
+        );
+        let cruise_on = fresh("CruiseModeMsg.CruiseMode")
+            && state.get::<CruiseModeMsg>().cruise_mode == CruiseMode::On;
+        let judged = commands_fresh && cruise_on && fresh("CruiseAccelMsg.CruiseAccel");
+        let command = state.get::<CruiseAccelMsg>().cruise_accel;
+        let cut = if fresh("TracMsg.TractionCut") {
+            state.get::<TracMsg>().traction_cut
+        } else {
+            0.0
+        };
+        let (want_accel, want_brake) = if command >= 0.0 {
+            (command * (1.0 - cut / 100.0), 0.0)
+        } else {
+            (0.0, -command)
+        };
+        let violated = (accel - want_accel).abs() > TOLERANCE_PCT
+            || (brake - want_brake).abs() > TOLERANCE_PCT;
+        self.cruise_rule.observe(t, judged, violated);
+    }
+
+    fn findings(&self, state: &CarState) -> Vec<Finding> {
+        let now = state.now_us();
+        let mut out = Vec::new();
+        for (rule, routine, what, unexercised) in [
+            (
+                &self.override_rule,
+                "brake override of the accelerator",
+                "accelerator command above 0 while the brake command was pressed",
+                "PedalAccel and PedalBrake never fresh together",
+            ),
+            (
+                &self.cruise_rule,
+                "commands follow the cruise command",
+                "commands differed from the cruise command while cruise stayed on",
+                "cruise never on with its command on the bus",
+            ),
+        ] {
+            let mut rule = Rule {
+                since: rule.since,
+                longest: rule.longest,
+                judged: rule.judged,
+            };
+            rule.end(now);
+            let value = rule.seconds();
+            let evidence = if rule.judged == 0 {
+                format!("not exercised: {unexercised}")
+            } else if rule.longest.is_none() {
+                format!("held in all {} comparisons", rule.judged)
+            } else {
+                format!("{what} for {value:.3} s")
+            };
+            out.push(Finding {
+                routine,
+                verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
+                value: (rule.judged > 0).then_some(value),
+                unit: "s",
+                suspect_above: SUSPECT_S,
+                faulty_above: FAULTY_S,
+                window: rule.longest,
+                evidence,
+            });
+        }
+        out
+    }
+}

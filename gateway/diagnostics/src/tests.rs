@@ -1,0 +1,166 @@
+//! Each routine flags the fault it is for, on frames made for it (the shipped scenarios,
+//! in tests/scenarios.rs, show the absence of false alarms).
+
+use autoplug_can::{
+    AccMsg, CanMessage, CruiseAccelMsg, CruiseMode, CruiseModeMsg, EngineMode, EngineMsg, Frame,
+    PedalAccel, PedalBrake, VehicleSpeedMsg,
+};
+use autoplug_gateway::{Pipeline, Strictness, VecSource};
+use autoplug_logs::LogFrame;
+
+use crate::{Diagnostics, Finding, Verdict};
+
+/// Frames every `period_ms` from 0 to `until_ms` made by `make(t_ms)`.
+fn every(period_ms: u64, until_ms: u64, make: impl Fn(u64) -> Frame) -> Vec<LogFrame> {
+    (0..=until_ms / period_ms)
+        .map(|i| LogFrame::from_can(i * period_ms * 1000, 0, &make(i * period_ms)))
+        .collect()
+}
+
+fn run(mut frames: Vec<LogFrame>, routine: &str) -> Finding {
+    frames.sort_by_key(|f| f.t_us);
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut diagnostics = Diagnostics::new();
+    pipeline
+        .run(
+            &mut VecSource::new("test", frames),
+            &mut [&mut diagnostics],
+            &mut || false,
+        )
+        .unwrap();
+    diagnostics
+        .report(pipeline.state())
+        .into_iter()
+        .flat_map(|d| d.findings)
+        .find(|f| f.routine == routine)
+        .unwrap()
+}
+
+fn brake(pct: f32) -> Frame {
+    PedalBrake { brake_cmd: pct }.frame()
+}
+
+fn accel(pct: f32) -> Frame {
+    PedalAccel { accel_cmd: pct }.frame()
+}
+
+#[test]
+fn accelerating_while_braking_is_faulty_for_the_pedals() {
+    let mut frames = every(10, 2000, |_| brake(50.0));
+    frames.extend(every(10, 2000, |t| {
+        accel(if t >= 1000 { 30.0 } else { 0.0 })
+    }));
+    let f = run(frames, "brake override of the accelerator");
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    assert!((f.value.unwrap() - 1.0).abs() < 0.02, "{f:?}");
+    let w = f.window.unwrap();
+    assert_eq!(w.from_us, 1_000_000);
+}
+
+#[test]
+fn commands_ignoring_the_cruise_command_are_faulty_for_the_pedals() {
+    let on = CruiseModeMsg {
+        cruise_mode: CruiseMode::On,
+    };
+    let mut frames = every(20, 2000, |_| on.frame());
+    frames.extend(every(20, 2000, |_| {
+        CruiseAccelMsg { cruise_accel: 40.0 }.frame()
+    }));
+    frames.extend(every(10, 2000, |_| brake(0.0)));
+    // The first second right, then the command is ignored.
+    frames.extend(every(10, 2000, |t| {
+        accel(if t < 1000 { 40.0 } else { 0.0 })
+    }));
+    let f = run(frames, "commands follow the cruise command");
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    let right = {
+        let mut frames = every(20, 2000, |_| on.frame());
+        frames.extend(every(20, 2000, |_| {
+            CruiseAccelMsg {
+                cruise_accel: -30.0,
+            }
+            .frame()
+        }));
+        frames.extend(every(10, 2000, |_| brake(30.0)));
+        frames.extend(every(10, 2000, |_| accel(0.0)));
+        run(frames, "commands follow the cruise command")
+    };
+    assert_eq!(
+        (right.verdict, right.value),
+        (Verdict::Ok, Some(0.0)),
+        "{right:?}"
+    );
+}
+
+#[test]
+fn brake_lights_off_under_braking_are_faulty_for_the_console() {
+    let mut frames = every(10, 2000, |t| brake(if t >= 500 { 60.0 } else { 0.0 }));
+    frames.extend(every(100, 2000, |_| {
+        AccMsg {
+            brake_lights: false,
+            ..AccMsg::default()
+        }
+        .frame()
+    }));
+    let f = run(frames, "brake lights against the brake");
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    assert!(f.value.unwrap() >= 1.4, "{f:?}");
+}
+
+#[test]
+fn fuel_rising_while_driving_is_faulty_for_the_engine() {
+    let mut frames = every(10, 5000, |_| {
+        VehicleSpeedMsg {
+            vehicle_speed: 60.0,
+        }
+        .frame()
+    });
+    frames.extend(every(20, 5000, |t| {
+        EngineMsg {
+            engine_rpm: 2000.0,
+            fuel_level: 30.0 + t as f32 / 1000.0,
+            engine_mode: EngineMode::Economy,
+        }
+        .frame()
+    }));
+    let f = run(frames, "fuel level never rising while driving");
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    assert!((f.value.unwrap() - 5.0).abs() < 0.3, "{f:?}");
+}
+
+#[test]
+fn an_ecu_that_stops_mid_log_is_no_data_and_a_gap_is_faulty() {
+    // EngineMsg for 1 s, then nothing while the cruise ECU goes on for 2 s more.
+    let mut frames = every(20, 1000, |_| {
+        EngineMsg {
+            engine_rpm: 900.0,
+            fuel_level: 30.0,
+            engine_mode: EngineMode::Economy,
+        }
+        .frame()
+    });
+    frames.extend(every(10, 3000, |_| {
+        VehicleSpeedMsg { vehicle_speed: 0.0 }.frame()
+    }));
+    let stopped = run(frames.clone(), crate::presence::ROUTINE);
+    assert_eq!(stopped.verdict, Verdict::NoData, "{stopped:?}");
+    // The engine comes back at 2.5 s: a gap of 75 periods, no diagnostic session.
+    frames.extend(
+        every(20, 500, |_| {
+            EngineMsg {
+                engine_rpm: 900.0,
+                fuel_level: 30.0,
+                engine_mode: EngineMode::Economy,
+            }
+            .frame()
+        })
+        .into_iter()
+        .map(|mut f| {
+            f.t_us += 2_500_000;
+            f
+        }),
+    );
+    let gap = run(frames, crate::presence::ROUTINE);
+    assert_eq!(gap.verdict, Verdict::Faulty, "{gap:?}");
+    assert!(gap.value.unwrap() > 70.0, "{gap:?}");
+}
