@@ -16,7 +16,8 @@ use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 use ecu_console::{BRAKE_LIGHTS_OFF_PCT, BRAKE_LIGHTS_ON_PCT};
 
-use crate::{Finding, Routine, Verdict, Window};
+use crate::span::LongestSpan;
+use crate::{Finding, Routine, Verdict};
 
 /// Longest disagreement above which the console is suspect, s.
 pub const SUSPECT_S: f64 = 0.1;
@@ -26,23 +27,7 @@ pub const FAULTY_S: f64 = 0.3;
 /// The console routine.
 #[derive(Default)]
 pub struct Console {
-    since: Option<u64>,
-    longest: Option<Window>,
-    compared: u64,
-}
-
-impl Console {
-    fn end(&mut self, t: u64) {
-        if let Some(since) = self.since.take() {
-            let len = t.saturating_sub(since);
-            if self.longest.is_none_or(|w| len > w.to_us - w.from_us) {
-                self.longest = Some(Window {
-                    from_us: since,
-                    to_us: t,
-                });
-            }
-        }
-    }
+    disagreement: LongestSpan,
 }
 
 impl Routine for Console {
@@ -60,39 +45,24 @@ impl Routine for Console {
         }
         let t = frame.t_us;
         let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
-        if !fresh("PedalBrake.BrakeCmd") || !fresh("AccMsg.BrakeLights") {
-            self.end(t);
-            return;
-        }
-        self.compared += 1;
+        let judged = fresh("PedalBrake.BrakeCmd") && fresh("AccMsg.BrakeLights");
         let brake = state.get::<PedalBrake>().brake_cmd;
         let lights = state.get::<AccMsg>().brake_lights;
         let wrong =
             (brake > BRAKE_LIGHTS_ON_PCT && !lights) || (brake <= BRAKE_LIGHTS_OFF_PCT && lights);
-        match (wrong, self.since) {
-            (true, None) => self.since = Some(t),
-            (false, Some(_)) => self.end(t),
-            _ => {}
-        }
+        self.disagreement.observe(t, judged, wrong);
     }
 
     fn findings(&self, state: &CarState) -> Vec<Finding> {
-        let mut me = Console {
-            since: self.since,
-            longest: self.longest,
-            compared: self.compared,
-        };
-        me.end(state.now_us());
-        let value = me
-            .longest
-            .map_or(0.0, |w| (w.to_us - w.from_us) as f64 * 1e-6);
+        let me = self.disagreement.until(state.now_us());
+        let value = me.seconds();
         let evidence = match me.longest {
-            _ if me.compared == 0 => {
+            _ if me.judged == 0 => {
                 "not exercised: PedalBrake and AccMsg never fresh together".to_string()
             }
             None => format!(
                 "brake lights agreed with the brake command in all {} comparisons",
-                me.compared
+                me.judged
             ),
             Some(w) => format!(
                 "brake lights disagreed with the brake command for {value:.3} s from {:.2} s",
@@ -102,7 +72,7 @@ impl Routine for Console {
         vec![Finding {
             routine: "brake lights against the brake",
             verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
-            value: (me.compared > 0).then_some(value),
+            value: (me.judged > 0).then_some(value),
             unit: "s",
             suspect_above: SUSPECT_S,
             faulty_above: FAULTY_S,

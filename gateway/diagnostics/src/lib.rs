@@ -25,6 +25,7 @@ pub mod cruise;
 pub mod engine;
 pub mod pedals;
 pub mod presence;
+mod span;
 mod verdict;
 
 pub use verdict::{EcuDiagnosis, Finding, Verdict, Window};

@@ -26,7 +26,8 @@ use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 use ecu_pedals::PEDAL_PRESSED_THRESHOLD;
 
-use crate::{Finding, Routine, Verdict, Window};
+use crate::span::LongestSpan;
+use crate::{Finding, Routine, Verdict};
 
 /// Longest violation above which the pedals ECU is suspect, s.
 pub const SUSPECT_S: f64 = 0.1;
@@ -35,50 +36,11 @@ pub const FAULTY_S: f64 = 0.5;
 /// Difference from the expected command still taken as agreement, %.
 pub const TOLERANCE_PCT: f32 = 2.0;
 
-#[derive(Default)]
-struct Rule {
-    since: Option<u64>,
-    longest: Option<Window>,
-    judged: u64,
-}
-
-impl Rule {
-    fn observe(&mut self, t: u64, judged: bool, violated: bool) {
-        if judged {
-            self.judged += 1;
-        }
-        match (judged && violated, self.since) {
-            (true, None) => self.since = Some(t),
-            (false, Some(_)) => self.end(t),
-            _ => {}
-        }
-    }
-
-    fn end(&mut self, t: u64) {
-        if let Some(since) = self.since.take() {
-            if self
-                .longest
-                .is_none_or(|w| t.saturating_sub(since) > w.to_us - w.from_us)
-            {
-                self.longest = Some(Window {
-                    from_us: since,
-                    to_us: t,
-                });
-            }
-        }
-    }
-
-    fn seconds(&self) -> f64 {
-        self.longest
-            .map_or(0.0, |w| (w.to_us - w.from_us) as f64 * 1e-6)
-    }
-}
-
 /// The pedals routine.
 #[derive(Default)]
 pub struct Pedals {
-    override_rule: Rule,
-    cruise_rule: Rule,
+    override_rule: LongestSpan,
+    cruise_rule: LongestSpan,
 }
 
 impl Routine for Pedals {
@@ -147,12 +109,7 @@ impl Routine for Pedals {
                 "cruise never on with its command on the bus",
             ),
         ] {
-            let mut rule = Rule {
-                since: rule.since,
-                longest: rule.longest,
-                judged: rule.judged,
-            };
-            rule.end(now);
+            let rule = rule.until(now);
             let value = rule.seconds();
             let evidence = if rule.judged == 0 {
                 format!("not exercised: {unexercised}")
