@@ -14,6 +14,7 @@
 //! | [`cruise`] | cruise control | rms tracking error against the latched set speed |
 //! | [`abs`] | ABS | longest wheel lock while braking |
 //! | [`console`] | console | longest disagreement of the brake lights with the brake |
+//! | [`differential`] | differential | torque split 0 under the hold conditions; split against the yaw-rate error |
 //! | [`engine`] | engine | fuel never rising while driving |
 //! | [`pedals`] | pedals | brake override of the accelerator; commands follow the cruise command |
 #![deny(missing_docs)]
@@ -22,6 +23,7 @@
 pub mod abs;
 pub mod console;
 pub mod cruise;
+pub mod differential;
 pub mod engine;
 pub mod pedals;
 pub mod presence;
@@ -74,6 +76,7 @@ impl Diagnostics {
         routines.push(Box::new(console::Console::default()));
         routines.push(Box::new(engine::Engine::default()));
         routines.push(Box::new(pedals::Pedals::default()));
+        routines.push(Box::new(differential::Differential::default()));
         Self { routines }
     }
 

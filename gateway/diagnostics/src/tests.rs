@@ -164,3 +164,58 @@ fn an_ecu_that_stops_mid_log_is_no_data_and_a_gap_is_faulty() {
     assert_eq!(gap.verdict, Verdict::Faulty, "{gap:?}");
     assert!(gap.value.unwrap() > 70.0, "{gap:?}");
 }
+
+fn differential_frames(split: f32, speed: f32, steering: f32, error: f32) -> Vec<LogFrame> {
+    use autoplug_can::{AbsMsg, DiffMsg, SteeringMsg, YawErrorMsg};
+    let mut frames = every(10, 2000, |_| {
+        DiffMsg {
+            torque_split: split,
+        }
+        .frame()
+    });
+    frames.extend(every(10, 2000, |_| {
+        YawErrorMsg {
+            yaw_rate_error: error,
+        }
+        .frame()
+    }));
+    frames.extend(every(10, 2000, |_| {
+        VehicleSpeedMsg {
+            vehicle_speed: speed,
+        }
+        .frame()
+    }));
+    frames.extend(every(10, 2000, |_| {
+        SteeringMsg {
+            steering_angle: steering,
+        }
+        .frame()
+    }));
+    frames.extend(every(10, 2000, |_| AbsMsg::default().frame()));
+    frames
+}
+
+#[test]
+fn a_split_while_it_must_hold_or_against_the_error_is_faulty_for_the_differential() {
+    // 30 N.m of split at 10 km/h: below the differential's minimum speed.
+    let slow = run(
+        differential_frames(30.0, 10.0, 45.0, 0.5),
+        "torque split 0 when it must hold",
+    );
+    assert_eq!(slow.verdict, Verdict::Faulty, "{slow:?}");
+    // Pushing the wrong way: a positive error wants a positive split.
+    let wrong = run(
+        differential_frames(-30.0, 100.0, 45.0, 0.5),
+        "torque split against the yaw-rate error",
+    );
+    assert_eq!(wrong.verdict, Verdict::Faulty, "{wrong:?}");
+    let right = run(
+        differential_frames(30.0, 100.0, 45.0, 0.5),
+        "torque split against the yaw-rate error",
+    );
+    assert_eq!(
+        (right.verdict, right.value),
+        (Verdict::Ok, Some(0.0)),
+        "{right:?}"
+    );
+}
