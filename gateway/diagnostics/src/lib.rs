@@ -11,6 +11,7 @@
 //! | module | ECU | measures |
 //! |---|---|---|
 //! | [`presence`] | all nine | longest gap between frames, in periods |
+//! | [`ranges`] | all nine | frames with a value out of range or of the wrong length |
 //! | [`cruise`] | cruise control | rms tracking error against the latched set speed |
 //! | [`abs`] | ABS | longest wheel lock while braking |
 //! | [`console`] | console | longest disagreement of the brake lights with the brake |
@@ -27,6 +28,7 @@ pub mod differential;
 pub mod engine;
 pub mod pedals;
 pub mod presence;
+pub mod ranges;
 mod span;
 mod verdict;
 
@@ -70,6 +72,7 @@ impl Diagnostics {
         let mut routines: Vec<Box<dyn Routine + Send>> = Vec::new();
         for node in ecus() {
             routines.push(Box::new(presence::Presence::new(node)));
+            routines.push(Box::new(ranges::Ranges::new(node)));
         }
         routines.push(Box::new(cruise::Cruise::default()));
         routines.push(Box::new(abs::Abs::default()));
@@ -92,8 +95,8 @@ impl Diagnostics {
                     .collect();
                 let silent = findings.iter().any(|f| f.verdict == Verdict::NoData);
                 // No data first (it overrides), then the worst.
-                // Among equals, the ECU's own routines before the presence check: they
-                // say more about it.
+                // Among equals, the ECU's own routines before the checks every ECU gets:
+                // they say more about it.
                 findings.sort_by_key(|f| {
                     let rank = match f.verdict {
                         Verdict::NoData => 0,
@@ -101,7 +104,10 @@ impl Diagnostics {
                         Verdict::Suspect => 2,
                         Verdict::Ok => 3,
                     };
-                    (rank, f.routine == presence::ROUTINE)
+                    (
+                        rank,
+                        f.routine == presence::ROUTINE || f.routine == ranges::ROUTINE,
+                    )
                 });
                 let verdict = if silent {
                     Verdict::NoData

@@ -219,3 +219,41 @@ fn a_split_while_it_must_hold_or_against_the_error_is_faulty_for_the_differentia
         "{right:?}"
     );
 }
+
+#[test]
+fn a_value_out_of_range_is_charged_to_its_sender() {
+    // SteeringMsg raw 5 is below the encoding's 10..90.
+    let mut frames = every(10, 500, |_| Frame::new(0x005, &[50]).unwrap());
+    frames.push(LogFrame::from_can(
+        505_000,
+        0,
+        &Frame::new(0x005, &[5]).unwrap(),
+    ));
+    frames.push(LogFrame::from_can(
+        506_000,
+        0,
+        &Frame::new(0x005, &[50, 0]).unwrap(),
+    ));
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut diagnostics = Diagnostics::new();
+    frames.sort_by_key(|f| f.t_us);
+    pipeline
+        .run(
+            &mut VecSource::new("t", frames),
+            &mut [&mut diagnostics],
+            &mut || false,
+        )
+        .unwrap();
+    let report = diagnostics.report(pipeline.state());
+    let steering = report
+        .iter()
+        .find(|d| d.ecu == autoplug_can::Node::Steering)
+        .unwrap();
+    let f = steering
+        .findings
+        .iter()
+        .find(|f| f.routine.starts_with("values in range"))
+        .unwrap();
+    assert_eq!((f.verdict, f.value), (Verdict::Faulty, Some(2.0)), "{f:?}");
+    assert!(f.evidence.contains("1 of the wrong length"), "{f:?}");
+}
