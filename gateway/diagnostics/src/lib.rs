@@ -14,6 +14,7 @@
 //! | [`ranges`] | all nine | frames with a value out of range or of the wrong length |
 //! | [`cruise`] | cruise control | rms tracking error against the latched set speed |
 //! | [`abs`] | ABS | longest wheel lock while braking |
+//! | [`cabin`] | cabin comfort | longest time the fan worked against the temperature error |
 //! | [`console`] | console | longest disagreement of the brake lights with the brake |
 //! | [`differential`] | differential | torque split 0 under the hold conditions; split against the yaw-rate error |
 //! | [`engine`] | engine | fuel never rising while driving |
@@ -22,6 +23,7 @@
 #![forbid(unsafe_code)]
 
 pub mod abs;
+pub mod cabin;
 pub mod console;
 pub mod cruise;
 pub mod differential;
@@ -80,6 +82,7 @@ impl Diagnostics {
         routines.push(Box::new(engine::Engine::default()));
         routines.push(Box::new(pedals::Pedals::default()));
         routines.push(Box::new(differential::Differential::default()));
+        routines.push(Box::new(cabin::Cabin::default()));
         Self { routines }
     }
 

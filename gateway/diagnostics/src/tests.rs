@@ -257,3 +257,20 @@ fn a_value_out_of_range_is_charged_to_its_sender() {
     assert_eq!((f.verdict, f.value), (Verdict::Faulty, Some(2.0)), "{f:?}");
     assert!(f.evidence.contains("1 of the wrong length"), "{f:?}");
 }
+
+#[test]
+fn a_fan_off_in_a_hot_cabin_is_faulty_for_the_cabin() {
+    use autoplug_can::{FanMsg, TempMsg, TempRefMsg};
+    let until = 200_000;
+    let mut frames = every(100, until, |_| TempMsg { cabin_temp: 85.0 }.frame());
+    frames.extend(every(100, until, |_| {
+        TempRefMsg {
+            cabin_set_temp: 70.0,
+        }
+        .frame()
+    }));
+    frames.extend(every(100, until, |_| FanMsg { fan_power: 0.0 }.frame()));
+    let f = run(frames, "fan against the temperature error");
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    assert!(f.value.unwrap() > 190.0, "{f:?}");
+}

@@ -1,0 +1,82 @@
+//! Cabin comfort: does the fan push the cabin toward its set point?
+//!
+//! The cabin ECU cools (its fan blows air-conditioned air; there is no heater): with the
+//! cabin (TempMsg) clearly warmer than the set point (TempRefMsg) the fan (FanMsg) must
+//! run, and with the cabin clearly colder it must not run hard. "Clearly" is
+//! [`MARGIN_F`]: past the sensor's noise and the 0.5 °F steps of the bus. The PID's
+//! integral may keep the fan turning for a while after the cabin crosses the set point,
+//! and a cabin takes minutes to respond, so the rule is judged over long stretches: the
+//! number is the longest time the fan worked against the error (off, below
+//! [`FAN_OFF_PCT`], while too warm; or above [`FAN_HARD_PCT`] while too cold).
+//! Suspect above [`SUSPECT_S`], faulty above [`FAULTY_S`].
+
+use autoplug_can::{FanMsg, Node, TempMsg, TempRefMsg, MESSAGES};
+use autoplug_gateway::{CarState, Update};
+use autoplug_logs::LogFrame;
+
+use crate::span::LongestSpan;
+use crate::{Finding, Routine, Verdict};
+
+/// Temperature difference that counts as clearly warmer or colder, °F.
+pub const MARGIN_F: f32 = 2.0;
+/// Fan power below which the fan counts as off, %.
+pub const FAN_OFF_PCT: f32 = 1.0;
+/// Fan power above which the fan counts as working hard, %.
+pub const FAN_HARD_PCT: f32 = 20.0;
+/// Longest contrary stretch above which the cabin ECU is suspect, s.
+pub const SUSPECT_S: f64 = 30.0;
+/// Longest contrary stretch above which the cabin ECU is faulty, s.
+pub const FAULTY_S: f64 = 120.0;
+
+/// The cabin routine.
+#[derive(Default)]
+pub struct Cabin {
+    contrary: LongestSpan,
+}
+
+impl Routine for Cabin {
+    fn ecu(&self) -> Node {
+        Node::Cabin
+    }
+
+    fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        let Update::Message { index, .. } = update else {
+            return;
+        };
+        if MESSAGES[index].id != FanMsg::ID {
+            return;
+        }
+        let t = frame.t_us;
+        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
+        let judged = fresh("TempMsg.CabinTemp") && fresh("TempRefMsg.CabinSetTemp");
+        let error = state.get::<TempMsg>().cabin_temp - state.get::<TempRefMsg>().cabin_set_temp;
+        let fan = state.get::<FanMsg>().fan_power;
+        let contrary =
+            (error > MARGIN_F && fan < FAN_OFF_PCT) || (error < -MARGIN_F && fan > FAN_HARD_PCT);
+        self.contrary.observe(t, judged, contrary);
+    }
+
+    fn findings(&self, state: &CarState) -> Vec<Finding> {
+        let span = self.contrary.until(state.now_us());
+        let value = span.seconds();
+        vec![Finding {
+            routine: "fan against the temperature error",
+            verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
+            value: (span.judged > 0).then_some(value),
+            unit: "s",
+            suspect_above: SUSPECT_S,
+            faulty_above: FAULTY_S,
+            window: span.longest,
+            evidence: if span.judged == 0 {
+                "not exercised: TempMsg, TempRefMsg and FanMsg never fresh together".into()
+            } else if span.longest.is_none() {
+                format!(
+                    "the fan never worked against the error in {} comparisons",
+                    span.judged
+                )
+            } else {
+                format!("the fan worked against the temperature error for {value:.1} s")
+            },
+        }]
+    }
+}
