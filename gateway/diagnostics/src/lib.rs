@@ -18,6 +18,7 @@
 //! | [`console`] | console | longest disagreement of the brake lights with the brake |
 //! | [`differential`] | differential | torque split 0 under the hold conditions; split against the yaw-rate error |
 //! | [`engine`] | engine | fuel never rising while driving |
+//! | [`transmission`] | transmission | time out of the shift schedule's band; shifts too soon, hunting |
 //! | [`pedals`] | pedals | brake override of the accelerator; commands follow the cruise command |
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
@@ -32,6 +33,7 @@ pub mod pedals;
 pub mod presence;
 pub mod ranges;
 mod span;
+pub mod transmission;
 mod verdict;
 
 pub use verdict::{EcuDiagnosis, Finding, Verdict, Window};
@@ -83,6 +85,7 @@ impl Diagnostics {
         routines.push(Box::new(pedals::Pedals::default()));
         routines.push(Box::new(differential::Differential::default()));
         routines.push(Box::new(cabin::Cabin::default()));
+        routines.push(Box::new(transmission::Transmission::default()));
         Self { routines }
     }
 

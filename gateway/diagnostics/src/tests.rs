@@ -274,3 +274,64 @@ fn a_fan_off_in_a_hot_cabin_is_faulty_for_the_cabin() {
     assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
     assert!(f.value.unwrap() > 190.0, "{f:?}");
 }
+
+fn trans_frames(gears: impl Fn(u64) -> autoplug_can::Gear, speed: f32) -> Vec<LogFrame> {
+    use autoplug_can::{AccMsg, ShiftMode, TransMsg};
+    let mut frames = every(20, 10_000, |t| {
+        TransMsg {
+            gear: gears(t),
+            shift_mode: ShiftMode::Automatic,
+        }
+        .frame()
+    });
+    frames.extend(every(10, 10_000, |_| {
+        VehicleSpeedMsg {
+            vehicle_speed: speed,
+        }
+        .frame()
+    }));
+    frames.extend(every(10, 10_000, |_| brake(0.0)));
+    frames.extend(every(100, 10_000, |_| AccMsg::default().frame()));
+    frames.extend(every(20, 10_000, |_| {
+        EngineMsg {
+            engine_rpm: 3000.0,
+            fuel_level: 30.0,
+            engine_mode: EngineMode::Economy,
+        }
+        .frame()
+    }));
+    frames
+}
+
+#[test]
+fn hunting_and_a_gear_out_of_its_band_are_flagged_for_the_transmission() {
+    use autoplug_can::Gear;
+    // 3rd, 4th at 2 s, back to 3rd at 3 s, 4th again at 4 s: hunting, twice.
+    let hunting = run(
+        trans_frames(
+            |t| match t {
+                2000..=2999 | 4000.. => Gear::Fourth,
+                _ => Gear::Third,
+            },
+            50.0,
+        ),
+        "shift rate and hunting",
+    );
+    assert_eq!(hunting.verdict, Verdict::Suspect, "{hunting:?}");
+    assert_eq!(hunting.value, Some(2.0), "{hunting:?}");
+    // 2nd gear at 120 km/h in economy for 10 s: far above its upshift speed.
+    let stuck = run(
+        trans_frames(|_| Gear::Second, 120.0),
+        "gear against the shift schedule",
+    );
+    assert_eq!(stuck.verdict, Verdict::Faulty, "{stuck:?}");
+    let fine = run(
+        trans_frames(|_| Gear::Sixth, 120.0),
+        "gear against the shift schedule",
+    );
+    assert_eq!(
+        (fine.verdict, fine.value),
+        (Verdict::Ok, Some(0.0)),
+        "{fine:?}"
+    );
+}
