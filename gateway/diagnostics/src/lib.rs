@@ -18,6 +18,7 @@
 //! | [`console`] | console | longest disagreement of the brake lights with the brake |
 //! | [`differential`] | differential | torque split 0 under the hold conditions; split against the yaw-rate error |
 //! | [`engine`] | engine | fuel never rising while driving |
+//! | [`steering`] | steering | paddle requests as pulses: longest request, direct Up/Down changes |
 //! | [`transmission`] | transmission | time out of the shift schedule's band; shifts too soon, hunting |
 //! | [`pedals`] | pedals | brake override of the accelerator; commands follow the cruise command |
 #![deny(missing_docs)]
@@ -33,6 +34,7 @@ pub mod pedals;
 pub mod presence;
 pub mod ranges;
 mod span;
+pub mod steering;
 pub mod transmission;
 mod verdict;
 
@@ -86,6 +88,7 @@ impl Diagnostics {
         routines.push(Box::new(differential::Differential::default()));
         routines.push(Box::new(cabin::Cabin::default()));
         routines.push(Box::new(transmission::Transmission::default()));
+        routines.push(Box::new(steering::Steering::default()));
         Self { routines }
     }
 

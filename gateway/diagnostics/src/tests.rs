@@ -335,3 +335,34 @@ fn hunting_and_a_gear_out_of_its_band_are_flagged_for_the_transmission() {
         "{fine:?}"
     );
 }
+
+#[test]
+fn a_stuck_paddle_request_is_faulty_for_the_steering() {
+    use autoplug_can::{ShiftMsg, ShiftRequest};
+    let pulse = |t: u64| {
+        let request = match t {
+            1000..=1100 => ShiftRequest::Up,
+            3000..=4000 => ShiftRequest::Down,
+            _ => ShiftRequest::None,
+        };
+        ShiftMsg {
+            shift_request: request,
+        }
+        .frame()
+    };
+    let f = run(every(20, 5000, pulse), "paddle requests as pulses");
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    assert!((f.value.unwrap() - 1.0).abs() < 0.03, "{f:?}");
+    let ok = |t: u64| {
+        ShiftMsg {
+            shift_request: if (1000..1100).contains(&t) {
+                ShiftRequest::Up
+            } else {
+                ShiftRequest::None
+            },
+        }
+        .frame()
+    };
+    let f = run(every(20, 5000, ok), "paddle requests as pulses");
+    assert_eq!(f.verdict, Verdict::Ok, "{f:?}");
+}
