@@ -14,8 +14,8 @@ use autoplug_can::{FanMsg, Node, TempMsg, TempRefMsg, MESSAGES};
 use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 
-use crate::span::LongestSpan;
-use crate::{Finding, Routine, Verdict};
+use crate::span::{LongestSpan, SpanRule};
+use crate::{Finding, Routine};
 
 /// Temperature difference that counts as clearly warmer or colder, °F.
 pub const MARGIN_F: f32 = 2.0;
@@ -57,26 +57,13 @@ impl Routine for Cabin {
     }
 
     fn findings(&self, state: &CarState) -> Vec<Finding> {
-        let span = self.contrary.until(state.now_us());
-        let value = span.seconds();
-        vec![Finding {
+        vec![SpanRule {
             routine: "fan against the temperature error",
-            verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
-            value: (span.judged > 0).then_some(value),
-            unit: "s",
-            suspect_above: SUSPECT_S,
-            faulty_above: FAULTY_S,
-            window: span.longest,
-            evidence: if span.judged == 0 {
-                "not exercised: TempMsg, TempRefMsg and FanMsg never fresh together".into()
-            } else if span.longest.is_none() {
-                format!(
-                    "the fan never worked against the error in {} comparisons",
-                    span.judged
-                )
-            } else {
-                format!("the fan worked against the temperature error for {value:.1} s")
-            },
-        }]
+            suspect_s: SUSPECT_S,
+            faulty_s: FAULTY_S,
+            broken: "the fan worked against the temperature error",
+            unexercised: "TempMsg, TempRefMsg and FanMsg never fresh together",
+        }
+        .finding(&self.contrary, state.now_us())]
     }
 }

@@ -16,8 +16,8 @@ use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 use ecu_console::{BRAKE_LIGHTS_OFF_PCT, BRAKE_LIGHTS_ON_PCT};
 
-use crate::span::LongestSpan;
-use crate::{Finding, Routine, Verdict};
+use crate::span::{LongestSpan, SpanRule};
+use crate::{Finding, Routine};
 
 /// Longest disagreement above which the console is suspect, s.
 pub const SUSPECT_S: f64 = 0.1;
@@ -54,30 +54,13 @@ impl Routine for Console {
     }
 
     fn findings(&self, state: &CarState) -> Vec<Finding> {
-        let me = self.disagreement.until(state.now_us());
-        let value = me.seconds();
-        let evidence = match me.longest {
-            _ if me.judged == 0 => {
-                "not exercised: PedalBrake and AccMsg never fresh together".to_string()
-            }
-            None => format!(
-                "brake lights agreed with the brake command in all {} comparisons",
-                me.judged
-            ),
-            Some(w) => format!(
-                "brake lights disagreed with the brake command for {value:.3} s from {:.2} s",
-                w.from_us as f64 * 1e-6
-            ),
-        };
-        vec![Finding {
+        vec![SpanRule {
             routine: "brake lights against the brake",
-            verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
-            value: (me.judged > 0).then_some(value),
-            unit: "s",
-            suspect_above: SUSPECT_S,
-            faulty_above: FAULTY_S,
-            window: me.longest,
-            evidence,
-        }]
+            suspect_s: SUSPECT_S,
+            faulty_s: FAULTY_S,
+            broken: "brake lights disagreed with the brake command",
+            unexercised: "PedalBrake and AccMsg never fresh together",
+        }
+        .finding(&self.disagreement, state.now_us())]
     }
 }

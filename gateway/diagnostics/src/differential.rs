@@ -24,8 +24,8 @@ use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 use ecu_diff::{BRAKE_HOLD_PCT, MIN_SPEED_KMH, MIN_STEERING_DEG, YAW_DEAD_BAND_RAD_S};
 
-use crate::span::LongestSpan;
-use crate::{Finding, Routine, Verdict};
+use crate::span::{LongestSpan, SpanRule};
+use crate::{Finding, Routine};
 
 /// Longest violation above which the differential ECU is suspect, s.
 pub const SUSPECT_S: f64 = 0.2;
@@ -84,40 +84,23 @@ impl Routine for Differential {
 
     fn findings(&self, state: &CarState) -> Vec<Finding> {
         let now = state.now_us();
-        [
-            (
-                self.hold.until(now),
-                "torque split 0 when it must hold",
-                "a torque split while too slow, steering too little or braking",
-                "never in a hold condition with its inputs on the bus",
-            ),
-            (
-                self.direction.until(now),
-                "torque split against the yaw-rate error",
-                "a torque split pushing against the yaw-rate error",
-                "never an active split with a yaw-rate error beyond the dead band",
-            ),
-        ]
-        .into_iter()
-        .map(|(span, routine, what, unexercised)| {
-            let value = span.seconds();
-            Finding {
-                routine,
-                verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
-                value: (span.judged > 0).then_some(value),
-                unit: "s",
-                suspect_above: SUSPECT_S,
-                faulty_above: FAULTY_S,
-                window: span.longest,
-                evidence: if span.judged == 0 {
-                    format!("not exercised: {unexercised}")
-                } else if span.longest.is_none() {
-                    format!("held in all {} comparisons", span.judged)
-                } else {
-                    format!("{what} for {value:.3} s")
-                },
+        vec![
+            SpanRule {
+                routine: "torque split 0 when it must hold",
+                suspect_s: SUSPECT_S,
+                faulty_s: FAULTY_S,
+                broken: "a torque split while too slow, steering too little or braking",
+                unexercised: "never in a hold condition with its inputs on the bus",
             }
-        })
-        .collect()
+            .finding(&self.hold, now),
+            SpanRule {
+                routine: "torque split against the yaw-rate error",
+                suspect_s: SUSPECT_S,
+                faulty_s: FAULTY_S,
+                broken: "a torque split pushing against the yaw-rate error",
+                unexercised: "never an active split with a yaw-rate error beyond the dead band",
+            }
+            .finding(&self.direction, now),
+        ]
     }
 }

@@ -26,8 +26,8 @@ use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 use ecu_pedals::PEDAL_PRESSED_THRESHOLD;
 
-use crate::span::LongestSpan;
-use crate::{Finding, Routine, Verdict};
+use crate::span::{LongestSpan, SpanRule};
+use crate::{Finding, Routine};
 
 /// Longest violation above which the pedals ECU is suspect, s.
 pub const SUSPECT_S: f64 = 0.1;
@@ -94,41 +94,23 @@ impl Routine for Pedals {
 
     fn findings(&self, state: &CarState) -> Vec<Finding> {
         let now = state.now_us();
-        let mut out = Vec::new();
-        for (rule, routine, what, unexercised) in [
-            (
-                &self.override_rule,
-                "brake override of the accelerator",
-                "accelerator command above 0 while the brake command was pressed",
-                "PedalAccel and PedalBrake never fresh together",
-            ),
-            (
-                &self.cruise_rule,
-                "commands follow the cruise command",
-                "commands differed from the cruise command while cruise stayed on",
-                "cruise never on with its command on the bus",
-            ),
-        ] {
-            let rule = rule.until(now);
-            let value = rule.seconds();
-            let evidence = if rule.judged == 0 {
-                format!("not exercised: {unexercised}")
-            } else if rule.longest.is_none() {
-                format!("held in all {} comparisons", rule.judged)
-            } else {
-                format!("{what} for {value:.3} s")
-            };
-            out.push(Finding {
-                routine,
-                verdict: Verdict::of(value, SUSPECT_S, FAULTY_S),
-                value: (rule.judged > 0).then_some(value),
-                unit: "s",
-                suspect_above: SUSPECT_S,
-                faulty_above: FAULTY_S,
-                window: rule.longest,
-                evidence,
-            });
-        }
-        out
+        vec![
+            SpanRule {
+                routine: "brake override of the accelerator",
+                suspect_s: SUSPECT_S,
+                faulty_s: FAULTY_S,
+                broken: "accelerator command above 0 while the brake command was pressed",
+                unexercised: "PedalAccel and PedalBrake never fresh together",
+            }
+            .finding(&self.override_rule, now),
+            SpanRule {
+                routine: "commands follow the cruise command",
+                suspect_s: SUSPECT_S,
+                faulty_s: FAULTY_S,
+                broken: "commands differed from the cruise command while cruise stayed on",
+                unexercised: "cruise never on with its command on the bus",
+            }
+            .finding(&self.cruise_rule, now),
+        ]
     }
 }

@@ -1,6 +1,6 @@
 //! The longest stretch of bus time a condition held: what most routines measure.
 
-use crate::Window;
+use crate::{Finding, Verdict, Window};
 
 /// Tracks a condition judged frame by frame and keeps its longest continuous stretch.
 #[derive(Clone, Copy, Debug, Default)]
@@ -53,5 +53,45 @@ impl LongestSpan {
     pub fn seconds(&self) -> f64 {
         self.longest
             .map_or(0.0, |w| (w.to_us - w.from_us) as f64 * 1e-6)
+    }
+}
+
+/// How a rule measured as a [`LongestSpan`] reads in a finding.
+pub struct SpanRule {
+    /// What was measured ("fan against the temperature error").
+    pub routine: &'static str,
+    /// Above this many seconds: suspect.
+    pub suspect_s: f64,
+    /// Above this many seconds: faulty.
+    pub faulty_s: f64,
+    /// What breaking the rule looks like ("the fan worked against the error").
+    pub broken: &'static str,
+    /// Why it could not be judged ("TempMsg and FanMsg never fresh together").
+    pub unexercised: &'static str,
+}
+
+impl SpanRule {
+    /// The finding for `span`, its running stretch ended at `now`.
+    pub fn finding(&self, span: &LongestSpan, now: u64) -> Finding {
+        let span = span.until(now);
+        let value = span.seconds();
+        Finding {
+            routine: self.routine,
+            verdict: Verdict::of(value, self.suspect_s, self.faulty_s),
+            value: (span.judged > 0).then_some(value),
+            unit: "s",
+            suspect_above: self.suspect_s,
+            faulty_above: self.faulty_s,
+            window: span.longest,
+            evidence: match span.longest {
+                _ if span.judged == 0 => format!("not exercised: {}", self.unexercised),
+                None => format!("held in all {} comparisons", span.judged),
+                Some(w) => format!(
+                    "{} for {value:.3} s from {:.2} s",
+                    self.broken,
+                    w.from_us as f64 * 1e-6
+                ),
+            },
+        }
     }
 }

@@ -23,7 +23,7 @@ use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 use ecu_trans::SHIFT_TIMEOUT_US;
 
-use crate::span::LongestSpan;
+use crate::span::{LongestSpan, SpanRule};
 use crate::{Finding, Routine, Verdict, Window};
 
 /// Widening of each gear's band, km/h.
@@ -176,24 +176,14 @@ impl Routine for Transmission {
     }
 
     fn findings(&self, state: &CarState) -> Vec<Finding> {
-        let band = self.out_of_band.until(state.now_us());
-        let value = band.seconds();
-        let schedule = Finding {
+        let schedule = SpanRule {
             routine: "gear against the shift schedule",
-            verdict: Verdict::of(value, BAND_SUSPECT_S, BAND_FAULTY_S),
-            value: (band.judged > 0).then_some(value),
-            unit: "s",
-            suspect_above: BAND_SUSPECT_S,
-            faulty_above: BAND_FAULTY_S,
-            window: band.longest,
-            evidence: if band.judged == 0 {
-                "not exercised: never in automatic in a forward gear without braking".into()
-            } else if band.longest.is_none() {
-                format!("in its schedule's band in all {} comparisons", band.judged)
-            } else {
-                format!("out of the schedule's band for {value:.1} s")
-            },
-        };
+            suspect_s: BAND_SUSPECT_S,
+            faulty_s: BAND_FAULTY_S,
+            broken: "out of the schedule's band",
+            unexercised: "never in automatic in a forward gear without braking",
+        }
+        .finding(&self.out_of_band, state.now_us());
         let shifts = Finding {
             routine: "shift rate and hunting",
             verdict: Verdict::of(self.bad_shifts as f64, 0.0, SHIFTS_FAULTY),
