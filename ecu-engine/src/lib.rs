@@ -1,12 +1,20 @@
 //! Engine ECU (node 0x03), spec section 2 and the report's pseudocode 5.2.1.6.
 //!
-//! Reads the engine speed and the fuel level and publishes them on EngineMsg every 20 ms
-//! (and at once on a change), with the engine mode (sport/economy) echoed from the console's
-//! AccMsg bit 2. The transmission takes its shift schedule from this echo. The engine ECU
-//! drives nothing: [`EcuLogic::step`] returns a [`Status`] of what it reports.
+//! Reads the engine speed, the fuel level and the fuel flow, and publishes them on
+//! EngineMsg every 20 ms (and at once on a change), with the engine mode (sport/economy)
+//! echoed from the console's AccMsg bit 2. The transmission takes its shift schedule from
+//! this echo. The engine ECU drives nothing: [`EcuLogic::step`] returns a [`Status`] of
+//! what it reports.
 //!
 //! Readings are clamped to what EngineMsg can carry: 0..[`ENGINE_RPM_MAX`] rpm and
 //! 0..[`FUEL_LEVEL_MAX_L`] L (0.25 L per bit); an unreadable (NaN) sensor reports 0.
+//!
+//! The fuel flow (0..[`FUEL_FLOW_MAX_L_PER_H`]) is integrated over each step's measured
+//! time into the fuel used since power-up, sent as a rolling 1 mL counter (EngineMsg
+//! `FuelUsed`, wrapping after 65535 mL). The level's 0.25 L steps cannot tell a trip's
+//! fuel to better than a step; the counter tells it to a millilitre, as a production ECU's
+//! consumption signal does. The sub-millilitre remainder is carried over, so rounding never
+//! accumulates.
 //!
 //! Safe state per stale input (3 periods without a valid frame):
 //!
@@ -29,6 +37,17 @@ pub const ENGINE_RPM_MAX: f32 = 9000.0;
 /// Highest fuel level EngineMsg carries, litres (raw 255 at 0.25 L); the tank holds 48 L.
 pub const FUEL_LEVEL_MAX_L: f32 = 63.75;
 
+/// Highest fuel flow the ECU's input reads, L/h (the EVO VI burns about 90 L/h at full
+/// power).
+pub const FUEL_FLOW_MAX_L_PER_H: f32 = 150.0;
+
+/// Longest step the fuel integration trusts, µs: a longer gap (a stalled loop, a clock
+/// jump) counts as this long, so one bad timestamp cannot add litres.
+pub const FUEL_MAX_STEP_US: u64 = 1_000_000;
+
+/// Where the rolling fuel counter wraps, mL (16 bits).
+pub const FUEL_USED_WRAP_ML: u32 = 1 << 16;
+
 /// The engine mode reported while the console's choice is unknown (see the crate docs).
 pub const SAFE_ENGINE_MODE: EngineMode = EngineMode::Economy;
 
@@ -43,6 +62,8 @@ pub struct Sensors {
     pub engine_rpm: f32,
     /// Fuel in the tank, litres.
     pub fuel_level_l: f32,
+    /// Fuel flow to the engine, litres per hour.
+    pub fuel_flow_l_per_h: f32,
 }
 
 /// The engine ECU drives no actuator: this is what it reports on EngineMsg.
@@ -55,6 +76,8 @@ pub struct Status {
     pub fuel_level_l: f32,
     /// Engine mode echoed (economy while AccMsg is stale or not yet received).
     pub engine_mode: EngineMode,
+    /// Fuel used since power-up, mL, as sent (rolling: 0..65535).
+    pub fuel_used_ml: u16,
 }
 
 impl Default for Status {
@@ -63,6 +86,7 @@ impl Default for Status {
             engine_rpm: 0.0,
             fuel_level_l: 0.0,
             engine_mode: SAFE_ENGINE_MODE,
+            fuel_used_ml: 0,
         }
     }
 }
@@ -73,6 +97,32 @@ pub struct EngineEcu {
     console: Input<AccMsg>,
     tx_engine: PeriodicTx,
     dtcs: Dtcs,
+    fuel: FuelCounter,
+}
+
+/// The fuel used since power-up: whole microlitres and the fraction carried over.
+#[derive(Clone, Debug, Default)]
+struct FuelCounter {
+    last_step: Option<Instant>,
+    used_ul: u64,
+    fraction_ul: f32,
+}
+
+impl FuelCounter {
+    /// Adds the flow since the last step; returns the rolling mL counter.
+    fn integrate(&mut self, now: Instant, flow_l_per_h: f32) -> u16 {
+        let flow = clamp_finite(flow_l_per_h, 0.0, FUEL_FLOW_MAX_L_PER_H);
+        if let Some(last) = self.last_step {
+            let dt_us = now.micros_since(last).min(FUEL_MAX_STEP_US);
+            // L/h over µs in µL: 1 L/h is 1e6 µL per 3.6e9 µs.
+            let ul = flow * dt_us as f32 / 3600.0 + self.fraction_ul;
+            let whole = ul as u64;
+            self.fraction_ul = ul - whole as f32;
+            self.used_ul += whole;
+        }
+        self.last_step = Some(now);
+        ((self.used_ul / 1000) % u64::from(FUEL_USED_WRAP_ML)) as u16
+    }
 }
 
 impl EngineEcu {
@@ -82,6 +132,7 @@ impl EngineEcu {
             console: Input::new(now),
             tx_engine: PeriodicTx::of::<EngineMsg>(),
             dtcs: Dtcs::new(),
+            fuel: FuelCounter::default(),
         }
     }
 }
@@ -108,11 +159,13 @@ impl EcuLogic for EngineEcu {
             engine_rpm: clamp_finite(sensors.engine_rpm, 0.0, ENGINE_RPM_MAX),
             fuel_level_l: clamp_finite(sensors.fuel_level_l, 0.0, FUEL_LEVEL_MAX_L),
             engine_mode,
+            fuel_used_ml: self.fuel.integrate(now, sensors.fuel_flow_l_per_h),
         };
         self.tx_engine.set_message(&EngineMsg {
             engine_rpm: status.engine_rpm,
             fuel_level: status.fuel_level_l,
             engine_mode: status.engine_mode,
+            fuel_used: f32::from(status.fuel_used_ml),
         });
         status
     }

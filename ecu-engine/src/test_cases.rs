@@ -30,15 +30,16 @@ fn engine(engine_rpm: f32, fuel_level_l: f32) -> Sensors {
     Sensors {
         engine_rpm,
         fuel_level_l,
+        fuel_flow_l_per_h: 0.0,
     }
 }
 
 /// The EngineMsg one transmit poll gave, raw bytes and message.
-fn poll_engine(ecu: &mut EngineEcu, t: u64) -> Option<([u8; 3], EngineMsg)> {
+fn poll_engine(ecu: &mut EngineEcu, t: u64) -> Option<([u8; 5], EngineMsg)> {
     let frame = ecu.poll_transmit(ms(t))?;
     assert!(ecu.poll_transmit(ms(t)).is_none(), "one message only");
-    let mut raw = [0u8; 3];
-    assert_eq!(frame.len(), 3);
+    let mut raw = [0u8; 5];
+    assert_eq!(frame.len(), 5);
     raw.copy_from_slice(frame.data());
     match Message::from_frame(&frame) {
         Ok(Message::EngineMsg(m)) => Some((raw, m)),
@@ -55,7 +56,7 @@ fn run(
     to: u64,
     mode: Option<EngineMode>,
     sensors: Sensors,
-) -> (Status, u32, Option<([u8; 3], EngineMsg)>) {
+) -> (Status, u32, Option<([u8; 5], EngineMsg)>) {
     let mut status = Status::default();
     let mut frames = 0;
     let mut last = None;
@@ -93,7 +94,7 @@ pub fn reports_rpm_and_fuel() {
     assert_eq!(status.engine_rpm, 3000.0);
     assert_eq!(status.fuel_level_l, 48.0);
     assert_eq!(status.engine_mode, EngineMode::Sport);
-    assert_eq!(last.map(|(raw, _)| raw), Some([85, 192, 0]));
+    assert_eq!(last.map(|(raw, _)| raw), Some([85, 192, 0, 0, 0]));
 
     let cases = [
         (
@@ -220,4 +221,62 @@ pub fn invalid_console_frame_records_a_dtc() {
     }
     assert_eq!(status.engine_mode, EngineMode::Economy);
     assert!(ecu.dtcs().is_active(lost_communication(Node::Console)));
+}
+
+/// The fuel flow is integrated over the measured step time into the rolling 1 mL counter:
+/// exact over many steps (the sub-millilitre remainder is carried), wrapping after
+/// 65535 mL, a NaN or negative flow adds nothing and a long gap counts as one second.
+pub fn counts_fuel_used() {
+    let mut ecu = EngineEcu::new(ms(0));
+    let flow = |fuel_flow_l_per_h| Sensors {
+        engine_rpm: 3000.0,
+        fuel_level_l: 40.0,
+        fuel_flow_l_per_h,
+    };
+    // 36 L/h is 10 mL/s: 100 s of 20 ms steps is 1000 mL.
+    let mut status = Status::default();
+    for step in 0..=5000u64 {
+        status = ecu.step(ms(step * 20), &flow(36.0));
+    }
+    assert_eq!(status.fuel_used_ml, 1000);
+    let mut last = None;
+    while let Some(frame) = ecu.poll_transmit(ms(100_000)) {
+        last = Some(frame);
+    }
+    let Some(frame) = last else {
+        panic!("EngineMsg sent")
+    };
+    let msg = match EngineMsg::decode(frame.data()) {
+        Ok(msg) => msg,
+        Err(e) => panic!("{:?}", e),
+    };
+    assert_eq!(msg.fuel_used, 1000.0);
+    assert_eq!(&frame.data()[3..5], &1000u16.to_le_bytes());
+
+    // 0.9 L/h is 5 µL a 20 ms step: still counted (1 mL after 200 steps).
+    let mut slow = EngineEcu::new(ms(0));
+    let mut status = Status::default();
+    for step in 0..=200u64 {
+        status = slow.step(ms(step * 20), &flow(0.9));
+    }
+    assert_eq!(status.fuel_used_ml, 1);
+
+    // Nothing for an unreadable or negative flow; a 10 s gap counts as 1 s.
+    let t = 100_000;
+    assert_eq!(ecu.step(ms(t + 20), &flow(f32::NAN)).fuel_used_ml, 1000);
+    assert_eq!(ecu.step(ms(t + 40), &flow(-50.0)).fuel_used_ml, 1000);
+    assert_eq!(ecu.step(ms(t + 10_040), &flow(36.0)).fuel_used_ml, 1010);
+
+    // The counter wraps at 16 bits: 150 L/h (the input's maximum, 41.67 mL/s) for 1600 s
+    // is 66667 mL, sent as 66667 - 65536.
+    let mut full = EngineEcu::new(ms(0));
+    let mut status = Status::default();
+    for step in 0..=80_000u64 {
+        status = full.step(ms(step * 20), &flow(1000.0));
+    }
+    assert!(
+        (1129..=1133).contains(&status.fuel_used_ml),
+        "{}",
+        status.fuel_used_ml
+    );
 }

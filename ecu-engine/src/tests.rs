@@ -11,6 +11,7 @@ shared_cases!(
     echoes_the_engine_mode,
     stale_console_reports_economy,
     invalid_console_frame_records_a_dtc,
+    counts_fuel_used,
 );
 
 proptest! {
@@ -20,7 +21,7 @@ proptest! {
     fn reports_within_limits(rpm in any::<f32>(), fuel in any::<f32>(), byte in any::<u8>()) {
         let mut ecu = EngineEcu::new(Instant::ZERO);
         ecu.on_frame(Instant::ZERO, &Frame::new(u32::from(AccMsg::ID), &[byte]).unwrap());
-        let status = ecu.step(Instant::ZERO, &Sensors { engine_rpm: rpm, fuel_level_l: fuel });
+        let status = ecu.step(Instant::ZERO, &Sensors { engine_rpm: rpm, fuel_level_l: fuel, fuel_flow_l_per_h: 0.0 });
         prop_assert!((0.0..=ENGINE_RPM_MAX).contains(&status.engine_rpm));
         prop_assert!((0.0..=FUEL_LEVEL_MAX_L).contains(&status.fuel_level_l));
         let expected = if byte & 0b0100 != 0 { EngineMode::Economy } else { EngineMode::Sport };

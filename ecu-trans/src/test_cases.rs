@@ -84,6 +84,7 @@ impl Bench {
                 engine_rpm: self.engine_rpm(),
                 fuel_level: 40.0,
                 engine_mode: self.engine_mode,
+                fuel_used: 0.0,
             }
             .frame();
             self.ecu.on_frame(now, &frame);

@@ -26,6 +26,11 @@ mod tests {
     fn invalid_console_frame_records_a_dtc() {
         test_cases::invalid_console_frame_records_a_dtc();
     }
+
+    #[test]
+    fn counts_fuel_used() {
+        test_cases::counts_fuel_used();
+    }
 }
 
 /// Only reached by a host build with a transport feature (`--all-features`).

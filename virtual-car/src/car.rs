@@ -673,6 +673,7 @@ impl VirtualCar {
         e.engine.step_if_due(t_us, || ecu_engine::Sensors {
             engine_rpm: s.engine_rpm as f32,
             fuel_level_l: s.fuel_l as f32,
+            fuel_flow_l_per_h: s.fuel_flow_l_per_h as f32,
         });
         e.trans.step_if_due(t_us, || ecu_trans::Sensors {
             current_gear: can_gear(s.gear),

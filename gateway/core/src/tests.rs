@@ -112,10 +112,11 @@ fn one_invalid_signal_does_not_hold_back_the_valid_ones() {
         engine_rpm: 3000.0,
         fuel_level: 40.0,
         engine_mode: EngineMode::Economy,
+        fuel_used: 0.0,
     }
     .frame();
     state.update(&at(0, good));
-    let mut data = [0u8; 3];
+    let mut data = [0u8; 5];
     data.copy_from_slice(good.data());
     data[0] = 100; // a new RPM
     data[2] = 7; // engine mode 7 is not in the value table

@@ -120,6 +120,7 @@ fn fuel_rising_while_driving_is_faulty_for_the_engine() {
             engine_rpm: 2000.0,
             fuel_level: 30.0 + t as f32 / 1000.0,
             engine_mode: EngineMode::Economy,
+            fuel_used: 0.0,
         }
         .frame()
     }));
@@ -136,6 +137,7 @@ fn an_ecu_that_stops_mid_log_is_no_data_and_a_gap_is_faulty() {
             engine_rpm: 900.0,
             fuel_level: 30.0,
             engine_mode: EngineMode::Economy,
+            fuel_used: 0.0,
         }
         .frame()
     });
@@ -151,6 +153,7 @@ fn an_ecu_that_stops_mid_log_is_no_data_and_a_gap_is_faulty() {
                 engine_rpm: 900.0,
                 fuel_level: 30.0,
                 engine_mode: EngineMode::Economy,
+                fuel_used: 0.0,
             }
             .frame()
         })
@@ -297,6 +300,7 @@ fn trans_frames(gears: impl Fn(u64) -> autoplug_can::Gear, speed: f32) -> Vec<Lo
             engine_rpm: 3000.0,
             fuel_level: 30.0,
             engine_mode: EngineMode::Economy,
+            fuel_used: 0.0,
         }
         .frame()
     }));

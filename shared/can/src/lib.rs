@@ -12,8 +12,8 @@
 //! ```
 //! use autoplug_can::{DecodeError, EngineMode, EngineMsg, Message, SteeringMsg};
 //!
-//! let frame = EngineMsg { engine_rpm: 3000.0, fuel_level: 48.0, engine_mode: EngineMode::Sport }.encode();
-//! assert_eq!(frame, [85, 192, 0]);
+//! let frame = EngineMsg { engine_rpm: 3000.0, fuel_level: 48.0, engine_mode: EngineMode::Sport, fuel_used: 1234.0 }.encode();
+//! assert_eq!(frame, [85, 192, 0, 0xD2, 0x04]);
 //! let Ok(Message::EngineMsg(engine)) = Message::decode(EngineMsg::ID, &frame) else { panic!() };
 //! assert_eq!(engine.fuel_level, 48.0);
 //!

@@ -11,7 +11,10 @@ const SPEC_TABLE: [(&str, u16, u8, u32, &[Node]); 18] = [
     ("VehicleSpeedMsg", 0x003, 1, 10, &[Node::Cruise]),
     ("PedalBrake", 0x004, 1, 10, &[Node::Pedals]),
     ("SteeringMsg", 0x005, 1, 10, &[Node::Steering]),
-    ("EngineMsg", 0x006, 3, 20, &[Node::Engine]),
+    // The spec's three bytes, then the fuel-used counter (bytes 3-4) this project added so
+    // a trip's fuel is known to 1 mL, not to the level's 0.25 L steps (README, "The CAN
+    // catalogue").
+    ("EngineMsg", 0x006, 5, 20, &[Node::Engine]),
     ("PedalAccel", 0x007, 1, 10, &[Node::Pedals]),
     (
         "CruiseModeMsg",
@@ -300,19 +303,21 @@ pub fn typed_messages_follow_the_spec() {
         EngineMsg {
             engine_rpm: 9000.0,
             fuel_level: 48.0,
-            engine_mode: EngineMode::Economy
+            engine_mode: EngineMode::Economy,
+            fuel_used: 0.0,
         }
         .encode(),
-        [255, 192, 1]
+        [255, 192, 1, 0, 0]
     );
     assert_eq!(
         EngineMsg {
             engine_rpm: 0.0,
             fuel_level: 0.0,
-            engine_mode: EngineMode::Sport
+            engine_mode: EngineMode::Sport,
+            fuel_used: 0.0,
         }
         .encode(),
-        [0, 0, 0]
+        [0, 0, 0, 0, 0]
     );
     assert_eq!(
         SteeringMsg {
@@ -455,8 +460,9 @@ pub fn update_keeps_the_last_good_value() {
         engine_rpm: 3000.0,
         fuel_level: 40.0,
         engine_mode: EngineMode::Economy,
+        fuel_used: 0.0,
     };
-    let result = engine.update_from(&[100, 120, 7]);
+    let result = engine.update_from(&[100, 120, 7, 0, 0]);
     assert_eq!(
         result,
         Err(DecodeError::UndefinedValue {

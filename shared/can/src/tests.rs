@@ -119,7 +119,7 @@ fn errors_read_well() {
     let e = Message::decode(EngineMsg::ID, &[1, 2]).unwrap_err();
     assert_eq!(
         std::format!("{e}"),
-        "EngineMsg: frame has 2 data bytes, the catalogue says 3"
+        "EngineMsg: frame has 2 data bytes, the catalogue says 5"
     );
     let e = Message::decode(0x123, &[]).unwrap_err();
     assert_eq!(
@@ -148,8 +148,9 @@ fn frames_check_identifier_and_length() {
         engine_rpm: 9000.0,
         fuel_level: 1.0,
         engine_mode: EngineMode::Sport,
+        fuel_used: 0.0,
     });
     let frame = msg.to_frame();
-    assert_eq!(std::format!("{frame:?}"), "006#FF0400");
+    assert_eq!(std::format!("{frame:?}"), "006#FF04000000");
     assert_eq!(Message::from_frame(&frame), Ok(msg));
 }

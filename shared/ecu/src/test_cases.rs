@@ -195,9 +195,10 @@ pub fn supervision_records_network_dtcs() {
         engine_rpm: 3000.0,
         fuel_level: 40.0,
         engine_mode: EngineMode::Sport,
+        fuel_used: 0.0,
     }
     .frame();
-    let bad = Frame::new(u32::from(EngineMsg::ID), &[1, 2, 9]).unwrap();
+    let bad = Frame::new(u32::from(EngineMsg::ID), &[1, 2, 9, 0, 0]).unwrap();
     assert!(receive(&mut engine, &mut dtcs, ms(0), &good));
     assert!(!receive(&mut engine, &mut dtcs, ms(0), &speed_frame(3)));
     assert!(!supervise(&mut engine, &mut dtcs, ms(59)));

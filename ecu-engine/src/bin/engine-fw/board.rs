@@ -7,6 +7,7 @@
 //! | D14 | CN10-5 | PB9 | CAN1 TX (AF9) to the transceiver's TXD | out | 3.3 V logic |
 //! | A0 | CN7-28 | PA0 | engine speed (ADC1_IN0) | in | 0–3.3 V = 0–9000 rpm |
 //! | A1 | CN7-30 | PA1 | fuel level (ADC1_IN1) | in | 0–3.3 V = 0–63.75 L |
+//! | A2 | CN7-32 | PA4 | fuel flow (ADC1_IN4) | in | 0–3.3 V = 0–150 L/h |
 //!
 //! The engine ECU drives nothing: it reports on EngineMsg.
 
@@ -14,22 +15,27 @@ use autoplug_firmware::analog::LinearInput;
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::read_analog;
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_engine::{EngineEcu, Sensors, Status, ENGINE_RPM_MAX, FUEL_LEVEL_MAX_L};
+use ecu_engine::{
+    EngineEcu, Sensors, Status, ENGINE_RPM_MAX, FUEL_FLOW_MAX_L_PER_H, FUEL_LEVEL_MAX_L,
+};
 use embassy_stm32::adc::Adc;
 use embassy_stm32::can::Can;
-use embassy_stm32::peripherals::{ADC1, PA0, PA1};
+use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4};
 use embassy_stm32::Peri;
 
 /// Engine speed: 0–3.3 V is 0–9000 rpm.
 const ENGINE_SPEED: LinearInput = LinearInput::new(0.0, ENGINE_RPM_MAX);
 /// Fuel level: 0–3.3 V is an empty to a full tank.
 const FUEL_LEVEL: LinearInput = LinearInput::new(0.0, FUEL_LEVEL_MAX_L);
+/// Fuel flow: 0–3.3 V is no flow to the input's maximum (a flow meter's analog output).
+const FUEL_FLOW: LinearInput = LinearInput::new(0.0, FUEL_FLOW_MAX_L_PER_H);
 
 /// The engine ECU's sensors.
 pub struct Board {
     adc: Adc<'static, ADC1>,
     engine_speed: Peri<'static, PA0>,
     fuel_level: Peri<'static, PA1>,
+    fuel_flow: Peri<'static, PA4>,
 }
 
 /// Brings up the clocks, CAN1 and the sensor inputs.
@@ -44,6 +50,7 @@ pub fn init() -> (Platform, Board) {
         adc: Adc::new(p.ADC1),
         engine_speed: p.PA0,
         fuel_level: p.PA1,
+        fuel_flow: p.PA4,
     };
     (platform, board)
 }
@@ -53,6 +60,7 @@ impl Io<EngineEcu> for Board {
         Sensors {
             engine_rpm: read_analog(&mut self.adc, &mut self.engine_speed, &ENGINE_SPEED),
             fuel_level_l: read_analog(&mut self.adc, &mut self.fuel_level, &FUEL_LEVEL),
+            fuel_flow_l_per_h: read_analog(&mut self.adc, &mut self.fuel_flow, &FUEL_FLOW),
         }
     }
 
