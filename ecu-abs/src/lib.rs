@@ -135,6 +135,11 @@ pub const BUILD_VARIANT: Variant = if cfg!(feature = "faulty") {
     Variant::Correct
 };
 
+/// Releases of brake pressure closer together than this belong to one ABS intervention:
+/// the ABS pulses a locking wheel several times a second, and one braking on a slippery
+/// stretch is one intervention, however many pulses it takes.
+pub const INTERVENTION_MERGE_GAP_US: u64 = 1_000_000;
+
 /// Control period. Wheel dynamics are fast (a wheel locks within ~100 ms at full brake), so
 /// the ABS runs at twice the message rate; messages still go out at their 10 ms periods
 /// (or on change, at most every 5 ms).

@@ -124,6 +124,9 @@ pub struct Summary {
     pub cruise: Option<CruiseFigures>,
     /// Time the ABS was acting, s.
     pub abs_active_s: f64,
+    /// ABS interventions: stretches of the ABS releasing brake pressure on any wheel,
+    /// those less than [`ecu_abs::INTERVENTION_MERGE_GAP_US`] apart counted as one.
+    pub abs_interventions: usize,
     /// Largest yaw-rate error, rad/s.
     pub peak_yaw_rate_error_rad_s: f64,
     /// Largest torque split, N·m.
@@ -155,6 +158,24 @@ pub fn shifts(gears: &[i32]) -> usize {
             count += 1;
             last = gear;
         }
+    }
+    count
+}
+
+/// ABS interventions in a trace: stretches of rows with a release on any wheel, merged when
+/// closer than [`ecu_abs::INTERVENTION_MERGE_GAP_US`].
+pub fn abs_interventions(trace: &[TraceRow]) -> usize {
+    let mut count = 0;
+    let mut last_release_s: Option<f64> = None;
+    let merge_gap_s = ecu_abs::INTERVENTION_MERGE_GAP_US as f64 * 1e-6;
+    for row in trace
+        .iter()
+        .filter(|r| r.abs_release.iter().any(|x| *x > 0.0))
+    {
+        if last_release_s.is_none_or(|t| row.t_s - t > merge_gap_s) {
+            count += 1;
+        }
+        last_release_s = Some(row.t_s);
     }
     count
 }
@@ -216,6 +237,7 @@ impl Summary {
             stops: stops(trace, mu),
             cruise: cruise(trace),
             abs_active_s: round(trace.iter().filter(|r| r.abs_active).count() as f64 * dt, 2),
+            abs_interventions: abs_interventions(trace),
             peak_yaw_rate_error_rad_s: round(
                 trace
                     .iter()
@@ -295,7 +317,13 @@ impl Summary {
                 ),
             );
         }
-        row("ABS active", format!("{:.2} s", self.abs_active_s));
+        row(
+            "ABS active",
+            format!(
+                "{:.2} s ({} interventions)",
+                self.abs_active_s, self.abs_interventions
+            ),
+        );
         row(
             "peak yaw-rate error",
             format!(

@@ -342,6 +342,16 @@ impl CarState {
         &self.signals
     }
 
+    /// Signal `i` of the message with this identifier (O(1): for per-frame use, where
+    /// [`CarState::signal`]'s search by name is too slow).
+    pub fn signal_of(&self, id: u16, i: usize) -> Option<&SignalState> {
+        let index = self.ids.get(u32::from(id))?;
+        if i >= MESSAGES[index].signals.len() {
+            return None;
+        }
+        self.signals.get(self.first_signal[index] + i)
+    }
+
     /// A signal by `Message.Signal` name or by VSS path.
     pub fn signal(&self, name: &str) -> Option<&SignalState> {
         self.signals.iter().find(|s| {
