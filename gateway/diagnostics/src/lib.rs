@@ -43,6 +43,7 @@ pub use verdict::{EcuDiagnosis, Finding, Verdict, Window};
 use autoplug_can::Node;
 use autoplug_gateway::{CarState, Observer, Update};
 use autoplug_logs::LogFrame;
+use serde::Serialize;
 
 /// A diagnostic routine: watches frames, then says what it found about its ECU.
 pub trait Routine {
@@ -61,9 +62,55 @@ pub fn ecus() -> impl Iterator<Item = Node> {
         .filter(|n| n.diag_node_number().is_some())
 }
 
+/// An ECU the bus showed restarting: its positive response to an ECU reset (UDS 0x11),
+/// as after a firmware update. What ran before is judged no more: its routines start over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Restart {
+    /// The ECU.
+    #[serde(serialize_with = "verdict::node_name")]
+    pub ecu: Node,
+    /// Bus time of the response, µs.
+    pub at_us: u64,
+}
+
 /// Every routine, as an observer of the pipeline.
 pub struct Diagnostics {
     routines: Vec<Box<dyn Routine + Send>>,
+    restarts: Vec<Restart>,
+}
+
+/// The routines that judge `node`: presence and ranges for every ECU, and its own.
+fn routines_for(node: Node) -> Vec<Box<dyn Routine + Send>> {
+    let mut routines: Vec<Box<dyn Routine + Send>> = vec![
+        Box::new(presence::Presence::new(node)),
+        Box::new(ranges::Ranges::new(node)),
+    ];
+    let own: Option<Box<dyn Routine + Send>> = match node {
+        Node::Cruise => Some(Box::new(cruise::Cruise::default())),
+        Node::ABS => Some(Box::new(abs::Abs::default())),
+        Node::Console => Some(Box::new(console::Console::default())),
+        Node::Engine => Some(Box::new(engine::Engine::default())),
+        Node::Pedals => Some(Box::new(pedals::Pedals::default())),
+        Node::Differential => Some(Box::new(differential::Differential::default())),
+        Node::Cabin => Some(Box::new(cabin::Cabin::default())),
+        Node::Transmission => Some(Box::new(transmission::Transmission::default())),
+        Node::Steering => Some(Box::new(steering::Steering::default())),
+        _ => None,
+    };
+    routines.extend(own);
+    routines
+}
+
+/// Whether `frame` is `node`'s positive response to an ECU reset: an ISO-TP single frame
+/// `0x51 sub` on its diagnostic response identifier.
+fn is_reset_response(node: Node, frame: &LogFrame) -> bool {
+    let data = frame.data();
+    node.diag_response_id().map(u32::from) == Some(frame.id)
+        && !frame.extended
+        && data.len() >= 3
+        && data[0] >> 4 == 0
+        && data[0] & 0x0F >= 2
+        && data[1] == 0x51
 }
 
 impl Default for Diagnostics {
@@ -73,23 +120,17 @@ impl Default for Diagnostics {
 }
 
 impl Diagnostics {
-    /// The standard set: presence for every ECU and each ECU's own routines.
+    /// The standard set: presence and ranges for every ECU and each ECU's own routines.
     pub fn new() -> Self {
-        let mut routines: Vec<Box<dyn Routine + Send>> = Vec::new();
-        for node in ecus() {
-            routines.push(Box::new(presence::Presence::new(node)));
-            routines.push(Box::new(ranges::Ranges::new(node)));
+        Self {
+            routines: ecus().flat_map(routines_for).collect(),
+            restarts: Vec::new(),
         }
-        routines.push(Box::new(cruise::Cruise::default()));
-        routines.push(Box::new(abs::Abs::default()));
-        routines.push(Box::new(console::Console::default()));
-        routines.push(Box::new(engine::Engine::default()));
-        routines.push(Box::new(pedals::Pedals::default()));
-        routines.push(Box::new(differential::Differential::default()));
-        routines.push(Box::new(cabin::Cabin::default()));
-        routines.push(Box::new(transmission::Transmission::default()));
-        routines.push(Box::new(steering::Steering::default()));
-        Self { routines }
+    }
+
+    /// The ECU restarts the bus showed, in order (each started its routines over).
+    pub fn restarts(&self) -> &[Restart] {
+        &self.restarts
     }
 
     /// The diagnosis of every ECU at this moment.
@@ -139,6 +180,16 @@ impl Diagnostics {
 
 impl Observer for Diagnostics {
     fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        if update == Update::Diagnostic {
+            if let Some(node) = ecus().find(|n| is_reset_response(*n, frame)) {
+                self.routines.retain(|r| r.ecu() != node);
+                self.routines.extend(routines_for(node));
+                self.restarts.push(Restart {
+                    ecu: node,
+                    at_us: frame.t_us,
+                });
+            }
+        }
         for routine in &mut self.routines {
             routine.on_frame(frame, update, state);
         }

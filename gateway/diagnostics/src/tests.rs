@@ -370,3 +370,89 @@ fn a_stuck_paddle_request_is_faulty_for_the_steering() {
     let f = run(every(20, 5000, ok), "paddle requests as pulses");
     assert_eq!(f.verdict, Verdict::Ok, "{f:?}");
 }
+
+#[test]
+fn only_a_positive_reset_response_on_the_ecus_own_identifier_restarts_its_routines() {
+    use crate::is_reset_response;
+    use autoplug_can::Node;
+    let frame = |id: u32, data: &[u8]| {
+        LogFrame::new(0, 0, id, false, autoplug_logs::FrameKind::Data, data).unwrap()
+    };
+    assert!(is_reset_response(
+        Node::Cruise,
+        &frame(0x78D, &[0x02, 0x51, 0x01, 0xAA, 0xAA, 0xAA, 0xAA, 0xAA])
+    ));
+    // Another ECU's response, a negative response, a request, a first frame.
+    assert!(!is_reset_response(
+        Node::Cruise,
+        &frame(0x78E, &[0x02, 0x51, 0x01])
+    ));
+    assert!(!is_reset_response(
+        Node::Cruise,
+        &frame(0x78D, &[0x03, 0x7F, 0x11, 0x22])
+    ));
+    assert!(!is_reset_response(
+        Node::Cruise,
+        &frame(0x70D, &[0x02, 0x11, 0x01])
+    ));
+    assert!(!is_reset_response(
+        Node::Cruise,
+        &frame(0x78D, &[0x10, 0x14, 0x51, 0x01])
+    ));
+    assert!(!is_reset_response(Node::Cruise, &frame(0x78D, &[0x02])));
+
+    // A fuel level that rose, then the engine reset: judged again from the reset on.
+    let mut frames = every(20, 5000, |t| {
+        EngineMsg {
+            engine_rpm: 2000.0,
+            fuel_level: 30.0 + t as f32 / 1000.0,
+            engine_mode: EngineMode::Economy,
+            fuel_used: 0.0,
+        }
+        .frame()
+    });
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut diagnostics = Diagnostics::new();
+    frames.push(
+        LogFrame::new(
+            5_001_000,
+            0,
+            0x783,
+            false,
+            autoplug_logs::FrameKind::Data,
+            &[0x02, 0x51, 0x01],
+        )
+        .unwrap(),
+    );
+    frames.extend(
+        every(20, 2000, |_| {
+            EngineMsg {
+                engine_rpm: 2000.0,
+                fuel_level: 35.0,
+                engine_mode: EngineMode::Economy,
+                fuel_used: 0.0,
+            }
+            .frame()
+        })
+        .into_iter()
+        .map(|mut f| {
+            f.t_us += 5_010_000;
+            f
+        }),
+    );
+    pipeline
+        .run(
+            &mut VecSource::new("test", frames),
+            &mut [&mut diagnostics],
+            &mut || false,
+        )
+        .unwrap();
+    assert_eq!(diagnostics.restarts().len(), 1);
+    assert_eq!(diagnostics.restarts()[0].at_us, 5_001_000);
+    let engine = diagnostics
+        .report(pipeline.state())
+        .into_iter()
+        .find(|d| d.ecu == Node::Engine)
+        .unwrap();
+    assert_eq!(engine.verdict, Verdict::Ok, "{engine:?}");
+}

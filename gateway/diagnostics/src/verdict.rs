@@ -101,7 +101,7 @@ pub struct EcuDiagnosis {
     pub findings: Vec<Finding>,
 }
 
-fn node_name<S: serde::Serializer>(node: &Node, s: S) -> Result<S::Ok, S::Error> {
+pub(crate) fn node_name<S: serde::Serializer>(node: &Node, s: S) -> Result<S::Ok, S::Error> {
     s.serialize_str(node.name())
 }
 
