@@ -8,6 +8,8 @@ use std::fmt;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use autoplug_can::Node;
 use autoplug_image::{ImageHeader, SoftwareVariant, Version, BUILD_ID_LEN};
@@ -17,12 +19,16 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::demo::Demo;
 use crate::driver::{self, DriveError};
 use crate::image_tool::{self, BuildOptions, ImageToolError, PayloadKind, SignatureCheck};
+use crate::live::BusUrl;
 use crate::names::{ecu_label, parse_ecu, ECUS, ECU_NAME_LIST};
 use crate::tester::{
     identification_table, FlashConfig, FlashError, FlashJob, IdentJob, TesterConfig,
 };
 use crate::transport::{self, TransportError, Via};
+use crate::watch::{StatusLine, TripLog, Watch};
 use crate::DEV_SECURITY_SECRET;
+use autoplug_gateway::{Observer, Pipeline, RecordingSink, Strictness};
+use autoplug_store::{SqliteStore, TripStore};
 use autoplug_virtual_car::scenario::Scenario;
 
 /// The `autoplug` command line.
@@ -105,7 +111,58 @@ pub enum Command {
         /// Skip malformed lines and count them, instead of stopping at the first.
         #[arg(long)]
         lenient: bool,
+        /// Also store the log's trips in this database (SQLite).
+        #[arg(long, value_name = "FILE")]
+        db: Option<PathBuf>,
+        /// The vehicle's name (a VIN) in the trip database.
+        #[arg(long, value_name = "NAME", default_value = "local", requires = "db")]
+        vehicle: String,
     },
+    /// Watch a live bus: the car's state in the terminal, every ECU's diagnosis, the trips
+    /// into the database and, with --record, all traffic into candump files. Runs until the
+    /// bus ends (the virtual car's scenario), --duration passes, or Ctrl-C.
+    Gateway {
+        /// The bus: virtual:SCENARIO.toml (the virtual car in this process),
+        /// socketcand://HOST:PORT/BUS or socketcan://IFACE.
+        #[arg(long, value_name = "URL", value_parser = parse_bus)]
+        bus: BusUrl,
+        /// Record all traffic into this directory (candump .log files, flushed every 100 ms).
+        #[arg(long, value_name = "DIR")]
+        record: Option<PathBuf>,
+        /// Start a new recording file after this many MB.
+        #[arg(long, value_name = "MB", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+        rotate_mb: Option<u64>,
+        /// Start a new recording file after this many minutes of bus time.
+        #[arg(long, value_name = "MINUTES", value_parser = clap::value_parser!(u64).range(1..=100_000))]
+        rotate_minutes: Option<u64>,
+        /// The trip database (SQLite; created if missing).
+        #[arg(long, value_name = "FILE", default_value = "autoplug.db")]
+        db: PathBuf,
+        /// Keep no trips.
+        #[arg(long, conflicts_with = "db")]
+        no_db: bool,
+        /// The vehicle's name (a VIN) in the trip database.
+        #[arg(long, value_name = "NAME", default_value = "local")]
+        vehicle: String,
+        /// Pace the virtual car at this multiple of real time (default 1).
+        #[arg(long, value_name = "X", value_parser = parse_speed, conflicts_with = "fast")]
+        speed: Option<f64>,
+        /// Run the virtual car as fast as the machine goes.
+        #[arg(long)]
+        fast: bool,
+        /// Stop after this many seconds.
+        #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
+        duration: Option<f64>,
+        /// No status line (the summary at the end is still printed).
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// The trips in the database.
+    #[command(subcommand)]
+    Trips(TripsCommand),
+    /// Log files.
+    #[command(subcommand)]
+    Log(LogCommand),
     /// Judge every ECU from a recorded log: verdict (ok, suspect, faulty, no data), number,
     /// unit, thresholds and evidence window. Exit status 0 when no ECU is faulty, 3 when
     /// one is (1 for an error, 2 for a wrong command line).
@@ -155,6 +212,68 @@ fn parse_demo(text: &str) -> Result<Demo, String> {
         "abs" => Ok(Demo::Abs),
         other => Err(format!("no demonstration '{other}': cruise or abs")),
     }
+}
+
+/// `trips` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum TripsCommand {
+    /// List the stored trips, newest first.
+    List {
+        /// The trip database.
+        #[arg(long, value_name = "FILE", default_value = "autoplug.db")]
+        db: PathBuf,
+        /// Only this vehicle's trips.
+        #[arg(long, value_name = "NAME")]
+        vehicle: Option<String>,
+        /// JSON for scripts.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Show one trip: its statistics, verdicts and trouble codes.
+    Show {
+        /// The trip's number (from `trips list`).
+        #[arg(value_name = "ID")]
+        id: i64,
+        /// The trip database.
+        #[arg(long, value_name = "FILE", default_value = "autoplug.db")]
+        db: PathBuf,
+        /// JSON for scripts.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// `log` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum LogCommand {
+    /// Convert a log (candump .log, Vector .asc or .blf) to Vector ASC or candump.
+    Export {
+        /// The log to read.
+        #[arg(value_name = "LOG")]
+        log: PathBuf,
+        /// The format to write.
+        #[arg(long, value_enum, default_value_t = ExportFormat::Asc)]
+        format: ExportFormat,
+        /// The file to write (never overwritten).
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Skip malformed lines and count them, instead of stopping at the first.
+        #[arg(long)]
+        lenient: bool,
+    },
+}
+
+/// `log export --format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// Vector ASC (CANalyzer, CANoe, python-can, SavvyCAN).
+    Asc,
+    /// candump .log (can-utils, python-can, cantools).
+    Candump,
+}
+
+fn parse_bus(text: &str) -> Result<BusUrl, String> {
+    text.parse()
 }
 
 /// `image` subcommands.
@@ -498,9 +617,15 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             log,
             speed,
             lenient,
+            db,
+            vehicle,
         } => {
-            let run =
-                crate::gateway::run_log(&log, strictness(lenient), speed).map_err(CliError::Log)?;
+            let trip_log = match db {
+                Some(db) => Some(open_trip_log(&db, &vehicle, &log.display().to_string())?),
+                None => None,
+            };
+            let run = crate::gateway::run_log(&log, strictness(lenient), speed, trip_log)
+                .map_err(CliError::Log)?;
             let state = run.pipeline.state();
             writeln!(out, "{}", log.display())?;
             crate::gateway::bus_summary(state, run.pipeline.malformed(), out)?;
@@ -508,11 +633,81 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             crate::gateway::signal_table(state, out)?;
             writeln!(out)?;
             crate::gateway::verdict_table(&run.diagnoses, out)?;
+            writeln!(out)?;
+            crate::gateway::trips_table(&run.trips, out)?;
+            if let Some(trip_log) = &run.trip_log {
+                report_trip_log(trip_log, out)?;
+            }
             Ok(())
         }
+        Command::Gateway {
+            bus,
+            record,
+            rotate_mb,
+            rotate_minutes,
+            db,
+            no_db,
+            vehicle,
+            speed,
+            fast,
+            duration,
+            quiet,
+        } => {
+            let options = GatewayOptions {
+                record,
+                rotate: autoplug_logs::RotatePolicy {
+                    max_bytes: rotate_mb.map(|mb| mb * 1_000_000),
+                    max_duration_us: rotate_minutes.map(|m| m * 60_000_000),
+                },
+                db: (!no_db).then_some(db),
+                vehicle,
+                speed,
+                fast,
+                duration,
+                quiet,
+            };
+            gateway(&bus, options, out)
+        }
+        Command::Trips(TripsCommand::List { db, vehicle, json }) => {
+            let store = open_existing_store(&db)?;
+            let rows = store
+                .trips(vehicle.as_deref())
+                .map_err(|e| CliError::Log(e.to_string()))?;
+            if json {
+                let text = serde_json::to_string_pretty(&rows)
+                    .map_err(|e| CliError::Log(e.to_string()))?;
+                writeln!(out, "{text}")?;
+            } else if rows.is_empty() {
+                writeln!(out, "no trips in {}", db.display())?;
+            } else {
+                crate::gateway::stored_trips_table(&rows, out)?;
+            }
+            Ok(())
+        }
+        Command::Trips(TripsCommand::Show { id, db, json }) => {
+            let store = open_existing_store(&db)?;
+            let detail = store
+                .trip(autoplug_store::TripId(id))
+                .map_err(|e| CliError::Log(e.to_string()))?
+                .ok_or_else(|| CliError::Log(format!("{}: there is no trip {id}", db.display())))?;
+            if json {
+                let text = serde_json::to_string_pretty(&detail)
+                    .map_err(|e| CliError::Log(e.to_string()))?;
+                writeln!(out, "{text}")?;
+            } else {
+                crate::gateway::trip_detail(&detail, out)?;
+            }
+            Ok(())
+        }
+        Command::Log(LogCommand::Export {
+            log,
+            format,
+            out: file,
+            lenient,
+        }) => export_log(&log, format, &file, lenient, out),
         Command::Diagnose { log, json, lenient } => {
-            let run =
-                crate::gateway::run_log(&log, strictness(lenient), None).map_err(CliError::Log)?;
+            let run = crate::gateway::run_log(&log, strictness(lenient), None, None)
+                .map_err(CliError::Log)?;
             if json {
                 writeln!(out, "{}", crate::gateway::verdict_json(&log, &run))?;
             } else {
@@ -538,6 +733,200 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             }
         }
     }
+}
+
+/// Opens (or creates) the trip database for a run.
+fn open_trip_log(db: &Path, vehicle: &str, source: &str) -> Result<TripLog, CliError> {
+    let store = SqliteStore::open(db).map_err(|e| CliError::Log(e.to_string()))?;
+    Ok(TripLog::new(Box::new(store), vehicle, source))
+}
+
+/// Opens a trip database that must exist (the read commands never create one).
+fn open_existing_store(db: &Path) -> Result<SqliteStore, CliError> {
+    if !db.exists() {
+        return Err(CliError::Log(format!(
+            "{}: no such trip database (the gateway creates it: autoplug gateway --db FILE)",
+            db.display()
+        )));
+    }
+    SqliteStore::open(db).map_err(|e| CliError::Log(e.to_string()))
+}
+
+fn report_trip_log(trip_log: &TripLog, out: &mut dyn Write) -> Result<(), CliError> {
+    if !trip_log.stored.is_empty() {
+        let ids: Vec<String> = trip_log.stored.iter().map(|id| id.to_string()).collect();
+        writeln!(out, "stored trip(s) {} ", ids.join(", "))?;
+    }
+    if let Some(failure) = &trip_log.failure {
+        writeln!(out, "{failure}")?;
+    }
+    Ok(())
+}
+
+/// What `autoplug gateway` was asked to do besides watching.
+struct GatewayOptions {
+    record: Option<PathBuf>,
+    rotate: autoplug_logs::RotatePolicy,
+    db: Option<PathBuf>,
+    vehicle: String,
+    speed: Option<f64>,
+    fast: bool,
+    duration: Option<f64>,
+    quiet: bool,
+}
+
+/// Set by Ctrl-C: the live gateway stops at the next frame or idle moment.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result<(), CliError> {
+    let pace = match bus {
+        BusUrl::Virtual(_) if options.fast => None,
+        BusUrl::Virtual(_) => Some(options.speed.unwrap_or(1.0)),
+        BusUrl::Transport(_) if options.fast || options.speed.is_some() => {
+            return Err(CliError::Log(
+                "--speed and --fast pace the virtual car only: a real bus goes at its own pace"
+                    .into(),
+            ))
+        }
+        BusUrl::Transport(_) => None,
+    };
+    let mut source = bus.open(pace).map_err(CliError::Log)?;
+    let trip_log = match &options.db {
+        Some(db) => Some(open_trip_log(db, &options.vehicle, &source.describe())?),
+        None => None,
+    };
+    let mut recording = match &options.record {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).map_err(|e| {
+                CliError::Log(format!(
+                    "cannot create the recording directory '{}': {e}",
+                    dir.display()
+                ))
+            })?;
+            let recorder = autoplug_logs::Recorder::start(dir, "gateway", options.rotate)
+                .map_err(|e| CliError::Log(e.to_string()))?;
+            Some(RecordingSink::new(recorder))
+        }
+        None => None,
+    };
+    // A second handler cannot be set (a test running several gateways): Ctrl-C then stops
+    // the first one's way, through the same flag.
+    STOP.store(false, Ordering::SeqCst);
+    let _ = ctrlc::set_handler(|| STOP.store(true, Ordering::SeqCst));
+    writeln!(
+        out,
+        "gateway on {}{}{} (Ctrl-C stops)",
+        source.describe(),
+        options.record.as_ref().map_or(String::new(), |d| format!(
+            ", recording into {}",
+            d.display()
+        )),
+        options
+            .db
+            .as_ref()
+            .map_or(String::new(), |d| format!(", trips into {}", d.display()))
+    )?;
+    let deadline = options
+        .duration
+        .map(|s| Instant::now() + Duration::from_secs_f64(s));
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut status_out = io::stderr();
+    let mut watch = Watch::new(trip_log);
+    if !options.quiet {
+        watch.status = Some(StatusLine::new(&mut status_out, Duration::from_secs(1)));
+    }
+    let result = {
+        let mut observers: Vec<&mut dyn Observer> = vec![&mut watch];
+        if let Some(sink) = recording.as_mut() {
+            observers.push(sink);
+        }
+        pipeline.run(source.as_mut(), &mut observers, &mut || {
+            STOP.load(Ordering::SeqCst) || deadline.is_some_and(|d| Instant::now() >= d)
+        })
+    };
+    watch.status = None;
+    watch.finish(pipeline.state());
+    if let Some(sink) = recording.as_mut() {
+        if let Some(failure) = sink.failure() {
+            writeln!(out, "{failure}")?;
+        }
+        let summary = sink.stop().map_err(|e| CliError::Log(e.to_string()))?;
+        for file in &summary.files {
+            writeln!(out, "recorded {}", file.display())?;
+        }
+        writeln!(
+            out,
+            "recording: {} frames, {} bytes in {} file(s)",
+            summary.frames,
+            summary.bytes,
+            summary.files.len()
+        )?;
+    }
+    let state = pipeline.state();
+    writeln!(
+        out,
+        "{} frames, {:.1} s of bus time",
+        state.counters().frames,
+        state.now_us() as f64 * 1e-6
+    )?;
+    crate::gateway::trips_table(&watch.ended, out)?;
+    if let Some(trip_log) = &watch.trip_log {
+        report_trip_log(trip_log, out)?;
+    }
+    crate::gateway::verdict_table(&watch.diagnostics.report(state), out)?;
+    result.map_err(|e| CliError::Log(e.to_string()))
+}
+
+/// `autoplug log export`: written to FILE.partial and renamed when complete, so a failed
+/// or refused export never leaves a half-written file under the name asked for.
+fn export_log(
+    log: &Path,
+    format: ExportFormat,
+    file: &Path,
+    lenient: bool,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    if file.exists() {
+        return Err(CliError::Log(format!(
+            "{}: already exists (not overwritten)",
+            file.display()
+        )));
+    }
+    let reader = autoplug_logs::open(log).map_err(|e| CliError::Log(e.to_string()))?;
+    let mut partial = file.as_os_str().to_owned();
+    partial.push(".partial");
+    let partial = PathBuf::from(partial);
+    let output = std::fs::File::create(&partial)
+        .map_err(|e| CliError::Log(format!("cannot create {}: {e}", partial.display())))?;
+    let writer = io::BufWriter::new(output);
+    let result = match format {
+        ExportFormat::Asc => autoplug_logs::export_asc(reader, writer),
+        ExportFormat::Candump => autoplug_logs::write::export_candump(reader, writer, false),
+    };
+    let fail = |message: String| {
+        let _ = std::fs::remove_file(&partial);
+        CliError::Log(message)
+    };
+    let summary = result.map_err(|e| fail(format!("{}: {e}", log.display())))?;
+    if let (false, Some(first)) = (lenient, &summary.first_skipped) {
+        return Err(fail(format!(
+            "{first} (use --lenient to skip malformed lines and count them)"
+        )));
+    }
+    std::fs::rename(&partial, file)
+        .map_err(|e| fail(format!("cannot write {}: {e}", file.display())))?;
+    writeln!(
+        out,
+        "wrote {} ({} frames{})",
+        file.display(),
+        summary.frames,
+        if summary.skipped > 0 {
+            format!(", {} malformed line(s) skipped", summary.skipped)
+        } else {
+            String::new()
+        }
+    )?;
+    Ok(())
 }
 
 /// Runs a demonstration and reports what it showed.
@@ -576,6 +965,29 @@ fn demo(which: Demo, dir: Option<&Path>, out: &mut dyn Write) -> Result<(), CliE
                 s.faulty, s.fixed
             ),
         )?,
+    }
+    for (when, d) in ["before the fix", "after the fix"]
+        .iter()
+        .zip(&report.gateway)
+    {
+        let finding = d.headline().map_or("-".to_string(), |f| {
+            format!(
+                "{}: {} (suspect above {}, faulty above {}{})",
+                f.routine,
+                f.value.map_or("-".into(), |v| format!("{v:.2} {}", f.unit)),
+                f.suspect_above,
+                f.faulty_above,
+                f.window.map_or(String::new(), |w| format!(", over {w}"))
+            )
+        });
+        w(
+            out,
+            format!(
+                "gateway diagnosis {when}: {} {}, {finding}",
+                which.ecu().name(),
+                d.verdict.name().to_uppercase()
+            ),
+        )?;
     }
     if let Some(dir) = dir {
         let dir = dir.join(&scenario.name);

@@ -16,7 +16,10 @@
 use std::fmt;
 
 use autoplug_can::Node;
+use autoplug_diagnostics::{Diagnostics, EcuDiagnosis};
+use autoplug_gateway::{Pipeline, Strictness};
 use autoplug_image::{SigningKey, SoftwareVariant, Version};
+use autoplug_logs::LogFrame;
 use autoplug_virtual_car::car::VirtualCar;
 use autoplug_virtual_car::diag::{build_image, FACTORY_PAYLOAD_LEN};
 use autoplug_virtual_car::report::{RunRecord, Summary, TRACE_PERIOD_US};
@@ -103,6 +106,10 @@ pub struct DemoReport {
     pub symptom: Symptom,
     /// The whole run: trace, bus log, summary.
     pub record: RunRecord,
+    /// The gateway's diagnosis of the flashed ECU from the bus alone: just before the fix
+    /// (the faulty software, judged since the bus showed it start), and at the end (the
+    /// correct software, judged since the fix).
+    pub gateway: [EcuDiagnosis; 2],
 }
 
 /// A demonstration could not run to its end.
@@ -195,12 +202,46 @@ pub fn run(demo: Demo, scenario: &Scenario) -> Result<DemoReport, DemoError> {
             }
         }
     };
+    let fix_us = (demo.flashes()[1].at_s * 1e6) as u64;
+    let gateway = gateway_diagnosis(demo.ecu(), &record, fix_us)?;
     Ok(DemoReport {
         demo,
         flashes,
         symptom,
         record,
+        gateway,
     })
+}
+
+/// The gateway's diagnosis of `ecu` on the run's bus log at `fix_us` (before the fix is
+/// flashed) and at the end: the same pipeline and routines as `autoplug gateway`.
+fn gateway_diagnosis(
+    ecu: Node,
+    record: &RunRecord,
+    fix_us: u64,
+) -> Result<[EcuDiagnosis; 2], DemoError> {
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut diagnostics = Diagnostics::new();
+    let of_ecu = |diagnostics: &Diagnostics, pipeline: &Pipeline| {
+        diagnostics
+            .report(pipeline.state())
+            .into_iter()
+            .find(|d| d.ecu == ecu)
+            .ok_or_else(|| DemoError::Scenario(format!("no diagnosis of {}", ecu.name())))
+    };
+    let mut before = None;
+    for f in &record.log {
+        if f.t_us >= fix_us && before.is_none() {
+            before = Some(of_ecu(&diagnostics, &pipeline)?);
+        }
+        pipeline.feed(
+            &LogFrame::from_can(f.t_us, 0, &f.frame),
+            &mut [&mut diagnostics],
+        );
+    }
+    let before =
+        before.ok_or_else(|| DemoError::Scenario("the bus log ends before the fix".into()))?;
+    Ok([before, of_ecu(&diagnostics, &pipeline)?])
 }
 
 fn record_row(car: &VirtualCar, trace: &mut Vec<autoplug_virtual_car::car::TraceRow>) {

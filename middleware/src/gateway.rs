@@ -1,15 +1,20 @@
-//! The gateway commands on recorded logs: `autoplug replay LOG` (the pipeline on a log,
-//! as fast as possible or paced) and `autoplug diagnose LOG` (the verdict table, or JSON
-//! for scripts). They run the same pipeline and observers as the live gateway.
+//! The gateway's commands: `autoplug gateway --bus URL` (live: the status line, the
+//! recording, trips into the store), `autoplug replay LOG` (the same pipeline on a log, as
+//! fast as possible or paced), `autoplug diagnose LOG` (the verdict table, or JSON for
+//! scripts), and the tables they print. Live and recorded input go through the same
+//! pipeline and the same [`Watch`].
 
 use std::io::Write;
 use std::path::Path;
 
-use autoplug_diagnostics::{Diagnostics, EcuDiagnosis, Verdict};
+use autoplug_diagnostics::{EcuDiagnosis, Verdict};
 use autoplug_gateway::{CarState, FrameSource, LogSource, Paced, Pipeline, Strictness};
+use autoplug_store::{TripDetail, TripRow};
+use autoplug_trips::{TripEnd, TripStats};
 use serde::Serialize;
 
 use crate::names::ecu_name;
+use crate::watch::{TripLog, Watch};
 
 /// What a run over a log found.
 pub struct LogRun {
@@ -17,24 +22,188 @@ pub struct LogRun {
     pub diagnoses: Vec<EcuDiagnosis>,
     /// The state at the end.
     pub pipeline: Pipeline,
+    /// The trips found, in order.
+    pub trips: Vec<(TripStats, TripEnd)>,
+    /// Where the trips were stored, if anywhere, and how that went.
+    pub trip_log: Option<TripLog>,
 }
 
-/// Runs the gateway pipeline with the diagnostics over a log file.
-pub fn run_log(path: &Path, strictness: Strictness, speed: Option<f64>) -> Result<LogRun, String> {
+/// Runs the gateway pipeline with the diagnostics and trips over a log file; trips go to
+/// `trip_log` if given.
+pub fn run_log(
+    path: &Path,
+    strictness: Strictness,
+    speed: Option<f64>,
+    trip_log: Option<TripLog>,
+) -> Result<LogRun, String> {
     let source = LogSource::open(path).map_err(|e| e.to_string())?;
     let mut source: Box<dyn FrameSource> = match speed {
         Some(speed) => Box::new(Paced::new(source, speed)),
         None => Box::new(source),
     };
     let mut pipeline = Pipeline::new(strictness);
-    let mut diagnostics = Diagnostics::new();
+    let mut watch = Watch::new(trip_log);
     pipeline
-        .run(source.as_mut(), &mut [&mut diagnostics], &mut || false)
+        .run(source.as_mut(), &mut [&mut watch], &mut || false)
         .map_err(|e| e.to_string())?;
+    watch.finish(pipeline.state());
     Ok(LogRun {
-        diagnoses: diagnostics.report(pipeline.state()),
+        diagnoses: watch.diagnostics.report(pipeline.state()),
         pipeline,
+        trips: watch.ended,
+        trip_log: watch.trip_log,
     })
+}
+
+/// The trips of a run, one line each.
+pub fn trips_table(trips: &[(TripStats, TripEnd)], out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{:>4} {:>9} {:>9} {:>9} {:>8} {:>8} {:>6} {:>11} {:>5} {:>6} {:>8} {:>9}  end",
+        "trip",
+        "start s",
+        "duration",
+        "km",
+        "fuel L",
+        "max km/h",
+        "shifts",
+        "ABS (s)",
+        "hard",
+        "cruise",
+        "diff",
+        "mean km/h"
+    )?;
+    for (i, (s, end)) in trips.iter().enumerate() {
+        trip_line(&(i + 1).to_string(), s, end.name(), out)?;
+    }
+    Ok(())
+}
+
+fn trip_line(id: &str, s: &TripStats, end: &str, out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{:>4} {:>9.2} {:>8.1}s {:>9.3} {:>8.3} {:>8.1} {:>6} {:>3} ({:>5.2}) {:>5} {:>5.0} s {:>3} ({:>3.1}) {:>9.1}  {end}",
+        id,
+        s.start_us as f64 * 1e-6,
+        s.duration_s,
+        s.distance_m / 1000.0,
+        s.fuel_used_l,
+        s.max_speed_kmh,
+        s.shifts,
+        s.abs_interventions,
+        s.abs_time_s,
+        s.hard_brakings,
+        s.cruise_time_s,
+        s.diff_interventions,
+        s.diff_time_s,
+        s.mean_speed_kmh,
+    )
+}
+
+/// `autoplug trips list`: the stored trips, newest first.
+pub fn stored_trips_table(rows: &[TripRow], out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(out, "{:<24} {:<12} source", "started (UTC)", "vehicle")?;
+    for row in rows {
+        writeln!(
+            out,
+            "{:<24} {:<12} {} [{}]",
+            utc(row.started_at_unix_ms),
+            row.vehicle,
+            row.source,
+            row.status.name()
+        )?;
+        trip_line(
+            &row.id.to_string(),
+            &row.stats,
+            row.end.map_or("-", |e| e.name()),
+            out,
+        )?;
+    }
+    Ok(())
+}
+
+/// `autoplug trips show ID`: one trip with its verdicts and trouble codes.
+pub fn trip_detail(detail: &TripDetail, out: &mut dyn Write) -> std::io::Result<()> {
+    let row = &detail.row;
+    let s = &row.stats;
+    writeln!(out, "trip {} of {} ({})", row.id, row.vehicle, row.source)?;
+    writeln!(out, "  started          {}", utc(row.started_at_unix_ms))?;
+    writeln!(
+        out,
+        "  status           {}{}",
+        row.status.name(),
+        row.end
+            .map_or(String::new(), |e| format!(", ended: {}", e.name()))
+    )?;
+    writeln!(
+        out,
+        "  bus time         {:.3}-{:.3} s",
+        s.start_us as f64 * 1e-6,
+        s.end_us as f64 * 1e-6
+    )?;
+    writeln!(
+        out,
+        "  duration         {:.1} s ({:.1} s moving)",
+        s.duration_s, s.moving_time_s
+    )?;
+    writeln!(out, "  distance         {:.3} km", s.distance_m / 1000.0)?;
+    writeln!(out, "  fuel used        {:.3} L", s.fuel_used_l)?;
+    writeln!(
+        out,
+        "  speed            max {:.0} km/h, mean {:.1} km/h",
+        s.max_speed_kmh, s.mean_speed_kmh
+    )?;
+    writeln!(out, "  shifts           {}", s.shifts)?;
+    writeln!(
+        out,
+        "  ABS              {} intervention(s), {:.2} s",
+        s.abs_interventions, s.abs_time_s
+    )?;
+    writeln!(out, "  hard brakings    {}", s.hard_brakings)?;
+    writeln!(out, "  cruise           {:.1} s", s.cruise_time_s)?;
+    writeln!(
+        out,
+        "  differential     {} intervention(s), {:.2} s",
+        s.diff_interventions, s.diff_time_s
+    )?;
+    writeln!(out, "  verdicts:")?;
+    for v in &detail.verdicts {
+        writeln!(
+            out,
+            "    {:<13} {:<8} {:>10} {:<10} {}: {}",
+            v.ecu,
+            v.verdict,
+            v.number.map_or("-".into(), |n| format!("{n:.3}")),
+            v.unit,
+            v.routine,
+            v.evidence
+        )?;
+    }
+    if detail.dtcs.is_empty() {
+        writeln!(out, "  DTCs: none recorded")?;
+    }
+    for d in &detail.dtcs {
+        writeln!(
+            out,
+            "    DTC {} {} status 0x{:02X}: {}",
+            d.ecu, d.code, d.status, d.description
+        )?;
+    }
+    writeln!(
+        out,
+        "  series: {} signal(s), 1 s buckets (mean, min, max)",
+        detail.series_signals.len()
+    )?;
+    Ok(())
+}
+
+/// Milliseconds since the epoch as `YYYY-mm-dd HH:MM:SS`, UTC.
+fn utc(unix_ms: i64) -> String {
+    let t = autoplug_logs::Utc::from_unix_us(u64::try_from(unix_ms).unwrap_or(0) * 1000);
+    format!(
+        "{:04}-{:02}-{:02} {:02}:{:02}:{:02}",
+        t.year, t.month, t.day, t.hour, t.minute, t.second
+    )
 }
 
 /// The verdict table, one line per ECU with its deciding finding.

@@ -9,8 +9,9 @@
 //! | [`driver`] | runs a job over a transport with the wall clock |
 //! | [`image_tool`] | key files, building an image from a raw binary or an ELF file, inspecting one |
 //! | [`names`] | NRC and service names (ISO 14229-1), ECU names of the command line |
-//! | [`live`] | live frame sources for the gateway (the in-process virtual car) |
-//! | [`gateway`] | the gateway on recorded logs: `replay` and `diagnose` |
+//! | [`live`] | live frame sources for the gateway: the in-process virtual car, socketcand, SocketCAN; the `--bus` URL |
+//! | [`gateway`] | the gateway's commands: `gateway` on a live bus, `replay` and `diagnose` on a log, `trips`, `log export` |
+//! | [`watch`] | what the gateway does with every frame: diagnostics, trips into the store, the status line |
 //! | [`cli`] | the `autoplug` command |
 //!
 //! Everything that talks to ECUs is sans-IO: it takes frames and the current time and
@@ -46,6 +47,7 @@ pub mod names;
 pub mod on_car;
 pub mod tester;
 pub mod transport;
+pub mod watch;
 
 /// The SecurityAccess secret of the AutoPlug ECUs in development: the key for a seed is
 /// `autoplug_uds::security::key_for(secret, node, seed)`, and the ECU side

@@ -1,12 +1,17 @@
-//! Live frame sources for the gateway: the virtual car in this process. (socketcand and
-//! SocketCAN follow, over the transports of [`crate::transport`].)
+//! Live frame sources for the gateway: the virtual car in this process, and socketcand or
+//! SocketCAN over the transports of [`crate::transport`]; [`BusUrl`] names one.
 
 use std::collections::VecDeque;
-use std::time::Duration;
+use std::path::PathBuf;
+use std::str::FromStr;
+use std::time::{Duration, Instant};
 
-use autoplug_gateway::{FrameSource, Poll, SourceError};
+use autoplug_gateway::{FrameSource, Paced, Poll, SourceError};
 use autoplug_logs::LogFrame;
 use autoplug_virtual_car::car::VirtualCar;
+use autoplug_virtual_car::scenario::Scenario;
+
+use crate::transport::{Transport, TransportError, Via};
 
 /// The virtual car's bus as a live source: each poll runs the car on until it has put
 /// frames on the bus, and hands them over in bus order with their bus time. The gateway
@@ -53,5 +58,94 @@ impl FrameSource for VirtualCarSource {
 
     fn describe(&self) -> String {
         format!("virtual car ({})", self.car.scenario().name)
+    }
+}
+
+/// A real-time transport (socketcand, SocketCAN) as a live source. Frames carry the bus
+/// time the other end reports (socketcand's timestamps); without one, the time since the
+/// source was opened on this host.
+pub struct TransportSource {
+    transport: Box<dyn Transport>,
+    opened: Instant,
+}
+
+impl TransportSource {
+    /// The source for an open transport.
+    pub fn new(transport: Box<dyn Transport>) -> Self {
+        Self {
+            transport,
+            opened: Instant::now(),
+        }
+    }
+}
+
+impl FrameSource for TransportSource {
+    fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
+        match self.transport.recv(max_wait) {
+            Ok(Some((frame, at))) => {
+                let t_us = at.bus_us.unwrap_or_else(|| {
+                    at.host.saturating_duration_since(self.opened).as_micros() as u64
+                });
+                Ok(Poll::Frame(LogFrame::from_can(t_us, 0, &frame)))
+            }
+            Ok(None) => Ok(Poll::Idle),
+            Err(TransportError::Closed(_)) => Ok(Poll::End),
+            Err(error) => Err(SourceError {
+                source: self.transport.describe(),
+                message: error.to_string(),
+            }),
+        }
+    }
+
+    fn describe(&self) -> String {
+        self.transport.describe()
+    }
+}
+
+/// The `--bus` URL of `autoplug gateway`: the in-process virtual car, or a transport.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BusUrl {
+    /// `virtual:SCENARIO.toml`: the virtual car in this process, driven by a scenario file.
+    Virtual(PathBuf),
+    /// `socketcand://HOST:PORT/BUS` or `socketcan://IFACE`.
+    Transport(Via),
+}
+
+impl FromStr for BusUrl {
+    type Err = String;
+
+    fn from_str(url: &str) -> Result<Self, String> {
+        if let Some(path) = url.strip_prefix("virtual:") {
+            if path.is_empty() {
+                return Err(format!(
+                    "invalid bus URL '{url}': name a scenario file, e.g. virtual:scenarios/drive-cycle.toml"
+                ));
+            }
+            return Ok(BusUrl::Virtual(PathBuf::from(path)));
+        }
+        url.parse::<Via>().map(BusUrl::Transport).map_err(|e| {
+            format!("{e}, or virtual:SCENARIO.toml for the virtual car in this process")
+        })
+    }
+}
+
+impl BusUrl {
+    /// Opens the bus as a frame source; `speed` paces the virtual car (1 = real time,
+    /// `None` = as fast as the machine goes).
+    pub fn open(&self, speed: Option<f64>) -> Result<Box<dyn FrameSource>, String> {
+        match self {
+            BusUrl::Virtual(path) => {
+                let scenario = Scenario::load(path).map_err(|e| e.to_string())?;
+                let source = VirtualCarSource::new(VirtualCar::new(&scenario));
+                Ok(match speed {
+                    Some(speed) => Box::new(Paced::new(source, speed)),
+                    None => Box::new(source),
+                })
+            }
+            BusUrl::Transport(via) => {
+                let transport = crate::transport::open(via).map_err(|e| e.to_string())?;
+                Ok(Box::new(TransportSource::new(transport)))
+            }
+        }
     }
 }

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use autoplug_diagnostics::Verdict;
 use autoplug_image::{SoftwareVariant, Version};
 use autoplug_middleware::demo::{run, Demo, DemoReport};
 use autoplug_virtual_car::scenario::Scenario;
@@ -49,6 +50,33 @@ fn scenario_1_the_faulty_cruise_oscillates_and_the_flashed_fix_holds_the_speed()
     assert!(s.faulty > 1.0, "the faulty cruise oscillates: {s:?}");
     assert!(s.fixed < 0.6, "the correct cruise holds the speed: {s:?}");
     assert!(s.faulty > 2.5 * s.fixed, "{s:?}");
+    gateway_flags_then_clears(&report, "tracking error");
+}
+
+/// The gateway's own diagnosis, from the bus alone: the ECU judged faulty with its number
+/// before the fix, ok after it (its routines start over when the bus shows the ECU reset).
+fn gateway_flags_then_clears(report: &DemoReport, routine: &str) {
+    let [before, after] = &report.gateway;
+    let finding = before.headline().unwrap();
+    assert_eq!(
+        (before.verdict, finding.routine),
+        (Verdict::Faulty, routine),
+        "{before:?}"
+    );
+    assert!(finding.value.unwrap() > finding.faulty_above, "{finding:?}");
+    assert_eq!(after.verdict, Verdict::Ok, "{after:?}");
+    let fixed = after
+        .findings
+        .iter()
+        .find(|f| f.routine == routine)
+        .unwrap();
+    assert!(fixed.value.unwrap() <= fixed.suspect_above, "{fixed:?}");
+    assert!(
+        fixed
+            .window
+            .is_none_or(|w| w.from_us > finding.window.unwrap().to_us),
+        "judged on the fixed software only: {fixed:?}"
+    );
 }
 
 #[test]
@@ -61,4 +89,5 @@ fn scenario_2_the_faulty_abs_spins_the_car_and_the_flashed_fix_keeps_it_straight
     );
     assert!(s.faulty > 45.0, "the faulty ABS spins the car: {s:?}");
     assert!(s.fixed < 15.0, "the correct ABS keeps it straight: {s:?}");
+    gateway_flags_then_clears(&report, "longest wheel lock while braking");
 }

@@ -7,6 +7,8 @@
 
 use std::collections::BTreeMap;
 
+use rustc_hash::FxHashMap;
+
 use autoplug_can::{Message, MessageSpec, Node, SignalKind, SignalSpec, MESSAGES};
 use autoplug_ecu::STALE_AFTER_PERIODS;
 use autoplug_logs::{FrameKind, LogFrame};
@@ -198,6 +200,9 @@ pub struct CarState {
     counters: BusCounters,
     now_us: u64,
     started: bool,
+    /// Index in `signals` of each signal by `Message.Signal` name and by VSS path: the
+    /// routines look signals up by name on every frame, so this must not be a search.
+    by_name: FxHashMap<String, usize>,
 }
 
 impl Default for CarState {
@@ -225,7 +230,13 @@ impl CarState {
                 });
             }
         }
+        let mut by_name = FxHashMap::default();
+        for (i, s) in signals.iter().enumerate() {
+            by_name.insert(format!("{}.{}", s.message.name, s.spec.name), i);
+            by_name.insert(s.spec.vss.to_string(), i);
+        }
         Self {
+            by_name,
             ids: IdIndex::new(),
             messages,
             stats: vec![MessageStats::default(); MESSAGES.len()],
@@ -354,12 +365,7 @@ impl CarState {
 
     /// A signal by `Message.Signal` name or by VSS path.
     pub fn signal(&self, name: &str) -> Option<&SignalState> {
-        self.signals.iter().find(|s| {
-            s.spec.vss == name
-                || name
-                    .split_once('.')
-                    .is_some_and(|(m, n)| s.message.name == m && s.spec.name == n)
-        })
+        self.by_name.get(name).map(|&i| &self.signals[i])
     }
 
     /// What was not a catalogue message.

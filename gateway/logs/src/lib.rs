@@ -36,4 +36,5 @@ pub mod write;
 pub use frame::{Direction, FrameError, FrameKind, LogFrame};
 pub use read::{open, LogError, LogFormat, LogReader, OpenError, Place};
 pub use record::{RecordError, RecordSummary, Recorder, RotatePolicy};
+pub use time::Utc;
 pub use write::{export_asc, AscWriter, CandumpWriter};

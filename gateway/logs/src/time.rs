@@ -38,13 +38,20 @@ fn days_in_month(year: i64, month: u32) -> u32 {
 
 /// A UTC date and time broken down, to the microsecond.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Utc {
+pub struct Utc {
+    /// Year, e.g. 2026.
     pub year: i64,
+    /// Month, 1..=12.
     pub month: u32,
+    /// Day of the month, 1..=31.
     pub day: u32,
+    /// Hour, 0..=23.
     pub hour: u32,
+    /// Minute, 0..=59.
     pub minute: u32,
+    /// Second, 0..=59.
     pub second: u32,
+    /// Microseconds, 0..=999_999.
     pub micros: u32,
     /// 0 = Sunday.
     pub weekday: u32,

@@ -61,7 +61,7 @@ fn hold_us<M: CanMessage>() -> u64 {
 /// The interval since the previous sample, if it is short enough to integrate over.
 fn held_since<M: CanMessage>(previous: Option<u64>, t_us: u64) -> Option<f64> {
     let dt = t_us.checked_sub(previous?)?;
-    (dt <= hold_us::<M>()).then(|| dt as f64 * 1e-6)
+    (dt <= hold_us::<M>()).then_some(dt as f64 * 1e-6)
 }
 
 /// Stretches of "acting" (ABS releasing, a torque split), counted once per stretch with
@@ -205,16 +205,35 @@ impl Open {
 }
 
 /// Finds trips in the traffic and keeps their statistics: an [`Observer`] of the pipeline.
-#[derive(Default)]
 pub struct TripTracker {
     open: Option<Open>,
     completed: Vec<CompletedTrip>,
+    keep_series: bool,
+}
+
+impl Default for TripTracker {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl TripTracker {
-    /// A tracker that has seen nothing.
+    /// A tracker that has seen nothing, keeping each trip's series.
     pub fn new() -> Self {
-        Self::default()
+        Self {
+            open: None,
+            completed: Vec::new(),
+            keep_series: true,
+        }
+    }
+
+    /// A tracker that keeps no series (nothing would store it): its memory then stays the
+    /// same however long a trip lasts.
+    pub fn without_series() -> Self {
+        Self {
+            keep_series: false,
+            ..Self::new()
+        }
     }
 
     /// The statistics of the trip in progress, up to the latest frame.
@@ -293,7 +312,9 @@ impl Observer for TripTracker {
                 return;
             }
         }
-        open.series.add(t, index, state);
+        if self.keep_series {
+            open.series.add(t, index, state);
+        }
         match id {
             VehicleSpeedMsg::ID => {
                 let kmh = f64::from(state.get::<VehicleSpeedMsg>().vehicle_speed);

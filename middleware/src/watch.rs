@@ -1,0 +1,302 @@
+//! What the gateway does with every frame, live or on a log: the diagnostics, the trips
+//! and, when a store is given, the trips written to it as they happen (begun, checkpointed
+//! every [`CHECKPOINT_US`] of bus time, finished with the verdicts). A store that fails (a
+//! full disk) stops storing with its error kept for the report; the watching goes on.
+
+use std::io::Write;
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+
+use autoplug_diagnostics::{Diagnostics, EcuDiagnosis};
+use autoplug_gateway::{CarState, Observer, Update};
+use autoplug_logs::LogFrame;
+use autoplug_store::{FinishedTrip, NewTrip, TripId, TripStore, VerdictRecord};
+use autoplug_trips::{CompletedTrip, TripEnd, TripStats, TripTracker};
+
+use crate::names::ecu_name;
+
+/// How often the trip in progress is written to the store, µs of bus time: a crash (kill
+/// -9, power loss) loses at most this much of a trip's statistics.
+pub const CHECKPOINT_US: u64 = 5_000_000;
+
+/// Where trips go, and what became of them.
+pub struct TripLog {
+    store: Box<dyn TripStore>,
+    vehicle: String,
+    source: String,
+    open: Option<TripId>,
+    last_checkpoint_us: u64,
+    /// Trips written to the store, finished.
+    pub stored: Vec<TripId>,
+    /// Why storing stopped, if it did.
+    pub failure: Option<String>,
+}
+
+impl TripLog {
+    /// Trips of `vehicle`, seen on `source`, into `store`.
+    pub fn new(store: Box<dyn TripStore>, vehicle: &str, source: &str) -> Self {
+        Self {
+            store,
+            vehicle: vehicle.to_string(),
+            source: source.to_string(),
+            open: None,
+            last_checkpoint_us: 0,
+            stored: Vec::new(),
+            failure: None,
+        }
+    }
+
+    /// The store (for reading back what was written).
+    pub fn store(&self) -> &dyn TripStore {
+        self.store.as_ref()
+    }
+
+    fn fail(&mut self, error: impl ToString) {
+        self.failure = Some(format!("trips no longer stored: {}", error.to_string()));
+        self.open = None;
+    }
+
+    fn sync(
+        &mut self,
+        done: Vec<CompletedTrip>,
+        trips: &mut TripTracker,
+        report: impl Fn() -> Vec<EcuDiagnosis>,
+        now_us: u64,
+    ) {
+        if self.failure.is_some() {
+            return;
+        }
+        for done in done {
+            if let Err(e) = self.finish(done, &report) {
+                return self.fail(e);
+            }
+        }
+        let Some(current) = trips.current() else {
+            return;
+        };
+        let id = match self.open {
+            Some(id) => id,
+            None => {
+                let trip = NewTrip {
+                    vehicle: self.vehicle.clone(),
+                    source: self.source.clone(),
+                    started_at_unix_ms: unix_ms(),
+                    start_us: current.start_us,
+                };
+                match self.store.begin_trip(&trip) {
+                    Ok(id) => {
+                        self.open = Some(id);
+                        self.last_checkpoint_us = now_us;
+                        id
+                    }
+                    Err(e) => return self.fail(e),
+                }
+            }
+        };
+        if now_us.saturating_sub(self.last_checkpoint_us) >= CHECKPOINT_US {
+            self.last_checkpoint_us = now_us;
+            let series = trips.take_series();
+            if let Err(e) = self.store.checkpoint_trip(id, &current, &series) {
+                self.fail(e);
+            }
+        }
+    }
+
+    fn finish(
+        &mut self,
+        done: CompletedTrip,
+        report: &impl Fn() -> Vec<EcuDiagnosis>,
+    ) -> Result<(), autoplug_store::StoreError> {
+        let id = match self.open.take() {
+            Some(id) => id,
+            // A trip that began and ended between two frames: begin it now.
+            None => self.store.begin_trip(&NewTrip {
+                vehicle: self.vehicle.clone(),
+                source: self.source.clone(),
+                started_at_unix_ms: unix_ms(),
+                start_us: done.stats.start_us,
+            })?,
+        };
+        let finished = FinishedTrip {
+            stats: done.stats,
+            end: done.end,
+            verdicts: report().iter().filter_map(verdict_record).collect(),
+            // DTCs are read over UDS by a gateway allowed to transmit: not on this path yet.
+            dtcs: Vec::new(),
+        };
+        self.store.finish_trip(id, &finished, &done.series)?;
+        self.stored.push(id);
+        Ok(())
+    }
+}
+
+fn unix_ms() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+/// An ECU's diagnosis as the store keeps it: its verdict and the finding that decides it.
+pub fn verdict_record(d: &EcuDiagnosis) -> Option<VerdictRecord> {
+    let f = d.headline()?;
+    Some(VerdictRecord {
+        ecu: ecu_name(d.ecu).to_string(),
+        verdict: d.verdict.name().to_string(),
+        routine: f.routine.to_string(),
+        number: f.value,
+        unit: f.unit.to_string(),
+        suspect_above: f.suspect_above,
+        faulty_above: f.faulty_above,
+        window_s: f
+            .window
+            .map(|w| (w.from_us as f64 * 1e-6, w.to_us as f64 * 1e-6)),
+        evidence: f.evidence.clone(),
+    })
+}
+
+/// A one-line view of the car for the terminal, every `every` of wall time.
+pub struct StatusLine<'a> {
+    out: &'a mut dyn Write,
+    every: std::time::Duration,
+    last: Option<Instant>,
+}
+
+impl<'a> StatusLine<'a> {
+    /// Prints to `out` once per `every`, the first time `every` from now (before that
+    /// every ECU would be "no data").
+    pub fn new(out: &'a mut dyn Write, every: std::time::Duration) -> Self {
+        Self {
+            out,
+            every,
+            last: Some(Instant::now()),
+        }
+    }
+}
+
+/// The gateway's watch over the traffic: diagnostics, trips, the store, the status line.
+pub struct Watch<'a> {
+    /// Every ECU's diagnostic routines.
+    pub diagnostics: Diagnostics,
+    /// The trips.
+    pub trips: TripTracker,
+    /// Where the trips go, if anywhere.
+    pub trip_log: Option<TripLog>,
+    /// The terminal view, if any.
+    pub status: Option<StatusLine<'a>>,
+    /// The trips that have ended, in order.
+    pub ended: Vec<(TripStats, TripEnd)>,
+}
+
+impl Default for Watch<'_> {
+    fn default() -> Self {
+        Self::new(None)
+    }
+}
+
+impl<'a> Watch<'a> {
+    /// Diagnostics and trips; trips stored in `trip_log` if given (without one, no series
+    /// is kept).
+    pub fn new(trip_log: Option<TripLog>) -> Self {
+        Self {
+            diagnostics: Diagnostics::new(),
+            trips: if trip_log.is_some() {
+                TripTracker::new()
+            } else {
+                TripTracker::without_series()
+            },
+            trip_log,
+            status: None,
+            ended: Vec::new(),
+        }
+    }
+
+    /// The input has ended: the trip in progress ends and is stored.
+    pub fn finish(&mut self, state: &CarState) {
+        self.trips.finish();
+        self.sync(state);
+    }
+
+    fn sync(&mut self, state: &CarState) {
+        let done = self.trips.take_completed();
+        self.ended
+            .extend(done.iter().map(|t| (t.stats.clone(), t.end)));
+        if let Some(log) = self.trip_log.as_mut() {
+            let diagnostics = &self.diagnostics;
+            log.sync(
+                done,
+                &mut self.trips,
+                || diagnostics.report(state),
+                state.now_us(),
+            );
+        }
+    }
+
+    fn maybe_print_status(&mut self, state: &CarState) {
+        let Some(status) = self.status.as_mut() else {
+            return;
+        };
+        let now = Instant::now();
+        if status
+            .last
+            .is_some_and(|t| now.duration_since(t) < status.every)
+        {
+            return;
+        }
+        status.last = Some(now);
+        let line = status_text(state, &self.diagnostics, &self.trips);
+        // The terminal view is best effort: a closed pipe must not stop the gateway.
+        let _ = writeln!(status.out, "{line}");
+    }
+}
+
+/// The car in one line: speed, RPM, gear, fuel, the trip so far and the diagnosis.
+pub fn status_text(state: &CarState, diagnostics: &Diagnostics, trips: &TripTracker) -> String {
+    use autoplug_can::{EngineMsg, TransMsg, VehicleSpeedMsg};
+    let engine = state.get::<EngineMsg>();
+    let gear = state.signal_of(TransMsg::ID, 0).and_then(|s| s.label());
+    let trip = trips.current().map_or("no trip".to_string(), |t| {
+        format!(
+            "trip {:.2} km, {:.0} s",
+            t.distance_m / 1000.0,
+            t.duration_s
+        )
+    });
+    let report = diagnostics.report(state);
+    let flagged: Vec<String> = report
+        .iter()
+        .filter(|d| d.verdict != autoplug_diagnostics::Verdict::Ok)
+        .map(|d| {
+            let number = d
+                .headline()
+                .and_then(|f| f.value.map(|v| format!(" {v:.2} {}", f.unit)))
+                .unwrap_or_default();
+            format!("{} {}{number}", ecu_name(d.ecu), d.verdict.name())
+        })
+        .collect();
+    format!(
+        "t {:>8.1} s | {:>3.0} km/h | {:>4.0} rpm | gear {:<7} | fuel {:>5.2} L | {} | {}",
+        state.now_us() as f64 * 1e-6,
+        state.get::<VehicleSpeedMsg>().vehicle_speed,
+        engine.engine_rpm,
+        gear.unwrap_or("-"),
+        engine.fuel_level,
+        trip,
+        if flagged.is_empty() {
+            "all ECUs ok".to_string()
+        } else {
+            flagged.join(", ")
+        }
+    )
+}
+
+impl Observer for Watch<'_> {
+    fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        self.diagnostics.on_frame(frame, update, state);
+        self.trips.on_frame(frame, update, state);
+        self.sync(state);
+        self.maybe_print_status(state);
+    }
+
+    fn on_idle(&mut self, state: &CarState) {
+        self.maybe_print_status(state);
+    }
+}

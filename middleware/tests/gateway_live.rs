@@ -1,0 +1,230 @@
+//! `autoplug gateway` on the virtual car: the recording, the trips in the database, and
+//! what `autoplug trips` and `autoplug log export` make of them; a `kill -9` in the middle
+//! leaves a readable recording and a consistent database.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use autoplug_store::{SqliteStore, TripStatus, TripStore};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn autoplug(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("the autoplug binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn the_live_gateway_records_the_bus_and_stores_the_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("trips.db");
+    let rec = dir.path().join("rec");
+    let output = autoplug(&[
+        "gateway",
+        "--bus",
+        "virtual:scenarios/stop-100-dry.toml",
+        "--fast",
+        "--quiet",
+        "--record",
+        rec.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+        "--vehicle",
+        "JA3AP00TEST000001",
+    ]);
+    let stdout = text(&output.stdout);
+    assert!(output.status.success(), "{output:?}");
+    assert!(stdout.contains("stored trip(s) 1"), "{stdout}");
+
+    // The recording: one file, every frame of the run, readable strictly.
+    let files: Vec<_> = std::fs::read_dir(&rec).unwrap().collect();
+    assert_eq!(files.len(), 1, "{stdout}");
+    let file = files[0].as_ref().unwrap().path();
+    let frames = autoplug_logs::open(&file)
+        .unwrap()
+        .collect::<Result<Vec<_>, _>>()
+        .unwrap();
+    assert!(stdout.contains(&format!("recording: {} frames", frames.len())));
+    assert!(frames.len() > 5000, "8 s of bus: {}", frames.len());
+
+    // The trip, as the database keeps it and as `trips` shows it.
+    let store = SqliteStore::open(&db).unwrap();
+    let trips = store.trips(Some("JA3AP00TEST000001")).unwrap();
+    assert_eq!(trips.len(), 1);
+    let trip = &trips[0];
+    assert_eq!(trip.status, TripStatus::Closed);
+    assert!(trip.stats.hard_brakings == 1 && trip.stats.abs_interventions >= 1);
+    let detail = store.trip(trip.id).unwrap().unwrap();
+    assert_eq!(detail.verdicts.len(), 9, "{detail:?}");
+    assert!(
+        detail.verdicts.iter().all(|v| v.verdict == "ok"),
+        "{detail:?}"
+    );
+    let speed = store.series(trip.id, "Vehicle.Speed").unwrap();
+    assert_eq!(speed.len(), 8, "8 s in 1 s buckets: {speed:?}");
+    assert!(speed[0].max >= 99.0 && speed[7].min == 0.0, "{speed:?}");
+
+    let list = autoplug(&["trips", "list", "--db", db.to_str().unwrap()]);
+    assert!(list.status.success(), "{list:?}");
+    assert!(text(&list.stdout).contains("JA3AP00TEST000001"));
+    let show = autoplug(&["trips", "show", "1", "--db", db.to_str().unwrap()]);
+    let shown = text(&show.stdout);
+    assert!(show.status.success(), "{show:?}");
+    assert!(shown.contains("hard brakings    1"), "{shown}");
+    assert!(shown.contains("abs"), "{shown}");
+    let json = autoplug(&["trips", "show", "1", "--json", "--db", db.to_str().unwrap()]);
+    let value: serde_json::Value = serde_json::from_slice(&json.stdout).unwrap();
+    assert_eq!(value["row"]["stats"]["hard_brakings"], 1);
+
+    // A trip that is not there, and a database that is not one: short, clear errors.
+    let missing = autoplug(&["trips", "show", "7", "--db", db.to_str().unwrap()]);
+    assert_eq!(missing.status.code(), Some(1));
+    assert!(
+        text(&missing.stderr).contains("there is no trip 7"),
+        "{missing:?}"
+    );
+    let garbage = dir.path().join("garbage.db");
+    std::fs::write(&garbage, vec![0x5Au8; 4096]).unwrap();
+    let refused = autoplug(&["trips", "list", "--db", garbage.to_str().unwrap()]);
+    assert_eq!(refused.status.code(), Some(1));
+    let message = text(&refused.stderr);
+    assert!(
+        message.contains("garbage.db") && message.lines().count() == 1,
+        "{message}"
+    );
+
+    // The recording exported to ASC: every frame, and no file left behind on refusal.
+    let asc = dir.path().join("rec.asc");
+    let export = autoplug(&[
+        "log",
+        "export",
+        file.to_str().unwrap(),
+        "--out",
+        asc.to_str().unwrap(),
+    ]);
+    assert!(export.status.success(), "{export:?}");
+    let exported = autoplug_logs::open(&asc)
+        .unwrap()
+        .collect::<Result<Vec<_>, _>>()
+        .unwrap();
+    assert_eq!(exported.len(), frames.len());
+    for (a, b) in exported.iter().zip(&frames) {
+        assert_eq!((a.id, a.data()), (b.id, b.data()));
+    }
+    let again = autoplug(&[
+        "log",
+        "export",
+        file.to_str().unwrap(),
+        "--out",
+        asc.to_str().unwrap(),
+    ]);
+    assert!(text(&again.stderr).contains("already exists"), "{again:?}");
+}
+
+#[test]
+fn replay_stores_the_same_trip_as_the_live_gateway() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("trips.db");
+    let rec = dir.path().join("rec");
+    let live = autoplug(&[
+        "gateway",
+        "--bus",
+        "virtual:scenarios/drive-cycle.toml",
+        "--fast",
+        "--quiet",
+        "--record",
+        rec.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+    ]);
+    assert!(live.status.success(), "{live:?}");
+    let file = std::fs::read_dir(&rec)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let replay = autoplug(&[
+        "replay",
+        file.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+    ]);
+    assert!(replay.status.success(), "{replay:?}");
+    let store = SqliteStore::open(&db).unwrap();
+    let trips = store.trips(None).unwrap();
+    assert_eq!(trips.len(), 2);
+    assert_eq!(trips[0].stats, trips[1].stats, "live and replayed trips");
+    let verdicts = |id| store.trip(id).unwrap().unwrap().verdicts;
+    assert_eq!(verdicts(trips[0].id), verdicts(trips[1].id));
+    assert!(trips[0].stats.shifts > 10 && trips[0].stats.fuel_used_l > 0.5);
+}
+
+#[test]
+fn kill_9_during_a_recording_leaves_a_readable_log_and_a_consistent_database() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("trips.db");
+    let rec = dir.path().join("rec");
+    // The drive cycle at 20 x real time: 7.5 s of wall time, killed after 3 s.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .args([
+            "gateway",
+            "--bus",
+            "virtual:scenarios/drive-cycle.toml",
+            "--speed",
+            "20",
+            "--quiet",
+            "--record",
+            rec.to_str().unwrap(),
+            "--db",
+            db.to_str().unwrap(),
+        ])
+        .current_dir(root())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    std::thread::sleep(Duration::from_secs(3));
+    assert!(child.try_wait().unwrap().is_none(), "still running at 3 s");
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    assert!(started.elapsed() < Duration::from_secs(7));
+
+    // The recording: complete lines only, in time order, from the start of the run.
+    let files: Vec<_> = std::fs::read_dir(&rec).unwrap().collect();
+    assert_eq!(files.len(), 1);
+    let frames = autoplug_logs::open(files[0].as_ref().unwrap().path())
+        .unwrap()
+        .collect::<Result<Vec<_>, _>>()
+        .expect("every line of the killed recording reads");
+    assert!(frames.len() > 1000, "{} frames", frames.len());
+    assert!(frames.windows(2).all(|w| w[0].t_us <= w[1].t_us));
+
+    // The database: intact, the trip marked interrupted with a checkpoint's statistics.
+    let conn = rusqlite::Connection::open(&db).unwrap();
+    let check: String = conn
+        .query_row("PRAGMA integrity_check", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(check, "ok");
+    drop(conn);
+    let store = SqliteStore::open(&db).unwrap();
+    let trips = store.trips(None).unwrap();
+    assert_eq!(trips.len(), 1, "{trips:?}");
+    assert_eq!(trips[0].status, TripStatus::Interrupted);
+    assert!(trips[0].stats.distance_m > 0.0, "{:?}", trips[0].stats);
+    // The checkpoint is of frames the gateway had seen; the recording is at most 100 ms
+    // behind them.
+    let last_frame_s = frames.last().unwrap().t_us as f64 * 1e-6;
+    assert!(trips[0].stats.end_us as f64 * 1e-6 <= last_frame_s + 0.2);
+}
