@@ -4,6 +4,7 @@
 //! as the machine goes or paced at ×N of their own time.
 
 use std::fmt;
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::time::{Duration, Instant};
 
 use autoplug_logs::{LogError, LogFrame};
@@ -47,10 +48,23 @@ pub trait FrameSource {
     fn describe(&self) -> String;
 }
 
-/// A recorded log, read as fast as the machine goes.
+/// Frames a log's reading thread hands over at a time.
+const READ_BATCH: usize = 1024;
+/// Batches read ahead at most: memory stays bounded (about 256 KiB of frames) however long
+/// the log, and however slowly the pipeline takes them.
+const READ_AHEAD_BATCHES: usize = 8;
+
+type Batch = Vec<Result<LogFrame, LogError>>;
+
+/// A recorded log, read as fast as the machine goes. Parsing runs on a thread of its own,
+/// a few batches ahead of the pipeline: on a machine with two cores the text is read while
+/// the frames before it are decoded and judged, so a replay goes at the pace of the slower
+/// of the two instead of their sum. The frames arrive in the file's order, exactly as a
+/// reader on this thread would give them.
 pub struct LogSource {
     name: String,
-    reader: autoplug_logs::LogReader,
+    batches: Receiver<Batch>,
+    current: std::vec::IntoIter<Result<LogFrame, LogError>>,
 }
 
 impl LogSource {
@@ -60,23 +74,67 @@ impl LogSource {
             source: path.display().to_string(),
             message: e.to_string(),
         })?;
+        let (sender, batches) = sync_channel(READ_AHEAD_BATCHES);
+        std::thread::Builder::new()
+            .name("log reader".into())
+            .spawn(move || read_ahead(reader, &sender))
+            .map_err(|e| SourceError {
+                source: path.display().to_string(),
+                message: format!("cannot start the reading thread: {e}"),
+            })?;
         Ok(Self {
             name: path.display().to_string(),
-            reader,
+            batches,
+            current: Vec::new().into_iter(),
         })
+    }
+}
+
+/// The reading thread: batches until the end of the log or a fatal error, or until the
+/// source is dropped (its receiver gone, the next send fails and the thread ends).
+fn read_ahead(reader: autoplug_logs::LogReader, sender: &SyncSender<Batch>) {
+    let mut batch = Vec::with_capacity(READ_BATCH);
+    for item in reader {
+        let fatal = matches!(&item, Err(e) if e.is_fatal());
+        batch.push(item);
+        if fatal {
+            break;
+        }
+        if batch.len() == READ_BATCH {
+            let full = std::mem::replace(&mut batch, Vec::with_capacity(READ_BATCH));
+            if sender.send(full).is_err() {
+                return;
+            }
+        }
+    }
+    if !batch.is_empty() {
+        let _ = sender.send(batch);
     }
 }
 
 impl FrameSource for LogSource {
     fn poll(&mut self, _max_wait: Duration) -> Result<Poll, SourceError> {
-        match self.reader.next() {
-            None => Ok(Poll::End),
-            Some(Ok(frame)) => Ok(Poll::Frame(frame)),
-            Some(Err(error)) if error.is_fatal() => Err(SourceError {
+        let item = match self.current.next() {
+            Some(item) => item,
+            None => match self.batches.recv() {
+                Ok(batch) => {
+                    self.current = batch.into_iter();
+                    match self.current.next() {
+                        Some(item) => item,
+                        None => return Ok(Poll::End),
+                    }
+                }
+                // The thread has sent everything and ended.
+                Err(_) => return Ok(Poll::End),
+            },
+        };
+        match item {
+            Ok(frame) => Ok(Poll::Frame(frame)),
+            Err(error) if error.is_fatal() => Err(SourceError {
                 source: self.name.clone(),
                 message: error.to_string(),
             }),
-            Some(Err(error)) => Ok(Poll::Malformed(error)),
+            Err(error) => Ok(Poll::Malformed(error)),
         }
     }
 

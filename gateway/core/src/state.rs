@@ -6,6 +6,7 @@
 //! recorded log of it give the same state at the same bus time.
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use rustc_hash::FxHashMap;
 
@@ -167,6 +168,36 @@ pub fn is_diagnostic_id(id: u32) -> bool {
                 || n.diag_response_id() == Some(id)
                 || n.obd_response_id() == Some(id)
         })
+}
+
+/// A signal named in code (`Message.Signal` or its VSS path), looked up by name once and
+/// by index ever after: routines that read signals on every frame keep these in statics.
+///
+/// ```
+/// use autoplug_gateway::{CarState, SignalName};
+/// static SPEED: SignalName = SignalName::new("VehicleSpeedMsg.VehicleSpeed");
+/// let state = CarState::new();
+/// assert_eq!(state.signal_named(&SPEED).map(|s| s.vss()), Some("Vehicle.Speed"));
+/// ```
+pub struct SignalName {
+    name: &'static str,
+    /// Index in the catalogue's signal order + 1; 0 until resolved.
+    index: AtomicUsize,
+}
+
+impl SignalName {
+    /// A name to resolve on first use.
+    pub const fn new(name: &'static str) -> Self {
+        Self {
+            name,
+            index: AtomicUsize::new(0),
+        }
+    }
+
+    /// The name.
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
 }
 
 /// The result of taking one frame into the state.
@@ -361,6 +392,20 @@ impl CarState {
             return None;
         }
         self.signals.get(self.first_signal[index] + i)
+    }
+
+    /// A signal by a [`SignalName`] (O(1) after its first use).
+    pub fn signal_named(&self, name: &SignalName) -> Option<&SignalState> {
+        // Every CarState lists the catalogue's signals in the same order, so the index
+        // found in one holds for all.
+        match name.index.load(Ordering::Relaxed) {
+            0 => {
+                let i = *self.by_name.get(name.name)?;
+                name.index.store(i + 1, Ordering::Relaxed);
+                self.signals.get(i)
+            }
+            i => self.signals.get(i - 1),
+        }
     }
 
     /// A signal by `Message.Signal` name or by VSS path.

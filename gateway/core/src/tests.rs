@@ -311,3 +311,64 @@ fn a_full_disk_stops_the_recording_and_not_the_pipeline() {
     assert!(failure.to_string().contains("disk full"), "{failure}");
     assert_eq!(pipeline.state().counters().frames, 20_000);
 }
+
+#[test]
+fn a_long_log_arrives_whole_and_in_order_through_the_reading_thread() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("long.log");
+    let mut file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    // 30 batches' worth, a malformed line deep inside.
+    for i in 0..30_000u64 {
+        if i == 20_000 {
+            writeln!(file, "(20.000000) can0 003#zz").unwrap();
+        }
+        writeln!(
+            file,
+            "({}.{:06}) can0 003#{:02X}",
+            i / 1000,
+            (i % 1000) * 1000,
+            i % 200
+        )
+        .unwrap();
+    }
+    drop(file);
+
+    let mut strict = Pipeline::new(Strictness::Strict);
+    let error = strict
+        .run(
+            &mut crate::LogSource::open(&path).unwrap(),
+            &mut [],
+            &mut || false,
+        )
+        .unwrap_err();
+    assert!(error.to_string().contains("line 20001"), "{error}");
+    assert_eq!(strict.state().counters().frames, 20_000);
+
+    let mut lenient = Pipeline::new(Strictness::Lenient);
+    lenient
+        .run(
+            &mut crate::LogSource::open(&path).unwrap(),
+            &mut [],
+            &mut || false,
+        )
+        .unwrap();
+    assert_eq!(lenient.state().counters().frames, 30_000);
+    assert_eq!(lenient.malformed(), 1);
+    assert_eq!(lenient.state().counters().time_backwards, 0, "in order");
+
+    // Stopping early and dropping the source ends its thread instead of blocking it.
+    let mut taken = 0;
+    let mut early = Pipeline::new(Strictness::Lenient);
+    early
+        .run(
+            &mut crate::LogSource::open(&path).unwrap(),
+            &mut [],
+            &mut || {
+                taken += 1;
+                taken > 10
+            },
+        )
+        .unwrap();
+    assert_eq!(early.state().counters().frames, 10);
+}

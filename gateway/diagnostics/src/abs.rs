@@ -15,10 +15,14 @@
 //! faulty software of the report never releases: its wheels stay locked to standstill).
 
 use autoplug_can::{AbsMsg, Node, PedalBrake, WheelSpeedMsg, YawErrorMsg, MESSAGES};
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 
 use crate::{Finding, Routine, Verdict, Window};
+
+/// The signals this routine reads on every relevant frame.
+static BRAKE_CMD: SignalName = SignalName::new("PedalBrake.BrakeCmd");
+static VEHICLE_SPEED: SignalName = SignalName::new("VehicleSpeedMsg.VehicleSpeed");
 
 /// Brake command above which the driver is braking, %.
 pub const BRAKING_PCT: f32 = 10.0;
@@ -46,7 +50,7 @@ pub struct Abs {
 
 impl Abs {
     fn vehicle_speed(state: &CarState, t: u64, wheels: &[f64; 4]) -> f64 {
-        match state.signal("VehicleSpeedMsg.VehicleSpeed") {
+        match state.signal_named(&VEHICLE_SPEED) {
             Some(s) if s.is_fresh(t) => s.value,
             _ => wheels.iter().copied().fold(0.0, f64::max),
         }
@@ -84,7 +88,7 @@ impl Routine for Abs {
         if id != WheelSpeedMsg::ID && id != AbsMsg::ID && id != YawErrorMsg::ID {
             return;
         }
-        let brake = state.signal("PedalBrake.BrakeCmd");
+        let brake = state.signal_named(&BRAKE_CMD);
         let braking_cmd = state.get::<PedalBrake>().brake_cmd;
         let w = state.get::<WheelSpeedMsg>();
         let wheels = [

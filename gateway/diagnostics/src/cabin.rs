@@ -11,11 +11,15 @@
 //! Suspect above [`SUSPECT_S`], faulty above [`FAULTY_S`].
 
 use autoplug_can::{FanMsg, Node, TempMsg, TempRefMsg, MESSAGES};
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 
 use crate::span::{LongestSpan, SpanRule};
 use crate::{Finding, Routine};
+
+/// The signals this routine reads on every relevant frame.
+static CABIN_TEMP: SignalName = SignalName::new("TempMsg.CabinTemp");
+static CABIN_SET_TEMP: SignalName = SignalName::new("TempRefMsg.CabinSetTemp");
 
 /// Temperature difference that counts as clearly warmer or colder, °F.
 pub const MARGIN_F: f32 = 2.0;
@@ -47,8 +51,8 @@ impl Routine for Cabin {
             return;
         }
         let t = frame.t_us;
-        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
-        let judged = fresh("TempMsg.CabinTemp") && fresh("TempRefMsg.CabinSetTemp");
+        let fresh = |name: &SignalName| state.signal_named(name).is_some_and(|s| s.is_fresh(t));
+        let judged = fresh(&CABIN_TEMP) && fresh(&CABIN_SET_TEMP);
         let error = state.get::<TempMsg>().cabin_temp - state.get::<TempRefMsg>().cabin_set_temp;
         let fan = state.get::<FanMsg>().fan_power;
         let contrary =

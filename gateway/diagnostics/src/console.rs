@@ -12,12 +12,16 @@
 //! [`SUSPECT_S`] the drivers behind see a late light: suspect; over [`FAULTY_S`], faulty.
 
 use autoplug_can::{AccMsg, Node, PedalBrake, MESSAGES};
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 use ecu_console::{BRAKE_LIGHTS_OFF_PCT, BRAKE_LIGHTS_ON_PCT};
 
 use crate::span::{LongestSpan, SpanRule};
 use crate::{Finding, Routine};
+
+/// The signals this routine reads on every relevant frame.
+static BRAKE_LIGHTS: SignalName = SignalName::new("AccMsg.BrakeLights");
+static BRAKE_CMD: SignalName = SignalName::new("PedalBrake.BrakeCmd");
 
 /// Longest disagreement above which the console is suspect, s.
 pub const SUSPECT_S: f64 = 0.1;
@@ -44,8 +48,8 @@ impl Routine for Console {
             return;
         }
         let t = frame.t_us;
-        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
-        let judged = fresh("PedalBrake.BrakeCmd") && fresh("AccMsg.BrakeLights");
+        let fresh = |name: &SignalName| state.signal_named(name).is_some_and(|s| s.is_fresh(t));
+        let judged = fresh(&BRAKE_CMD) && fresh(&BRAKE_LIGHTS);
         let brake = state.get::<PedalBrake>().brake_cmd;
         let lights = state.get::<AccMsg>().brake_lights;
         let wrong =

@@ -16,10 +16,13 @@
 //! [`FAULTY_KMH`].
 
 use autoplug_can::{CruiseMode, CruiseModeMsg, Node, VehicleSpeedMsg, MESSAGES};
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 
 use crate::{Finding, Routine, Verdict, Window};
+
+/// The signals this routine reads on every relevant frame.
+static CRUISE_MODE: SignalName = SignalName::new("CruiseModeMsg.CruiseMode");
 
 /// Time after engagement before the error counts, s: the speed settles within it.
 pub const SETTLE_S: f64 = 8.0;
@@ -106,7 +109,7 @@ impl Routine for Cruise {
             }
             VehicleSpeedMsg::ID => {
                 let mode_fresh = state
-                    .signal("CruiseModeMsg.CruiseMode")
+                    .signal_named(&CRUISE_MODE)
                     .is_some_and(|s| s.is_fresh(t));
                 if self.current.is_some() && !mode_fresh {
                     // The cruise ECU disengages on a stale CruiseModeMsg.

@@ -20,12 +20,19 @@
 //! plainly not applied.
 
 use autoplug_can::{AbsMsg, DiffMsg, Node, SteeringMsg, VehicleSpeedMsg, YawErrorMsg, MESSAGES};
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 use ecu_diff::{BRAKE_HOLD_PCT, MIN_SPEED_KMH, MIN_STEERING_DEG, YAW_DEAD_BAND_RAD_S};
 
 use crate::span::{LongestSpan, SpanRule};
 use crate::{Finding, Routine};
+
+/// The signals this routine reads on every relevant frame.
+static BRAKE_FL: SignalName = SignalName::new("AbsMsg.BrakeFL");
+static TORQUE_SPLIT: SignalName = SignalName::new("DiffMsg.TorqueSplit");
+static STEERING_ANGLE: SignalName = SignalName::new("SteeringMsg.SteeringAngle");
+static VEHICLE_SPEED: SignalName = SignalName::new("VehicleSpeedMsg.VehicleSpeed");
+static YAW_RATE_ERROR: SignalName = SignalName::new("YawErrorMsg.YawRateError");
 
 /// Longest violation above which the differential ECU is suspect, s.
 pub const SUSPECT_S: f64 = 0.2;
@@ -59,23 +66,23 @@ impl Routine for Differential {
             return;
         }
         let t = frame.t_us;
-        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
+        let fresh = |name: &SignalName| state.signal_named(name).is_some_and(|s| s.is_fresh(t));
         let split = state.get::<DiffMsg>().torque_split;
         let speed = state.get::<VehicleSpeedMsg>().vehicle_speed;
         let steering = state.get::<SteeringMsg>().steering_angle.abs();
         let a = state.get::<AbsMsg>();
         let brake = a.brake_fl.max(a.brake_fr).max(a.brake_rl).max(a.brake_rr);
-        let inputs = fresh("DiffMsg.TorqueSplit")
-            && fresh("VehicleSpeedMsg.VehicleSpeed")
-            && fresh("SteeringMsg.SteeringAngle")
-            && fresh("AbsMsg.BrakeFL");
+        let inputs = fresh(&TORQUE_SPLIT)
+            && fresh(&VEHICLE_SPEED)
+            && fresh(&STEERING_ANGLE)
+            && fresh(&BRAKE_FL);
         let must_hold = speed < MIN_SPEED_KMH - SPEED_STEP_KMH
             || steering < MIN_STEERING_DEG - STEERING_STEP_DEG
             || brake > BRAKE_HOLD_PCT + BRAKE_STEP_PCT;
         self.hold.observe(t, inputs && must_hold, split != 0.0);
         let error = state.get::<YawErrorMsg>().yaw_rate_error;
-        let judged = fresh("DiffMsg.TorqueSplit")
-            && fresh("YawErrorMsg.YawRateError")
+        let judged = fresh(&TORQUE_SPLIT)
+            && fresh(&YAW_RATE_ERROR)
             && split.abs() >= ACTIVE_NM
             && error.abs() > YAW_DEAD_BAND_RAD_S;
         self.direction

@@ -7,10 +7,13 @@
 //! faulty above [`FUEL_FAULTY_L`]).
 
 use autoplug_can::{EngineMsg, Node, VehicleSpeedMsg, MESSAGES};
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 
 use crate::{Finding, Routine, Verdict, Window};
+
+/// The signals this routine reads on every relevant frame.
+static VEHICLE_SPEED: SignalName = SignalName::new("VehicleSpeedMsg.VehicleSpeed");
 
 /// Fuel rise while driving above which the engine is suspect, L.
 pub const FUEL_SUSPECT_L: f64 = 0.25;
@@ -40,8 +43,8 @@ impl Routine for Engine {
         if MESSAGES[index].id != EngineMsg::ID {
             return;
         }
-        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
-        if !fresh("VehicleSpeedMsg.VehicleSpeed") {
+        let fresh = |name: &SignalName| state.signal_named(name).is_some_and(|s| s.is_fresh(t));
+        if !fresh(&VEHICLE_SPEED) {
             self.lowest_fuel = None;
             return;
         }

@@ -22,12 +22,19 @@
 use autoplug_can::{
     CruiseAccelMsg, CruiseMode, CruiseModeMsg, Node, PedalAccel, PedalBrake, TracMsg, MESSAGES,
 };
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 use ecu_pedals::PEDAL_PRESSED_THRESHOLD;
 
 use crate::span::{LongestSpan, SpanRule};
 use crate::{Finding, Routine};
+
+/// The signals this routine reads on every relevant frame.
+static CRUISE_ACCEL: SignalName = SignalName::new("CruiseAccelMsg.CruiseAccel");
+static CRUISE_MODE: SignalName = SignalName::new("CruiseModeMsg.CruiseMode");
+static ACCEL_CMD: SignalName = SignalName::new("PedalAccel.AccelCmd");
+static BRAKE_CMD: SignalName = SignalName::new("PedalBrake.BrakeCmd");
+static TRACTION_CUT: SignalName = SignalName::new("TracMsg.TractionCut");
 
 /// Longest violation above which the pedals ECU is suspect, s.
 pub const SUSPECT_S: f64 = 0.1;
@@ -64,20 +71,20 @@ impl Routine for Pedals {
             return;
         }
         let t = frame.t_us;
-        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
+        let fresh = |name: &SignalName| state.signal_named(name).is_some_and(|s| s.is_fresh(t));
         let accel = state.get::<PedalAccel>().accel_cmd;
         let brake = state.get::<PedalBrake>().brake_cmd;
-        let commands_fresh = fresh("PedalAccel.AccelCmd") && fresh("PedalBrake.BrakeCmd");
+        let commands_fresh = fresh(&ACCEL_CMD) && fresh(&BRAKE_CMD);
         self.override_rule.observe(
             t,
             commands_fresh,
             brake > PEDAL_PRESSED_THRESHOLD && accel > TOLERANCE_PCT,
         );
-        let cruise_on = fresh("CruiseModeMsg.CruiseMode")
-            && state.get::<CruiseModeMsg>().cruise_mode == CruiseMode::On;
-        let judged = commands_fresh && cruise_on && fresh("CruiseAccelMsg.CruiseAccel");
+        let cruise_on =
+            fresh(&CRUISE_MODE) && state.get::<CruiseModeMsg>().cruise_mode == CruiseMode::On;
+        let judged = commands_fresh && cruise_on && fresh(&CRUISE_ACCEL);
         let command = state.get::<CruiseAccelMsg>().cruise_accel;
-        let cut = if fresh("TracMsg.TractionCut") {
+        let cut = if fresh(&TRACTION_CUT) {
             state.get::<TracMsg>().traction_cut
         } else {
             0.0

@@ -94,6 +94,10 @@ impl Routine for Presence {
                 self.last_diag_us = Some(frame.t_us);
             }
             Update::Message { index, .. } => {
+                // Most frames are another ECU's: one comparison turns them away.
+                if MESSAGES[index].senders.first() != Some(&self.node) {
+                    return;
+                }
                 let id = MESSAGES[index].id;
                 let Some(i) = self.tracked.iter().position(|t| t.id == id) else {
                     return;

@@ -19,12 +19,18 @@ use autoplug_can::{
     EngineMode, EngineMsg, Gear, Node, PedalBrake, ShiftMode, ShiftMsg, ShiftRequest, TransMsg,
     VehicleSpeedMsg, MESSAGES,
 };
-use autoplug_gateway::{CarState, Update};
+use autoplug_gateway::{CarState, SignalName, Update};
 use autoplug_logs::LogFrame;
 use ecu_trans::SHIFT_TIMEOUT_US;
 
 use crate::span::{LongestSpan, SpanRule};
 use crate::{Finding, Routine, Verdict, Window};
+
+/// The signals this routine reads on every relevant frame.
+static ENGINE_MODE: SignalName = SignalName::new("EngineMsg.EngineMode");
+static BRAKE_CMD: SignalName = SignalName::new("PedalBrake.BrakeCmd");
+static GEAR: SignalName = SignalName::new("TransMsg.Gear");
+static VEHICLE_SPEED: SignalName = SignalName::new("VehicleSpeedMsg.VehicleSpeed");
 
 /// Widening of each gear's band, km/h.
 pub const BAND_MARGIN_KMH: f32 = 3.0;
@@ -89,9 +95,8 @@ impl Routine for Transmission {
             return;
         };
         let t = frame.t_us;
-        let fresh = |name| state.signal(name).is_some_and(|s| s.is_fresh(t));
-        let braking =
-            fresh("PedalBrake.BrakeCmd") && state.get::<PedalBrake>().brake_cmd > BRAKING_PCT;
+        let fresh = |name: &SignalName| state.signal_named(name).is_some_and(|s| s.is_fresh(t));
+        let braking = fresh(&BRAKE_CMD) && state.get::<PedalBrake>().brake_cmd > BRAKING_PCT;
         match MESSAGES[index].id {
             ShiftMsg::ID if state.get::<ShiftMsg>().shift_request != ShiftRequest::None => {
                 self.excused = true;
@@ -145,11 +150,8 @@ impl Routine for Transmission {
                     }
                 }
                 // Schedule band.
-                let judged = automatic
-                    && !braking
-                    && fresh("TransMsg.Gear")
-                    && fresh("VehicleSpeedMsg.VehicleSpeed");
-                let mode = if fresh("EngineMsg.EngineMode") {
+                let judged = automatic && !braking && fresh(&GEAR) && fresh(&VEHICLE_SPEED);
+                let mode = if fresh(&ENGINE_MODE) {
                     state.get::<EngineMsg>().engine_mode
                 } else {
                     EngineMode::Economy

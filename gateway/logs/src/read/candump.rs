@@ -13,7 +13,7 @@
 
 use std::io::BufRead;
 
-use super::lines::{Line, Lines};
+use super::lines::{Line, Lines, RawLine};
 use super::LogError;
 use crate::frame::{Direction, FrameKind, LogFrame, MAX_EXTENDED_ID, MAX_STANDARD_ID};
 use crate::time::parse_seconds;
@@ -37,7 +37,7 @@ pub struct CandumpLine<'a> {
 /// [`CandumpReader`] skips them.
 pub fn parse_line(text: &str, line: u64) -> Result<CandumpLine<'_>, LogError> {
     let err = |message: String| LogError::at_line(line, message);
-    let mut parts = text.split_whitespace();
+    let mut parts = text.split_ascii_whitespace();
     let (Some(stamp), Some(interface), Some(body)) = (parts.next(), parts.next(), parts.next())
     else {
         return Err(err(format!(
@@ -129,6 +129,73 @@ pub fn parse_line(text: &str, line: u64) -> Result<CandumpLine<'_>, LogError> {
     })
 }
 
+/// The common line, `(SECS.MICROS) IFACE ID#DATA` with python-can's optional ` R`/` T`,
+/// parsed in one pass over its bytes: a replay spends most of its reading time on lines.
+/// Anything else (remote frames, separators in the data, a raw DLC, extra spaces,
+/// malformed text) gives `None` and goes to [`parse_line`], which reads every form and
+/// words the errors; a test holds the two to the same result.
+fn parse_common(line: &[u8]) -> Option<(LogFrame, &[u8])> {
+    let rest = line.strip_prefix(b"(")?;
+    // Seconds: 1 to 20 digits; micros: up to 6 digits kept, further ones truncated.
+    let mut i = 0;
+    let mut secs: u64 = 0;
+    while let Some(&b) = rest.get(i).filter(|b| b.is_ascii_digit()) {
+        secs = secs.checked_mul(10)?.checked_add(u64::from(b - b'0'))?;
+        i += 1;
+    }
+    if i == 0 || i > 20 {
+        return None;
+    }
+    let mut micros: u64 = 0;
+    let mut frac_digits = 0;
+    if rest.get(i) == Some(&b'.') {
+        i += 1;
+        while let Some(&b) = rest.get(i).filter(|b| b.is_ascii_digit()) {
+            if frac_digits < 6 {
+                micros = micros * 10 + u64::from(b - b'0');
+                frac_digits += 1;
+            }
+            i += 1;
+        }
+    }
+    for _ in frac_digits..6 {
+        micros *= 10;
+    }
+    let t_us = secs.checked_mul(1_000_000)?.checked_add(micros)?;
+    let rest = rest[i..].strip_prefix(b") ")?;
+    let space = rest.iter().position(|&b| b == b' ')?;
+    let (interface, rest) = (&rest[..space], &rest[space + 1..]);
+    if interface.is_empty() || !interface.iter().all(u8::is_ascii_graphic) {
+        return None;
+    }
+    let hash = rest.iter().position(|&b| b == b'#')?;
+    let (id_text, rest) = (&rest[..hash], &rest[hash + 1..]);
+    let mut id: u32 = 0;
+    for &b in id_text {
+        id = id << 4 | u32::from(hex_value(b)?);
+    }
+    let (id, extended, kind) = match id_text.len() {
+        3 if id <= MAX_STANDARD_ID => (id, false, FrameKind::Data),
+        8 if id & CAN_ERR_FLAG != 0 => (id & MAX_EXTENDED_ID, false, FrameKind::Error),
+        8 if id <= MAX_EXTENDED_ID => (id, true, FrameKind::Data),
+        _ => return None,
+    };
+    let (hex, direction) = match rest {
+        [hex @ .., b' ', b'R' | b'r'] => (hex, Direction::Rx),
+        [hex @ .., b' ', b'T' | b't'] => (hex, Direction::Tx),
+        hex => (hex, Direction::Rx),
+    };
+    if hex.len() % 2 != 0 || hex.len() > 16 {
+        return None;
+    }
+    let mut data = [0u8; 8];
+    for (byte, pair) in data.iter_mut().zip(hex.chunks_exact(2)) {
+        *byte = hex_value(pair[0])? << 4 | hex_value(pair[1])?;
+    }
+    let frame = LogFrame::new(t_us, 0, id, extended, kind, &data[..hex.len() / 2]).ok()?;
+    Some((frame.with_direction(direction), interface))
+}
+
 struct Data {
     bytes: [u8; 8],
     len: usize,
@@ -174,7 +241,12 @@ fn parse_data(text: &str) -> Result<Data, String> {
 }
 
 fn hex_value(b: u8) -> Option<u8> {
-    (b as char).to_digit(16).map(|v| v as u8)
+    match b {
+        b'0'..=b'9' => Some(b - b'0'),
+        b'a'..=b'f' => Some(b - b'a' + 10),
+        b'A'..=b'F' => Some(b - b'A' + 10),
+        _ => None,
+    }
 }
 
 /// Reads a candump log line by line; see the [module](self) for the format. Interface
@@ -210,7 +282,7 @@ impl<R: BufRead> Iterator for CandumpReader<R> {
         }
         loop {
             let number = self.lines.number() + 1;
-            let line = match self.lines.next_line() {
+            let raw = match self.lines.next_raw() {
                 None => {
                     self.done = true;
                     return None;
@@ -219,9 +291,22 @@ impl<R: BufRead> Iterator for CandumpReader<R> {
                     self.done = true;
                     return Some(Err(LogError::io(number, &e)));
                 }
-                Some(Ok(line)) => line,
+                Some(Ok(raw)) => raw,
             };
-            let text = match line {
+            if let RawLine::Bytes(bytes) = raw {
+                if let Some((mut frame, interface)) = parse_common(bytes) {
+                    // parse_common takes ASCII interface names only.
+                    let name = std::str::from_utf8(interface).unwrap_or_default();
+                    return Some(match channel_of(&mut self.interfaces, name) {
+                        Ok(channel) => {
+                            frame.channel = channel;
+                            Ok(frame)
+                        }
+                        Err(message) => Err(LogError::at_line(number, message)),
+                    });
+                }
+            }
+            let text = match raw.text() {
                 Line::Bad(message) => return Some(Err(LogError::at_line(number, message))),
                 Line::Text(text) if text.trim().is_empty() => continue,
                 Line::Text(text) => text,
@@ -230,26 +315,28 @@ impl<R: BufRead> Iterator for CandumpReader<R> {
                 Ok(parsed) => parsed,
                 Err(e) => return Some(Err(e)),
             };
-            let channel = match self.interfaces.iter().position(|n| n == parsed.interface) {
-                Some(i) => i,
-                None if self.interfaces.len() < MAX_INTERFACES => {
-                    self.interfaces.push(parsed.interface.to_string());
-                    self.interfaces.len() - 1
-                }
-                None => {
-                    return Some(Err(LogError::at_line(
-                        number,
-                        format!(
-                            "interface \"{}\" is one more than the {MAX_INTERFACES} channels a log may use",
-                            parsed.interface
-                        ),
-                    )))
-                }
+            let channel = match channel_of(&mut self.interfaces, parsed.interface) {
+                Ok(channel) => channel,
+                Err(message) => return Some(Err(LogError::at_line(number, message))),
             };
             let mut frame = parsed.frame;
-            frame.channel = channel as u8;
+            frame.channel = channel;
             return Some(Ok(frame));
         }
+    }
+}
+
+/// The channel of an interface name: its place in order of first appearance.
+fn channel_of(interfaces: &mut Vec<String>, name: &str) -> Result<u8, String> {
+    match interfaces.iter().position(|n| n == name) {
+        Some(i) => Ok(i as u8),
+        None if interfaces.len() < MAX_INTERFACES => {
+            interfaces.push(name.to_string());
+            Ok((interfaces.len() - 1) as u8)
+        }
+        None => Err(format!(
+            "interface \"{name}\" is one more than the {MAX_INTERFACES} channels a log may use"
+        )),
     }
 }
 
@@ -265,6 +352,88 @@ impl<R> std::fmt::Debug for CandumpReader<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fast path agrees with the full parser wherever it answers, and leaves every
+    /// other form to it.
+    fn same_as_parse_line(line: &str) -> bool {
+        let full = parse_line(line, 1);
+        match parse_common(line.as_bytes()) {
+            Some((frame, interface)) => {
+                let full = full.unwrap_or_else(|e| panic!("{line}: fast path took it, {e}"));
+                assert_eq!(
+                    (frame, interface),
+                    (full.frame, full.interface.as_bytes()),
+                    "{line}"
+                );
+                true
+            }
+            None => false,
+        }
+    }
+
+    #[test]
+    fn the_fast_path_reads_common_lines_as_parse_line_does() {
+        for line in [
+            "(1436509052.249713) can0 044#2A366C2BBA",
+            "(0.002146) can0 006#919F00F500",
+            "(12) vcan0 7FF#",
+            "(12.) can1 7ff#aabb T",
+            "(1.1234567) can0 123#00 R",
+            "(3.000001) can0 12345678#0102030405060708 t",
+            "(3.5) can0 20000004#0000000000000000",
+            "(9999999999999.999999) x 000#01",
+        ] {
+            assert!(
+                same_as_parse_line(line),
+                "{line}: the fast path should read it"
+            );
+        }
+        for line in [
+            "(1.0) can0 123#R",
+            "(1.0) can0 123#R4",
+            "(1.0) can0 123#11.22",
+            "(1.0) can0 12345678#0102030405060708_9",
+            "(1.0)  can0 123#11",
+            "(1.0)\tcan0 123#11",
+            "(1.0) can0 123##011",
+            "(1.0) can0 800#11",
+            "(1.0) can0 1234#11",
+            "(1.0) can0 123#112",
+            "(1.0) can0 123#112233445566778899",
+            "(1.0) can0 123#11 X",
+            "(1.0) can0 123#11 ",
+            "(.5) can0 123#11",
+            "(123456789012345678901.0) can0 123#11",
+            "(1.0) can0 123#1G",
+            "1.0 can0 123#11",
+        ] {
+            assert!(!same_as_parse_line(line), "{line}: left to parse_line");
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_fast_path_never_disagrees(
+            secs in 0u64..2_000_000_000,
+            micros in 0u32..1_000_000,
+            id in 0u32..0x4000_0000,
+            wide in proptest::bool::ANY,
+            data in proptest::collection::vec(proptest::num::u8::ANY, 0..=9),
+            tail in proptest::sample::select(vec!["", " R", " T", " r", " x"]),
+            noise in proptest::option::of((0usize..40, proptest::num::u8::ANY)),
+        ) {
+            let id_text = if wide { format!("{id:08X}") } else { format!("{:03X}", id & 0xFFF) };
+            let hex: String = data.iter().map(|b| format!("{b:02x}")).collect();
+            let mut line = format!("({secs}.{micros:06}) can0 {id_text}#{hex}{tail}").into_bytes();
+            if let Some((at, byte)) = noise {
+                let at = at.min(line.len() - 1);
+                line[at] = byte;
+            }
+            if let Ok(line) = String::from_utf8(line) {
+                same_as_parse_line(&line);
+            }
+        }
+    }
 
     fn read(text: &str) -> Vec<Result<LogFrame, LogError>> {
         CandumpReader::new(text.as_bytes()).collect()

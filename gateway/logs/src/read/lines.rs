@@ -14,6 +14,29 @@ pub(crate) enum Line<'a> {
     Bad(String),
 }
 
+/// One line as read, before it is taken as text.
+pub(crate) enum RawLine<'a> {
+    /// The bytes, without `\n` or `\r\n`.
+    Bytes(&'a [u8]),
+    /// Longer than [`MAX_LINE`] (consumed, not kept).
+    TooLong,
+}
+
+impl<'a> RawLine<'a> {
+    /// The line as text, or what is wrong with it.
+    pub fn text(self) -> Line<'a> {
+        match self {
+            RawLine::TooLong => Line::Bad(format!(
+                "line is longer than {MAX_LINE} bytes: not a log line"
+            )),
+            RawLine::Bytes(bytes) => match std::str::from_utf8(bytes) {
+                Ok(text) => Line::Text(text),
+                Err(_) => Line::Bad("line is not text (invalid UTF-8)".into()),
+            },
+        }
+    }
+}
+
 /// Reads lines one by one, counting them from 1.
 pub(crate) struct Lines<R> {
     input: R,
@@ -39,6 +62,11 @@ impl<R: BufRead> Lines<R> {
 
     /// The next line, `None` at the end of the input.
     pub fn next_line(&mut self) -> Option<io::Result<Line<'_>>> {
+        self.next_raw().map(|r| r.map(RawLine::text))
+    }
+
+    /// The next line's bytes, `None` at the end of the input.
+    pub fn next_raw(&mut self) -> Option<io::Result<RawLine<'_>>> {
         self.buf.clear();
         let mut too_long = false;
         let mut any = false;
@@ -55,7 +83,7 @@ impl<R: BufRead> Lines<R> {
                 break;
             }
             any = true;
-            let (chunk, used, done) = match available.iter().position(|&b| b == b'\n') {
+            let (chunk, used, done) = match memchr::memchr(b'\n', available) {
                 Some(i) => (&available[..i], i + 1, true),
                 None => (available, available.len(), false),
             };
@@ -74,17 +102,12 @@ impl<R: BufRead> Lines<R> {
         }
         self.number += 1;
         if too_long {
-            return Some(Ok(Line::Bad(format!(
-                "line is longer than {MAX_LINE} bytes: not a log line"
-            ))));
+            return Some(Ok(RawLine::TooLong));
         }
         if self.buf.last() == Some(&b'\r') {
             self.buf.pop();
         }
-        Some(Ok(match std::str::from_utf8(&self.buf) {
-            Ok(text) => Line::Text(text),
-            Err(_) => Line::Bad("line is not text (invalid UTF-8)".into()),
-        }))
+        Some(Ok(RawLine::Bytes(&self.buf)))
     }
 }
 
