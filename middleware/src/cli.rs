@@ -22,7 +22,8 @@ use crate::image_tool::{self, BuildOptions, ImageToolError, PayloadKind, Signatu
 use crate::live::BusUrl;
 use crate::names::{ecu_label, parse_ecu, ECUS, ECU_NAME_LIST};
 use crate::tester::{
-    identification_table, FlashConfig, FlashError, FlashJob, IdentJob, TesterConfig,
+    dtc_table, identification_table, DtcJob, FlashConfig, FlashError, FlashJob, IdentJob,
+    TesterConfig,
 };
 use crate::transport::{self, TransportError, Via};
 use crate::watch::{StatusLine, TripLog, Watch};
@@ -61,6 +62,20 @@ pub enum Command {
     /// Read the identification (part number F187, software F189, serial F18C, hardware
     /// F191) of one ECU or all nine.
     Ids {
+        /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
+        #[arg(long, value_name = "URL", value_parser = parse_via)]
+        via: Via,
+        /// Which ECU (engine, pedals, steering, transmission, cabin, console,
+        /// differential, cruise, abs), or all.
+        #[arg(long, value_name = "NAME|all", default_value = "all", value_parser = parse_selection)]
+        ecu: EcuSelection,
+        /// UDS timing.
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
+    /// Read the trouble codes (UDS 0x19 02 FF) of one ECU or all nine, with their status
+    /// and description.
+    Dtcs {
         /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
         #[arg(long, value_name = "URL", value_parser = parse_via)]
         via: Via,
@@ -567,6 +582,24 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                     problems,
                 }
                 .into());
+            }
+            Ok(())
+        }
+        Command::Dtcs { via, ecu, timing } => {
+            let mut transport = transport::open(&via)?;
+            let ecus = ecu.ecus();
+            let mut job = DtcJob::new(&ecus, timing.tester_config());
+            let reports = match driver::run(transport.as_mut(), &mut job) {
+                Ok(reports) => reports,
+                Err(DriveError::Transport(error)) => return Err(error.into()),
+                Err(DriveError::Job(never)) => match never {},
+            };
+            write!(out, "{}", dtc_table(&reports))?;
+            if reports.iter().all(|r| r.entries.is_err()) {
+                return Err(CliError::NoAnswer(format!(
+                    "no ECU answered on {}: is the bus the right one, and are the ECUs powered?",
+                    transport.describe()
+                )));
             }
             Ok(())
         }

@@ -21,6 +21,9 @@
 //! | [`steering`] | steering | paddle requests as pulses: longest request, direct Up/Down changes |
 //! | [`transmission`] | transmission | time out of the shift schedule's band; shifts too soon, hunting |
 //! | [`pedals`] | pedals | brake override of the accelerator; commands follow the cruise command |
+//!
+//! Besides the routines, [`dtcs`] reads the ECUs' trouble codes off the bus wherever a
+//! tester (the gateway itself, when it may transmit) asked for them, with their descriptions.
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -29,6 +32,7 @@ pub mod cabin;
 pub mod console;
 pub mod cruise;
 pub mod differential;
+pub mod dtcs;
 pub mod engine;
 pub mod pedals;
 pub mod presence;
@@ -38,6 +42,7 @@ pub mod steering;
 pub mod transmission;
 mod verdict;
 
+pub use dtcs::{describe as describe_dtc, DtcEntry, DtcMonitor, EcuDtcs};
 pub use verdict::{EcuDiagnosis, Finding, Verdict, Window};
 
 use autoplug_can::Node;

@@ -456,3 +456,81 @@ fn only_a_positive_reset_response_on_the_ecus_own_identifier_restarts_its_routin
         .unwrap();
     assert_eq!(engine.verdict, Verdict::Ok, "{engine:?}");
 }
+
+#[test]
+fn dtc_reports_are_heard_single_and_multi_frame_and_described() {
+    use crate::dtcs::describe;
+    use crate::DtcMonitor;
+    use autoplug_can::Node;
+    use autoplug_ecu::{invalid_data, lost_communication};
+    let diag = |t: u64, id: u32, data: &[u8]| {
+        LogFrame::new(t, 0, id, false, autoplug_logs::FrameKind::Data, data).unwrap()
+    };
+    let lost = lost_communication(Node::Console).to_bytes();
+    let invalid = invalid_data(Node::Pedals).to_bytes();
+    let gear = ecu_trans::GEAR_NOT_ENGAGED.to_bytes();
+    let frames = vec![
+        // The cruise ECU: one code, in a single frame (7 bytes: 59 02 mask + 1 record).
+        diag(
+            1,
+            0x78D,
+            &[0x07, 0x59, 0x02, 0xFF, lost[0], lost[1], lost[2], 0x2F],
+        ),
+        // The transmission: three codes (15 bytes) in a first and two consecutive frames.
+        diag(
+            2,
+            0x786,
+            &[0x10, 0x0F, 0x59, 0x02, 0xFF, lost[0], lost[1], lost[2]],
+        ),
+        diag(
+            3,
+            0x786,
+            &[
+                0x21, 0x2F, invalid[0], invalid[1], invalid[2], 0x28, gear[0],
+            ],
+        ),
+        diag(
+            4,
+            0x786,
+            &[0x22, gear[1], gear[2], 0x09, 0xAA, 0xAA, 0xAA, 0xAA],
+        ),
+        // The ABS: a consecutive frame out of sequence spoils its response.
+        diag(
+            5,
+            0x78E,
+            &[0x10, 0x0B, 0x59, 0x02, 0xFF, lost[0], lost[1], lost[2]],
+        ),
+        diag(6, 0x78E, &[0x22, 0x2F, 0, 0, 0, 0, 0]),
+        // A negative response and a request are not reports.
+        diag(7, 0x78C, &[0x03, 0x7F, 0x19, 0x31]),
+        diag(8, 0x70C, &[0x03, 0x19, 0x02, 0xFF]),
+    ];
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut monitor = DtcMonitor::new();
+    pipeline
+        .run(
+            &mut VecSource::new("test", frames),
+            &mut [&mut monitor],
+            &mut || false,
+        )
+        .unwrap();
+    let latest = monitor.latest();
+    assert_eq!(latest.len(), 2, "{latest:?}");
+    assert_eq!(latest[0].ecu, Node::Transmission);
+    let codes: Vec<String> = latest[0]
+        .entries
+        .iter()
+        .map(|e| e.dtc.to_string())
+        .collect();
+    assert_eq!(codes, ["U0140-87", "U0429-86", "P0730-00"]);
+    assert_eq!(latest[0].entries[2].status, 0x09);
+    assert_eq!(latest[1].ecu, Node::Cruise);
+    assert_eq!(latest[1].read_at_us, 1);
+    assert_eq!(
+        describe(latest[1].entries[0].dtc),
+        "lost communication with the Console ECU (missing message)"
+    );
+    assert!(describe(ecu_trans::GEAR_NOT_ENGAGED).starts_with("incorrect gear ratio"));
+    assert!(describe(ecu_abs::WHEEL_SENSOR_DTCS[1]).starts_with("front right wheel"));
+    assert!(describe(autoplug_ecu::Dtc::from_u24(0x12_3456)).starts_with("not an AutoPlug code"));
+}
