@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """A gateway recording and its ASC export, read by cantools and python-can.
 
-    python3 scripts/recording-check.py DBC RECORDING.log EXPORT.asc REFERENCE.log
+    python3 scripts/recording-check.py DBC RECORDING.log EXPORT.asc REFERENCE.log [EXPORT.mcap]
 
 RECORDING.log is what `autoplug gateway --record` wrote, EXPORT.asc what
 `autoplug log export` made of it, REFERENCE.log the virtual car's own bus log of the same
@@ -10,7 +10,10 @@ ASCReader (cantools' logreader has no ASC parser); every catalogue frame of both
 decoded with cantools against the DBC (strict: a value outside its range fails), and both
 must hold exactly the reference's frames, in order, with the same identifiers and data
 (the ASC export's times are relative to its first frame, so times are compared as
-offsets from the first frame, to the microsecond). Exits 1 on any disagreement.
+offsets from the first frame, to the microsecond). EXPORT.mcap, if given, is read with
+the mcap package: its raw channel must hold every frame, and each message channel's
+decoded signals must equal cantools' decoding of the same frame (to float precision).
+Exits 1 on any disagreement.
 """
 
 import sys
@@ -44,10 +47,44 @@ def relative(frames):
     return [(t - t0, i, d) for t, i, d in frames]
 
 
+def check_mcap(db, catalogue, rec, path, failures):
+    import json
+    try:
+        from mcap.reader import make_reader
+    except ImportError as e:  # pragma: no cover
+        sys.exit(f"recording-check: {e}; install with: pip install mcap")
+    raw, decoded = [], []
+    with open(path, "rb") as f:
+        for _schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            body = json.loads(message.data)
+            if channel.topic == "/can/frames":
+                raw.append((message.log_time // 1000, body["id"], bytes(body["data"])))
+            else:
+                decoded.append((message.log_time // 1000, channel.topic[1:], body))
+    if raw != rec:
+        failures.append(f"MCAP raw channel: {len(raw)} frames, recording {len(rec)}")
+    expected = []
+    for t, frame_id, data in rec:
+        if frame_id in catalogue:
+            msg = db.get_message_by_frame_id(frame_id)
+            expected.append((t, msg.name, db.decode_message(frame_id, data, decode_choices=False)))
+    if len(expected) != len(decoded):
+        failures.append(f"MCAP: {len(decoded)} decoded messages, cantools decodes {len(expected)}")
+        return 0
+    for (t1, name1, ours), (t2, name2, theirs) in zip(decoded, expected):
+        same = (t1, name1) == (t2, name2) and ours.keys() == theirs.keys() and all(
+            abs(ours[k] - theirs[k]) <= 1e-4 * max(1.0, abs(theirs[k])) for k in ours)
+        if not same:
+            failures.append(f"MCAP {name1} at {t1} us: {ours}, cantools {name2} at {t2} us: {theirs}")
+            return 0
+    return len(decoded)
+
+
 def main():
-    if len(sys.argv) != 5:
+    if len(sys.argv) not in (5, 6):
         sys.exit(__doc__)
-    dbc, recording, export, reference = sys.argv[1:]
+    dbc, recording, export, reference = sys.argv[1:5]
+    mcap_path = sys.argv[5] if len(sys.argv) == 6 else None
     db = cantools.database.load_file(dbc)
     catalogue = {m.frame_id for m in db.messages if not m.name.startswith(("Diag", "Obd"))}
     ref = candump_frames(reference)
@@ -70,10 +107,14 @@ def main():
             except Exception as e:  # cantools raises several kinds
                 failures.append(f"{source}: frame {frame_id:03X}#{data.hex()} at {t} us: {e}")
                 break
+    mcap_decoded = 0
+    if mcap_path:
+        mcap_decoded = check_mcap(db, catalogue, rec, mcap_path, failures)
     for f in failures:
         print(f"FAIL {f}")
     print(f"recording-check: {len(rec)} frames recorded, {len(asc)} exported to ASC, "
-          f"{decoded} catalogue frames decoded by cantools, {len(failures)} failure(s)")
+          f"{decoded} catalogue frames decoded by cantools, {mcap_decoded} MCAP messages "
+          f"matching cantools' decoding, {len(failures)} failure(s)")
     sys.exit(1 if failures else 0)
 
 

@@ -16,10 +16,11 @@ use autoplug_image::{ImageHeader, SoftwareVariant, Version, BUILD_ID_LEN};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::bus_tester::BusTester;
 use crate::demo::Demo;
 use crate::driver::{self, DriveError};
 use crate::image_tool::{self, BuildOptions, ImageToolError, PayloadKind, SignatureCheck};
-use crate::live::BusUrl;
+use crate::live::{BusUrl, Outbox, Transmitting};
 use crate::names::{ecu_label, parse_ecu, ECUS, ECU_NAME_LIST};
 use crate::tester::{
     dtc_table, identification_table, DtcJob, FlashConfig, FlashError, FlashJob, IdentJob,
@@ -31,6 +32,9 @@ use crate::DEV_SECURITY_SECRET;
 use autoplug_gateway::{Observer, Pipeline, RecordingSink, Strictness};
 use autoplug_store::{SqliteStore, TripStore};
 use autoplug_virtual_car::scenario::Scenario;
+use std::cell::RefCell;
+use std::collections::VecDeque;
+use std::rc::Rc;
 
 /// The `autoplug` command line.
 #[derive(Debug, Parser)]
@@ -171,6 +175,14 @@ pub enum Command {
         /// No status line (the summary at the end is still printed).
         #[arg(long)]
         quiet: bool,
+        /// Let the gateway transmit: it reads every ECU's identification at the start (into
+        /// the inventory) and their trouble codes (UDS 0x19) then and every
+        /// --dtc-interval. Without it the gateway only listens.
+        #[arg(long)]
+        transmit: bool,
+        /// Seconds of bus time between two readings of the trouble codes.
+        #[arg(long, value_name = "SECONDS", default_value_t = 60.0, value_parser = parse_seconds, requires = "transmit")]
+        dtc_interval: f64,
     },
     /// The trips in the database.
     #[command(subcommand)]
@@ -261,7 +273,8 @@ pub enum TripsCommand {
 /// `log` subcommands.
 #[derive(Debug, Subcommand)]
 pub enum LogCommand {
-    /// Convert a log (candump .log, Vector .asc or .blf) to Vector ASC or candump.
+    /// Convert a log (candump .log, Vector .asc or .blf) to Vector ASC, candump, or MCAP with
+    /// the signals decoded.
     Export {
         /// The log to read.
         #[arg(value_name = "LOG")]
@@ -285,6 +298,8 @@ pub enum ExportFormat {
     Asc,
     /// candump .log (can-utils, python-can, cantools).
     Candump,
+    /// MCAP with every signal decoded (Foxglove, Lichtblick, PlotJuggler).
+    Mcap,
 }
 
 fn parse_bus(text: &str) -> Result<BusUrl, String> {
@@ -666,6 +681,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             crate::gateway::signal_table(state, out)?;
             writeln!(out)?;
             crate::gateway::verdict_table(&run.diagnoses, out)?;
+            crate::gateway::heard_dtcs(&run.dtcs, out)?;
             writeln!(out)?;
             crate::gateway::trips_table(&run.trips, out)?;
             if let Some(trip_log) = &run.trip_log {
@@ -685,8 +701,11 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             fast,
             duration,
             quiet,
+            transmit,
+            dtc_interval,
         } => {
             let options = GatewayOptions {
+                transmit: transmit.then_some((dtc_interval * 1e6) as u64),
                 record,
                 rotate: autoplug_logs::RotatePolicy {
                     max_bytes: rotate_mb.map(|mb| mb * 1_000_000),
@@ -798,6 +817,8 @@ fn report_trip_log(trip_log: &TripLog, out: &mut dyn Write) -> Result<(), CliErr
 
 /// What `autoplug gateway` was asked to do besides watching.
 struct GatewayOptions {
+    /// May transmit, reading the DTCs this often (µs of bus time).
+    transmit: Option<u64>,
     record: Option<PathBuf>,
     rotate: autoplug_logs::RotatePolicy,
     db: Option<PathBuf>,
@@ -824,6 +845,17 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         BusUrl::Transport(_) => None,
     };
     let mut source = bus.open(pace).map_err(CliError::Log)?;
+    let mut tester = None;
+    if let Some(dtc_interval_us) = options.transmit {
+        let outbox: Outbox = Rc::new(RefCell::new(VecDeque::new()));
+        source = Box::new(Transmitting::new(source, Rc::clone(&outbox)));
+        tester = Some(BusTester::new(
+            &ECUS,
+            TesterConfig::DEFAULT,
+            outbox,
+            dtc_interval_us,
+        ));
+    }
     let trip_log = match &options.db {
         Some(db) => Some(open_trip_log(db, &options.vehicle, &source.describe())?),
         None => None,
@@ -865,6 +897,7 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     let mut pipeline = Pipeline::new(Strictness::Strict);
     let mut status_out = io::stderr();
     let mut watch = Watch::new(trip_log);
+    watch.tester = tester;
     if !options.quiet {
         watch.status = Some(StatusLine::new(&mut status_out, Duration::from_secs(1)));
     }
@@ -907,6 +940,10 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         report_trip_log(trip_log, out)?;
     }
     crate::gateway::verdict_table(&watch.diagnostics.report(state), out)?;
+    if let Some(rows) = &watch.identification {
+        write!(out, "{}", identification_table(rows))?;
+    }
+    crate::gateway::heard_dtcs(&watch.dtcs, out)?;
     result.map_err(|e| CliError::Log(e.to_string()))
 }
 
@@ -932,9 +969,14 @@ fn export_log(
     let output = std::fs::File::create(&partial)
         .map_err(|e| CliError::Log(format!("cannot create {}: {e}", partial.display())))?;
     let writer = io::BufWriter::new(output);
+    let mut decoded = None;
     let result = match format {
         ExportFormat::Asc => autoplug_logs::export_asc(reader, writer),
         ExportFormat::Candump => autoplug_logs::write::export_candump(reader, writer, false),
+        ExportFormat::Mcap => autoplug_logs::export_mcap(reader, writer).map(|s| {
+            decoded = Some((s.decoded, s.undecodable));
+            s.export
+        }),
     };
     let fail = |message: String| {
         let _ = std::fs::remove_file(&partial);
@@ -950,9 +992,17 @@ fn export_log(
         .map_err(|e| fail(format!("cannot write {}: {e}", file.display())))?;
     writeln!(
         out,
-        "wrote {} ({} frames{})",
+        "wrote {} ({} frames{}{})",
         file.display(),
         summary.frames,
+        decoded.map_or(String::new(), |(ok, bad)| format!(
+            ", {ok} decoded into their messages' channels{}",
+            if bad > 0 {
+                format!(", {bad} not decodable (raw only)")
+            } else {
+                String::new()
+            }
+        )),
         if summary.skipped > 0 {
             format!(", {} malformed line(s) skipped", summary.skipped)
         } else {

@@ -7,7 +7,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use autoplug_diagnostics::{EcuDiagnosis, Verdict};
+use autoplug_diagnostics::{DtcMonitor, EcuDiagnosis, Verdict};
 use autoplug_gateway::{CarState, FrameSource, LogSource, Paced, Pipeline, Strictness};
 use autoplug_store::{TripDetail, TripRow};
 use autoplug_trips::{TripEnd, TripStats};
@@ -26,6 +26,8 @@ pub struct LogRun {
     pub trips: Vec<(TripStats, TripEnd)>,
     /// Where the trips were stored, if anywhere, and how that went.
     pub trip_log: Option<TripLog>,
+    /// The trouble codes heard in the log.
+    pub dtcs: DtcMonitor,
 }
 
 /// Runs the gateway pipeline with the diagnostics and trips over a log file; trips go to
@@ -52,7 +54,35 @@ pub fn run_log(
         pipeline,
         trips: watch.ended,
         trip_log: watch.trip_log,
+        dtcs: watch.dtcs,
     })
+}
+
+/// The trouble codes the ECUs reported on the bus (to whichever tester asked), latest per
+/// ECU; nothing if none was heard.
+pub fn heard_dtcs(dtcs: &DtcMonitor, out: &mut dyn Write) -> std::io::Result<()> {
+    for report in dtcs.latest() {
+        if report.entries.is_empty() {
+            writeln!(
+                out,
+                "DTCs {} at {:.2} s: none",
+                ecu_name(report.ecu),
+                report.read_at_us as f64 * 1e-6
+            )?;
+        }
+        for e in &report.entries {
+            writeln!(
+                out,
+                "DTCs {} at {:.2} s: {} status 0x{:02X}: {}",
+                ecu_name(report.ecu),
+                report.read_at_us as f64 * 1e-6,
+                e.dtc,
+                e.status,
+                autoplug_diagnostics::describe_dtc(e.dtc)
+            )?;
+        }
+    }
+    Ok(())
 }
 
 /// The trips of a run, one line each.

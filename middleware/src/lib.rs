@@ -11,6 +11,7 @@
 //! | [`names`] | NRC and service names (ISO 14229-1), ECU names of the command line |
 //! | [`live`] | live frame sources for the gateway: the in-process virtual car, socketcand, SocketCAN; the `--bus` URL |
 //! | [`gateway`] | the gateway's commands: `gateway` on a live bus, `replay` and `diagnose` on a log, `trips`, `log export` |
+//! | [`bus_tester`] | the gateway as a tester on a live bus (`--transmit`): identification into the inventory, trouble codes every minute |
 //! | [`watch`] | what the gateway does with every frame: diagnostics, trips into the store, the status line |
 //! | [`cli`] | the `autoplug` command |
 //!
@@ -37,6 +38,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod bus_tester;
 pub mod cli;
 pub mod demo;
 pub mod driver;

@@ -1,11 +1,14 @@
 //! Live frame sources for the gateway: the virtual car in this process, and socketcand or
 //! SocketCAN over the transports of [`crate::transport`]; [`BusUrl`] names one.
 
+use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::path::PathBuf;
+use std::rc::Rc;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
+use autoplug_can::Frame;
 use autoplug_gateway::{FrameSource, Paced, Poll, SourceError};
 use autoplug_logs::LogFrame;
 use autoplug_virtual_car::car::VirtualCar;
@@ -59,6 +62,10 @@ impl FrameSource for VirtualCarSource {
     fn describe(&self) -> String {
         format!("virtual car ({})", self.car.scenario().name)
     }
+
+    fn transmit(&mut self, frame: &Frame) -> Result<bool, SourceError> {
+        Ok(self.car.inject(*frame))
+    }
 }
 
 /// A real-time transport (socketcand, SocketCAN) as a live source. Frames carry the bus
@@ -99,6 +106,60 @@ impl FrameSource for TransportSource {
 
     fn describe(&self) -> String {
         self.transport.describe()
+    }
+
+    fn transmit(&mut self, frame: &Frame) -> Result<bool, SourceError> {
+        self.transport
+            .send(frame)
+            .map(|()| true)
+            .map_err(|error| SourceError {
+                source: self.transport.describe(),
+                message: error.to_string(),
+            })
+    }
+}
+
+/// Frames the gateway's own tester wants on the bus, waiting for the source: the tester
+/// is an observer of the pipeline and cannot reach the source the pipeline is reading.
+/// Bounded: a tester that got ahead of the bus by more than this is stopped by it.
+pub type Outbox = Rc<RefCell<VecDeque<Frame>>>;
+
+/// Most frames waiting in an [`Outbox`] (a 4 KiB ISO-TP transfer is 586 frames).
+pub const OUTBOX_CAPACITY: usize = 1024;
+
+/// A live source that also sends what the gateway's tester queued, before each poll.
+pub struct Transmitting {
+    inner: Box<dyn FrameSource>,
+    outbox: Outbox,
+}
+
+impl Transmitting {
+    /// `inner`, sending what `outbox` holds.
+    pub fn new(inner: Box<dyn FrameSource>, outbox: Outbox) -> Self {
+        Self { inner, outbox }
+    }
+}
+
+impl FrameSource for Transmitting {
+    fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
+        loop {
+            let Some(frame) = self.outbox.borrow_mut().pop_front() else {
+                break;
+            };
+            if !self.inner.transmit(&frame)? {
+                self.outbox.borrow_mut().push_front(frame);
+                break;
+            }
+        }
+        self.inner.poll(max_wait)
+    }
+
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+
+    fn transmit(&mut self, frame: &Frame) -> Result<bool, SourceError> {
+        self.inner.transmit(frame)
     }
 }
 

@@ -6,13 +6,17 @@
 use std::io::Write;
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
-use autoplug_diagnostics::{Diagnostics, EcuDiagnosis};
+use autoplug_diagnostics::{describe_dtc, Diagnostics, DtcMonitor, EcuDiagnosis};
 use autoplug_gateway::{CarState, Observer, Update};
 use autoplug_logs::LogFrame;
-use autoplug_store::{FinishedTrip, NewTrip, TripId, TripStore, VerdictRecord};
+use autoplug_store::{
+    DtcRecord, EcuIdentity, FinishedTrip, NewTrip, TripId, TripStore, VerdictRecord,
+};
 use autoplug_trips::{CompletedTrip, TripEnd, TripStats, TripTracker};
 
+use crate::bus_tester::BusTester;
 use crate::names::ecu_name;
+use crate::tester::EcuIdentification;
 
 /// How often the trip in progress is written to the store, µs of bus time: a crash (kill
 /// -9, power loss) loses at most this much of a trip's statistics.
@@ -50,6 +54,15 @@ impl TripLog {
         self.store.as_ref()
     }
 
+    fn record_inventory(&mut self, ecus: &[EcuIdentity]) {
+        if self.failure.is_some() || ecus.is_empty() {
+            return;
+        }
+        if let Err(e) = self.store.record_inventory(&self.vehicle, unix_ms(), ecus) {
+            self.fail(e);
+        }
+    }
+
     fn fail(&mut self, error: impl ToString) {
         self.failure = Some(format!("trips no longer stored: {}", error.to_string()));
         self.open = None;
@@ -59,7 +72,7 @@ impl TripLog {
         &mut self,
         done: Vec<CompletedTrip>,
         trips: &mut TripTracker,
-        report: impl Fn() -> Vec<EcuDiagnosis>,
+        report: impl Fn() -> Findings,
         now_us: u64,
     ) {
         if self.failure.is_some() {
@@ -104,7 +117,7 @@ impl TripLog {
     fn finish(
         &mut self,
         done: CompletedTrip,
-        report: &impl Fn() -> Vec<EcuDiagnosis>,
+        report: &impl Fn() -> Findings,
     ) -> Result<(), autoplug_store::StoreError> {
         let id = match self.open.take() {
             Some(id) => id,
@@ -116,17 +129,68 @@ impl TripLog {
                 start_us: done.stats.start_us,
             })?,
         };
+        let (verdicts, dtcs) = report();
         let finished = FinishedTrip {
             stats: done.stats,
             end: done.end,
-            verdicts: report().iter().filter_map(verdict_record).collect(),
-            // DTCs are read over UDS by a gateway allowed to transmit: not on this path yet.
-            dtcs: Vec::new(),
+            verdicts,
+            dtcs,
         };
         self.store.finish_trip(id, &finished, &done.series)?;
         self.stored.push(id);
         Ok(())
     }
+}
+
+/// The verdicts and the trouble codes a trip ends with.
+type Findings = (Vec<VerdictRecord>, Vec<DtcRecord>);
+
+/// Every ECU's verdict and the latest trouble codes heard on the bus.
+fn findings(diagnostics: &Diagnostics, dtcs: &DtcMonitor, state: &CarState) -> Findings {
+    let verdicts = diagnostics
+        .report(state)
+        .iter()
+        .filter_map(verdict_record)
+        .collect();
+    let dtcs = dtcs
+        .latest()
+        .iter()
+        .flat_map(|r| {
+            r.entries.iter().map(|e| DtcRecord {
+                ecu: ecu_name(r.ecu).to_string(),
+                code: e.dtc.to_string(),
+                status: e.status,
+                description: describe_dtc(e.dtc),
+            })
+        })
+        .collect();
+    (verdicts, dtcs)
+}
+
+/// The identification the gateway read, as the inventory keeps it.
+pub fn identities(rows: &[EcuIdentification]) -> Vec<EcuIdentity> {
+    let text = |v: &Result<Vec<u8>, crate::tester::UdsError>| {
+        v.as_ref().ok().map(|b| {
+            String::from_utf8_lossy(b)
+                .trim_end_matches('\0')
+                .to_string()
+        })
+    };
+    rows.iter()
+        .filter(|r| r.answered())
+        .map(|r| EcuIdentity {
+            ecu: ecu_name(r.ecu).to_string(),
+            node: r.ecu.diag_node_number().unwrap_or(0),
+            part_number: text(&r.part_number),
+            software_version: text(&r.software_version),
+            hardware_version: text(&r.hardware_version),
+            serial_number: r
+                .serial_number
+                .as_ref()
+                .ok()
+                .map(|b| b.iter().map(|x| format!("{x:02X}")).collect::<String>()),
+        })
+        .collect()
 }
 
 fn unix_ms() -> i64 {
@@ -184,6 +248,12 @@ pub struct Watch<'a> {
     pub status: Option<StatusLine<'a>>,
     /// The trips that have ended, in order.
     pub ended: Vec<(TripStats, TripEnd)>,
+    /// The trouble codes heard on the bus.
+    pub dtcs: DtcMonitor,
+    /// The gateway's own tester, when it may transmit.
+    pub tester: Option<BusTester>,
+    /// The ECUs' identification, once the tester read it.
+    pub identification: Option<Vec<EcuIdentification>>,
 }
 
 impl Default for Watch<'_> {
@@ -206,6 +276,9 @@ impl<'a> Watch<'a> {
             trip_log,
             status: None,
             ended: Vec::new(),
+            dtcs: DtcMonitor::new(),
+            tester: None,
+            identification: None,
         }
     }
 
@@ -220,11 +293,11 @@ impl<'a> Watch<'a> {
         self.ended
             .extend(done.iter().map(|t| (t.stats.clone(), t.end)));
         if let Some(log) = self.trip_log.as_mut() {
-            let diagnostics = &self.diagnostics;
+            let (diagnostics, dtcs) = (&self.diagnostics, &self.dtcs);
             log.sync(
                 done,
                 &mut self.trips,
-                || diagnostics.report(state),
+                || findings(diagnostics, dtcs, state),
                 state.now_us(),
             );
         }
@@ -291,6 +364,16 @@ pub fn status_text(state: &CarState, diagnostics: &Diagnostics, trips: &TripTrac
 impl Observer for Watch<'_> {
     fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
         self.diagnostics.on_frame(frame, update, state);
+        self.dtcs.on_frame(frame, update, state);
+        if let Some(tester) = self.tester.as_mut() {
+            tester.on_frame(frame, update, state);
+            if let Some(rows) = tester.take_identities() {
+                if let Some(log) = self.trip_log.as_mut() {
+                    log.record_inventory(&identities(&rows));
+                }
+                self.identification = Some(rows);
+            }
+        }
         self.trips.on_frame(frame, update, state);
         self.sync(state);
         self.maybe_print_status(state);

@@ -228,3 +228,84 @@ fn kill_9_during_a_recording_leaves_a_readable_log_and_a_consistent_database() {
     let last_frame_s = frames.last().unwrap().t_us as f64 * 1e-6;
     assert!(trips[0].stats.end_us as f64 * 1e-6 <= last_frame_s + 0.2);
 }
+
+#[test]
+fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_finds_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("console-silent.toml");
+    std::fs::write(
+        &scenario,
+        "name = \"console-silent\"\nduration_s = 20.0\n[[at]]\nt_s = 3.0\nfault = { silence = \"Console\" }\n",
+    )
+    .unwrap();
+    let db = dir.path().join("trips.db");
+    let rec = dir.path().join("rec");
+    let bus = format!("virtual:{}", scenario.display());
+    let live = autoplug(&[
+        "gateway",
+        "--bus",
+        &bus,
+        "--fast",
+        "--quiet",
+        "--transmit",
+        "--dtc-interval",
+        "5",
+        "--record",
+        rec.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+        "--vehicle",
+        "JA3AP00TEST000002",
+    ]);
+    let stdout = text(&live.stdout);
+    assert!(live.status.success(), "{live:?}");
+    assert!(stdout.contains("AP-CRUISE-0001"), "{stdout}");
+    assert!(
+        stdout.contains("DTCs engine") && stdout.contains("U0140-87"),
+        "{stdout}"
+    );
+
+    let store = SqliteStore::open(&db).unwrap();
+    let inventory = store.inventory("JA3AP00TEST000002").unwrap();
+    assert_eq!(inventory.len(), 9, "{inventory:?}");
+    assert!(
+        inventory
+            .iter()
+            .all(|(e, _, _)| e.part_number.is_some()
+                && e.software_version.as_deref() == Some("1.0.0"))
+    );
+    let trip = store.trips(None).unwrap().remove(0);
+    let detail = store.trip(trip.id).unwrap().unwrap();
+    let lost: Vec<&str> = detail
+        .dtcs
+        .iter()
+        .filter(|d| d.code == "U0140-87")
+        .map(|d| d.ecu.as_str())
+        .collect();
+    assert_eq!(lost, ["engine", "transmission"], "{:?}", detail.dtcs);
+    assert!(detail.dtcs[0]
+        .description
+        .contains("lost communication with the Console"));
+    // The console went silent for good: asking it did not hide that.
+    let console = detail.verdicts.iter().find(|v| v.ecu == "console").unwrap();
+    assert_eq!(console.verdict, "no data", "{console:?}");
+
+    // The recording holds the requests and answers: its replay stores the same codes.
+    let file = std::fs::read_dir(&rec)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let replay = autoplug(&[
+        "replay",
+        file.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+    ]);
+    assert!(replay.status.success(), "{replay:?}");
+    let trips = store.trips(None).unwrap();
+    let replayed = store.trip(trips[0].id).unwrap().unwrap();
+    assert_eq!(replayed.dtcs, detail.dtcs);
+    assert_eq!(replayed.verdicts, detail.verdicts);
+}

@@ -46,6 +46,15 @@ pub trait FrameSource {
 
     /// What it is, for messages ("bus.log", "socketcand://127.0.0.1:29536/can0").
     fn describe(&self) -> String;
+
+    /// Puts a frame on the bus (a live source whose gateway may transmit): `Ok(false)` when
+    /// it cannot take it yet (a full queue; offer it again later). A recorded log refuses.
+    fn transmit(&mut self, _frame: &autoplug_can::Frame) -> Result<bool, SourceError> {
+        Err(SourceError {
+            source: self.describe(),
+            message: "cannot transmit: not a live bus".into(),
+        })
+    }
 }
 
 /// Frames a log's reading thread hands over at a time.
@@ -229,5 +238,9 @@ impl<S: FrameSource> FrameSource for Paced<S> {
 
     fn describe(&self) -> String {
         format!("{} (x{})", self.inner.describe(), self.speed)
+    }
+
+    fn transmit(&mut self, frame: &autoplug_can::Frame) -> Result<bool, SourceError> {
+        self.inner.transmit(frame)
     }
 }

@@ -2,16 +2,18 @@
 //!
 //! For each cyclic message the ECU is the first sender of, the routine measures the longest
 //! gap between two frames, in periods of that message. A gap is not held against the ECU
-//! when diagnostic traffic to it (or to all ECUs) was seen during the gap or in the second
-//! before it: a tester silences normal traffic (UDS 0x28) and resets ECUs while flashing,
-//! and that is not a fault.
+//! when the ECU itself answered a tester during the gap or in the second before it: a
+//! tester silences normal traffic (UDS 0x28), programs and resets ECUs while flashing, and
+//! the ECU's own responses show it alive and busy with the tester. Requests alone explain
+//! nothing: a gateway that keeps asking a dead ECU for its trouble codes must not hide that
+//! it is dead.
 //!
 //! Thresholds: a receiver declares an input stale after 3 periods (spec section 2), so a
 //! gap over 3 periods already put the ECU's receivers into their safe states: suspect.
 //! Over 10 periods the ECU is taken to have stopped: faulty. An ECU none of whose messages
 //! ever arrived, or all of whose messages stopped for good, is reported as no data.
 
-use autoplug_can::{Node, DIAG_FUNCTIONAL_REQUEST_ID, MESSAGES};
+use autoplug_can::{Node, MESSAGES};
 use autoplug_gateway::{CarState, Update};
 use autoplug_logs::LogFrame;
 
@@ -23,7 +25,7 @@ pub const ROUTINE: &str = "messages at their periods";
 pub const GAP_SUSPECT_PERIODS: f64 = 3.0;
 /// Gaps over this many periods: faulty.
 pub const GAP_FAULTY_PERIODS: f64 = 10.0;
-/// Diagnostic traffic this long before a gap still explains it, µs.
+/// An answer to a tester this long before a gap still explains it, µs.
 const DIAG_EXPLAINS_US: u64 = 1_000_000;
 
 struct Tracked {
@@ -41,7 +43,7 @@ struct Tracked {
 pub struct Presence {
     node: Node,
     tracked: Vec<Tracked>,
-    last_diag_us: Option<u64>,
+    last_response_us: Option<u64>,
 }
 
 impl Presence {
@@ -64,21 +66,16 @@ impl Presence {
         Self {
             node,
             tracked,
-            last_diag_us: None,
+            last_response_us: None,
         }
     }
 
-    fn is_diag_for_node(&self, id: u32) -> bool {
-        let Ok(id) = u16::try_from(id) else {
-            return false;
-        };
-        id == DIAG_FUNCTIONAL_REQUEST_ID
-            || self.node.diag_request_id() == Some(id)
-            || self.node.diag_response_id() == Some(id)
+    fn is_response_of_node(&self, id: u32) -> bool {
+        u16::try_from(id).is_ok_and(|id| self.node.diag_response_id() == Some(id))
     }
 
     fn explained(&self, from_us: u64) -> bool {
-        self.last_diag_us
+        self.last_response_us
             .is_some_and(|d| d + DIAG_EXPLAINS_US >= from_us)
     }
 }
@@ -90,8 +87,8 @@ impl Routine for Presence {
 
     fn on_frame(&mut self, frame: &LogFrame, update: Update, _state: &CarState) {
         match update {
-            Update::Diagnostic if self.is_diag_for_node(frame.id) => {
-                self.last_diag_us = Some(frame.t_us);
+            Update::Diagnostic if self.is_response_of_node(frame.id) => {
+                self.last_response_us = Some(frame.t_us);
             }
             Update::Message { index, .. } => {
                 // Most frames are another ECU's: one comparison turns them away.

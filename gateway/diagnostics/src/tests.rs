@@ -534,3 +534,68 @@ fn dtc_reports_are_heard_single_and_multi_frame_and_described() {
     assert!(describe(ecu_abs::WHEEL_SENSOR_DTCS[1]).starts_with("front right wheel"));
     assert!(describe(autoplug_ecu::Dtc::from_u24(0x12_3456)).starts_with("not an AutoPlug code"));
 }
+
+#[test]
+fn a_gap_is_explained_by_the_ecus_answers_to_a_tester_not_by_requests_alone() {
+    use autoplug_can::Node;
+    let engine = |_| {
+        EngineMsg {
+            engine_rpm: 900.0,
+            fuel_level: 30.0,
+            engine_mode: EngineMode::Economy,
+            fuel_used: 0.0,
+        }
+        .frame()
+    };
+    let diag = |t_ms: u64, id: u32, data: &[u8]| {
+        LogFrame::new(
+            t_ms * 1000,
+            0,
+            id,
+            false,
+            autoplug_logs::FrameKind::Data,
+            data,
+        )
+        .unwrap()
+    };
+    let verdict = |frames: Vec<LogFrame>| {
+        let mut frames = frames;
+        frames.sort_by_key(|f| f.t_us);
+        let mut pipeline = Pipeline::new(Strictness::Strict);
+        let mut diagnostics = Diagnostics::new();
+        pipeline
+            .run(
+                &mut VecSource::new("test", frames),
+                &mut [&mut diagnostics],
+                &mut || false,
+            )
+            .unwrap();
+        diagnostics
+            .report(pipeline.state())
+            .into_iter()
+            .find(|d| d.ecu == Node::Engine)
+            .unwrap()
+    };
+    // The engine sends for 1 s, then stops; a tester asks it for its DTCs every second.
+    let mut asked = every(20, 1000, engine);
+    asked.extend(every(10, 4000, |_| {
+        VehicleSpeedMsg { vehicle_speed: 0.0 }.frame()
+    }));
+    for t in [1500, 2500, 3500] {
+        asked.push(diag(t, 0x703, &[0x03, 0x19, 0x02, 0xFF]));
+    }
+    assert_eq!(verdict(asked.clone()).verdict, Verdict::NoData);
+
+    // The same, but it answers: it is in a diagnostic session, alive.
+    let mut answered = asked;
+    for t in [1501, 2501, 3501] {
+        answered.push(diag(t, 0x783, &[0x03, 0x59, 0x02, 0xFF]));
+    }
+    // And it resumes at 4 s, so the gap ends.
+    answered.extend(every(20, 500, engine).into_iter().map(|mut f| {
+        f.t_us += 4_000_000;
+        f
+    }));
+    let d = verdict(answered);
+    assert_eq!(d.verdict, Verdict::Ok, "{d:?}");
+}

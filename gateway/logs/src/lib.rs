@@ -28,12 +28,14 @@
 #![forbid(unsafe_code)]
 
 pub mod frame;
+pub mod mcap_export;
 pub mod read;
 pub mod record;
 mod time;
 pub mod write;
 
 pub use frame::{Direction, FrameError, FrameKind, LogFrame};
+pub use mcap_export::{export_mcap, McapSummary};
 pub use read::{open, LogError, LogFormat, LogReader, OpenError, Place};
 pub use record::{RecordError, RecordSummary, Recorder, RotatePolicy};
 pub use time::Utc;
