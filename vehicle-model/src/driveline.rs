@@ -209,6 +209,14 @@ impl Driveline {
             self.declutch_timer_s = p.declutch_hold_s;
         }
         let ratio = signed_ratio(p, self.gearbox.engaged());
+        if self.gearbox.shifting() {
+            // A shift ends a launch: the new gear's clutch closes like after any shift
+            // (the launch regime comes back only if the input is then below
+            // `clutch_release_rpm`). Without this, a gearbox that upshifts before the
+            // input has caught up with the engine (economy at full throttle) would slip
+            // the clutch through every gear.
+            self.launching = false;
+        }
         if self.gearbox.shifting() || ratio == 0.0 || self.declutch_timer_s > 0.0 {
             self.clutch_engagement = 0.0;
             return;
