@@ -599,3 +599,46 @@ fn a_gap_is_explained_by_the_ecus_answers_to_a_tester_not_by_requests_alone() {
     let d = verdict(answered);
     assert_eq!(d.verdict, Verdict::Ok, "{d:?}");
 }
+
+#[test]
+fn an_engine_rpm_that_disagrees_with_speed_and_gear_is_flagged() {
+    use autoplug_can::{Gear, ShiftMode, TransMsg};
+    // 100 km/h in 4th for 10 s; the engine reports `rpm(t)`.
+    let run_with = |rpm: &dyn Fn(u64) -> f32| {
+        let mut frames = every(10, 10_000, |_| {
+            VehicleSpeedMsg {
+                vehicle_speed: 100.0,
+            }
+            .frame()
+        });
+        frames.extend(every(10, 10_000, |_| brake(0.0)));
+        frames.extend(every(20, 10_000, |_| {
+            TransMsg {
+                gear: Gear::Fourth,
+                shift_mode: ShiftMode::Automatic,
+            }
+            .frame()
+        }));
+        frames.extend(every(20, 10_000, |t| {
+            EngineMsg {
+                engine_rpm: rpm(t),
+                fuel_level: 30.0,
+                engine_mode: EngineMode::Economy,
+                fuel_used: 0.0,
+            }
+            .frame()
+        }));
+        run(frames, "RPM against speed and gear")
+    };
+    let expected = ecu_trans::engine_rpm_at(100.0, ecu_trans::GEAR_RATIOS[3]);
+    let ok = run_with(&|_| expected);
+    assert_eq!(ok.verdict, Verdict::Ok, "{ok:?}");
+    assert!(ok.evidence.starts_with("held in all"), "{ok:?}");
+    // A sensor stuck at idle from 2 s on: faulty, for the 8 s it lasted.
+    let stuck = run_with(&|t| if t < 2000 { expected } else { 850.0 });
+    assert_eq!(stuck.verdict, Verdict::Faulty, "{stuck:?}");
+    assert!((stuck.value.unwrap() - 8.0).abs() < 0.1, "{stuck:?}");
+    // 10 % off is within the tolerance (quantisation, tyre slip).
+    let slipping = run_with(&|_| expected * 1.1);
+    assert_eq!(slipping.verdict, Verdict::Ok, "{slipping:?}");
+}
