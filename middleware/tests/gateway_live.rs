@@ -7,6 +7,11 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use autoplug_store::{SqliteStore, TripStatus, TripStore};
+use autoplug_virtual_car::car::VirtualCar;
+use autoplug_virtual_car::scenario::Scenario;
+use autoplug_virtual_car::socketcand::SocketcandServer;
+
+mod common;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -308,4 +313,84 @@ fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_fin
     let replayed = store.trip(trips[0].id).unwrap().unwrap();
     assert_eq!(replayed.dtcs, detail.dtcs);
     assert_eq!(replayed.verdicts, detail.verdicts);
+}
+
+/// The virtual car served over socketcand in real time on a thread, as `virtual-car run
+/// --socketcand --realtime` serves it, until `stop` or the scenario's end.
+fn serve_car(
+    server: SocketcandServer,
+    scenario: Scenario,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) {
+    use std::sync::atomic::Ordering;
+    common::wait_for_raw_client(&server);
+    let mut car = VirtualCar::new(&scenario);
+    let wall = Instant::now();
+    let mut from_client = std::collections::VecDeque::new();
+    while !car.finished() && !stop.load(Ordering::Relaxed) {
+        car.tick();
+        while let Some(client) = server.try_recv() {
+            from_client.push_back(client.frame);
+        }
+        while let Some(frame) = from_client.front() {
+            if !car.inject(*frame) {
+                break;
+            }
+            from_client.pop_front();
+        }
+        for entry in car.take_log().iter().filter(|e| e.sender != "External") {
+            server.broadcast(entry.t_us, &entry.frame, None);
+        }
+        if car.time_us() % 10_000 == 0 {
+            if let Some(wait) = Duration::from_micros(car.time_us()).checked_sub(wall.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+    }
+}
+
+#[test]
+fn the_gateway_on_socketcand_watches_the_car_and_talks_to_its_ecus() {
+    let root = root();
+    let scenario = Scenario::load(&root.join("scenarios/workshop.toml")).unwrap();
+    let server = SocketcandServer::start("127.0.0.1:0").unwrap();
+    let url = format!("socketcand://127.0.0.1:{}/can0", server.address().port());
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let car = {
+        let stop = std::sync::Arc::clone(&stop);
+        std::thread::spawn(move || serve_car(server, scenario, stop))
+    };
+    let output = autoplug(&[
+        "gateway",
+        "--bus",
+        &url,
+        "--duration",
+        "3",
+        "--no-db",
+        "--quiet",
+        "--transmit",
+    ]);
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    car.join().unwrap();
+    let stdout = text(&output.stdout);
+    assert!(output.status.success(), "{output:?}");
+    // About 1190 frames a second for 3 s of wall time, less the connection's start.
+    let frames: u64 = stdout
+        .lines()
+        .find_map(|l| l.split_once(" frames, ").map(|(n, _)| n.parse().unwrap()))
+        .unwrap();
+    assert!(frames > 1500, "{stdout}");
+    // Its tester read the nine ECUs' identification and trouble codes over the link.
+    assert!(
+        stdout.contains("AP-CRUISE-0001") && stdout.contains("AP-ABS-0001"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("DTCs abs at"), "{stdout}");
+    // A live bus refuses pacing options.
+    let paced = autoplug(&["gateway", "--bus", &url, "--speed", "2", "--no-db"]);
+    assert_eq!(paced.status.code(), Some(1));
+    assert!(
+        text(&paced.stderr).contains("pace the virtual car only"),
+        "{paced:?}"
+    );
 }
