@@ -18,7 +18,7 @@
 //! | [`console`] | console | longest disagreement of the brake lights with the brake |
 //! | [`differential`] | differential | torque split 0 under the hold conditions; split against the yaw-rate error |
 //! | [`engine`] | engine | RPM against speed and gear; fuel never rising while driving |
-//! | [`steering`] | steering | paddle requests as pulses: longest request, direct Up/Down changes |
+//! | [`steering`] | steering | paddle requests as pulses: longest request, direct Up/Down changes; the angle's rate |
 //! | [`transmission`] | transmission | time out of the shift schedule's band; shifts too soon, hunting |
 //! | [`pedals`] | pedals | brake override of the accelerator; commands follow the cruise command |
 //!

@@ -642,3 +642,27 @@ fn an_engine_rpm_that_disagrees_with_speed_and_gear_is_flagged() {
     let slipping = run_with(&|_| expected * 1.1);
     assert_eq!(slipping.verdict, Verdict::Ok, "{slipping:?}");
 }
+
+#[test]
+fn a_steering_angle_that_jumps_faster_than_a_hand_is_flagged() {
+    use autoplug_can::SteeringMsg;
+    let angle = |deg: f32| {
+        SteeringMsg {
+            steering_angle: deg,
+        }
+        .frame()
+    };
+    // A 180 deg/s ramp (the step steer is 200): ok, measured close to it.
+    let ramp = run(
+        every(10, 2000, |t| angle((t as f32 * 0.18).min(135.0) - 67.5)),
+        "steering angle rate",
+    );
+    assert_eq!(ramp.verdict, Verdict::Ok, "{ramp:?}");
+    assert!((ramp.value.unwrap() - 180.0).abs() < 40.0, "{ramp:?}");
+    // A jump from -90 to +90 degrees between two frames: 3600 deg/s over 50 ms.
+    let jump = run(
+        every(10, 2000, |t| angle(if t < 1000 { -90.0 } else { 90.0 })),
+        "steering angle rate",
+    );
+    assert_eq!(jump.verdict, Verdict::Faulty, "{jump:?}");
+}
