@@ -26,7 +26,7 @@ use crate::tester::{
     dtc_table, identification_table, DtcJob, FlashConfig, FlashError, FlashJob, IdentJob,
     TesterConfig,
 };
-use crate::transport::{self, TransportError, Via};
+use crate::transport::{self, Transport, TransportError, Via};
 use crate::watch::{StatusLine, TripLog, Watch};
 use crate::DEV_SECURITY_SECRET;
 use autoplug_gateway::{Observer, Pipeline, RecordingSink, Strictness};
@@ -601,14 +601,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             Ok(())
         }
         Command::Dtcs { via, ecu, timing } => {
-            let mut transport = transport::open(&via)?;
-            let ecus = ecu.ecus();
-            let mut job = DtcJob::new(&ecus, timing.tester_config());
-            let reports = match driver::run(transport.as_mut(), &mut job) {
-                Ok(reports) => reports,
-                Err(DriveError::Transport(error)) => return Err(error.into()),
-                Err(DriveError::Job(never)) => match never {},
-            };
+            let (reports, transport) =
+                run_reading(&via, DtcJob::new(&ecu.ecus(), timing.tester_config()))?;
             write!(out, "{}", dtc_table(&reports))?;
             if reports.iter().all(|r| r.entries.is_err()) {
                 return Err(CliError::NoAnswer(format!(
@@ -619,14 +613,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             Ok(())
         }
         Command::Ids { via, ecu, timing } => {
-            let mut transport = transport::open(&via)?;
-            let ecus = ecu.ecus();
-            let mut job = IdentJob::new(&ecus, timing.tester_config());
-            let rows = match driver::run(transport.as_mut(), &mut job) {
-                Ok(rows) => rows,
-                Err(DriveError::Transport(error)) => return Err(error.into()),
-                Err(DriveError::Job(never)) => match never {},
-            };
+            let (rows, transport) =
+                run_reading(&via, IdentJob::new(&ecu.ecus(), timing.tester_config()))?;
             write!(out, "{}", identification_table(&rows))?;
             let silent: Vec<String> = rows
                 .iter()
@@ -784,6 +772,20 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 Err(CliError::FaultyEcu(faulty.join(", ")))
             }
         }
+    }
+}
+
+/// Runs a job that only reads (identification, DTCs: it cannot fail as a whole) over the
+/// bus `via` names; gives its result and the transport, for messages.
+fn run_reading<J>(via: &Via, mut job: J) -> Result<(J::Output, Box<dyn Transport>), CliError>
+where
+    J: crate::tester::Job<Error = std::convert::Infallible>,
+{
+    let mut transport = transport::open(via)?;
+    match driver::run(transport.as_mut(), &mut job) {
+        Ok(output) => Ok((output, transport)),
+        Err(DriveError::Transport(error)) => Err(error.into()),
+        Err(DriveError::Job(never)) => match never {},
     }
 }
 

@@ -17,7 +17,8 @@ fn every(period_ms: u64, until_ms: u64, make: impl Fn(u64) -> Frame) -> Vec<LogF
         .collect()
 }
 
-fn run(mut frames: Vec<LogFrame>, routine: &str) -> Finding {
+/// The diagnosis of every ECU after `frames` (sorted into time order first).
+fn report(mut frames: Vec<LogFrame>) -> Vec<crate::EcuDiagnosis> {
     frames.sort_by_key(|f| f.t_us);
     let mut pipeline = Pipeline::new(Strictness::Strict);
     let mut diagnostics = Diagnostics::new();
@@ -28,8 +29,11 @@ fn run(mut frames: Vec<LogFrame>, routine: &str) -> Finding {
             &mut || false,
         )
         .unwrap();
-    diagnostics
-        .report(pipeline.state())
+    diagnostics.report(pipeline.state())
+}
+
+fn run(frames: Vec<LogFrame>, routine: &str) -> Finding {
+    report(frames)
         .into_iter()
         .flat_map(|d| d.findings)
         .find(|f| f.routine == routine)
@@ -559,19 +563,7 @@ fn a_gap_is_explained_by_the_ecus_answers_to_a_tester_not_by_requests_alone() {
         .unwrap()
     };
     let verdict = |frames: Vec<LogFrame>| {
-        let mut frames = frames;
-        frames.sort_by_key(|f| f.t_us);
-        let mut pipeline = Pipeline::new(Strictness::Strict);
-        let mut diagnostics = Diagnostics::new();
-        pipeline
-            .run(
-                &mut VecSource::new("test", frames),
-                &mut [&mut diagnostics],
-                &mut || false,
-            )
-            .unwrap();
-        diagnostics
-            .report(pipeline.state())
+        report(frames)
             .into_iter()
             .find(|d| d.ecu == Node::Engine)
             .unwrap()
