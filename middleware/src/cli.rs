@@ -900,6 +900,9 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     let mut status_out = io::stderr();
     let mut watch = Watch::new(trip_log);
     watch.tester = tester;
+    if let BusUrl::Transport(_) = bus {
+        watch.silent_after = Some(crate::watch::LIVE_SILENCE);
+    }
     if !options.quiet {
         watch.status = Some(StatusLine::new(&mut status_out, Duration::from_secs(1)));
     }

@@ -4,7 +4,7 @@
 //! full disk) stops storing with its error kept for the report; the watching goes on.
 
 use std::io::Write;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use autoplug_diagnostics::{describe_dtc, Diagnostics, DtcMonitor, EcuDiagnosis};
 use autoplug_gateway::{CarState, Observer, Update};
@@ -17,6 +17,9 @@ use autoplug_trips::{CompletedTrip, TripEnd, TripStats, TripTracker};
 use crate::bus_tester::BusTester;
 use crate::names::ecu_name;
 use crate::tester::EcuIdentification;
+
+/// How long a real bus may be silent before its trip ends: the trip rule's own.
+pub const LIVE_SILENCE: Duration = Duration::from_micros(autoplug_trips::SILENT_AFTER_US);
 
 /// How often the trip in progress is written to the store, µs of bus time: a crash (kill
 /// -9, power loss) loses at most this much of a trip's statistics.
@@ -254,6 +257,11 @@ pub struct Watch<'a> {
     pub tester: Option<BusTester>,
     /// The ECUs' identification, once the tester read it.
     pub identification: Option<Vec<EcuIdentification>>,
+    /// On a real bus: how long it may stay silent, in wall time, before the trip in
+    /// progress ends (bus time stands still while no frame comes). `None` for a log or the
+    /// virtual car, whose silences are in their own time.
+    pub silent_after: Option<Duration>,
+    idle_since: Option<Instant>,
 }
 
 impl Default for Watch<'_> {
@@ -279,6 +287,8 @@ impl<'a> Watch<'a> {
             dtcs: DtcMonitor::new(),
             tester: None,
             identification: None,
+            silent_after: None,
+            idle_since: None,
         }
     }
 
@@ -363,6 +373,7 @@ pub fn status_text(state: &CarState, diagnostics: &Diagnostics, trips: &TripTrac
 
 impl Observer for Watch<'_> {
     fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        self.idle_since = None;
         self.diagnostics.on_frame(frame, update, state);
         self.dtcs.on_frame(frame, update, state);
         if let Some(tester) = self.tester.as_mut() {
@@ -380,6 +391,96 @@ impl Observer for Watch<'_> {
     }
 
     fn on_idle(&mut self, state: &CarState) {
+        let Some(silent_after) = self.silent_after else {
+            return self.maybe_print_status(state);
+        };
+        // The first idle call comes 50 ms after the last frame (the pipeline's IDLE_AFTER).
+        let since = *self.idle_since.get_or_insert_with(Instant::now);
+        if since.elapsed() >= silent_after && self.trips.current().is_some() {
+            self.trips.bus_silent();
+            self.sync(state);
+        }
         self.maybe_print_status(state);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use autoplug_can::{CanMessage, VehicleSpeedMsg};
+    use autoplug_gateway::{FrameSource, Pipeline, Poll, SourceError, Strictness};
+
+    /// Frames for a while, then a bus that stays silent.
+    struct Falls {
+        frames: std::vec::IntoIter<LogFrame>,
+    }
+
+    impl FrameSource for Falls {
+        fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
+            Ok(match self.frames.next() {
+                Some(f) => Poll::Frame(f),
+                None => {
+                    std::thread::sleep(max_wait);
+                    Poll::Idle
+                }
+            })
+        }
+
+        fn describe(&self) -> String {
+            "a bus that falls silent".into()
+        }
+    }
+
+    #[test]
+    fn a_live_bus_that_falls_silent_ends_its_trip_without_another_frame() {
+        let frames: Vec<LogFrame> = (0..100)
+            .map(|i| {
+                LogFrame::from_can(
+                    i * 10_000,
+                    0,
+                    &VehicleSpeedMsg {
+                        vehicle_speed: 50.0,
+                    }
+                    .frame(),
+                )
+            })
+            .collect();
+        let mut source = Falls {
+            frames: frames.into_iter(),
+        };
+        let mut watch = Watch::new(None);
+        watch.silent_after = Some(Duration::from_millis(200));
+        let mut pipeline = Pipeline::new(Strictness::Strict);
+        let started = Instant::now();
+        pipeline
+            .run(&mut source, &mut [&mut watch], &mut || {
+                started.elapsed() > Duration::from_secs(2)
+            })
+            .unwrap();
+        assert_eq!(watch.ended.len(), 1, "ended while the bus was silent");
+        assert_eq!(watch.ended[0].1, TripEnd::BusSilent);
+        assert_eq!(watch.ended[0].0.end_us, 990_000);
+
+        // A log's own silences are in its time: a replay's watch ignores the wall clock.
+        let mut replay = Watch::new(None);
+        let mut source = Falls {
+            frames: vec![LogFrame::from_can(
+                0,
+                0,
+                &VehicleSpeedMsg {
+                    vehicle_speed: 50.0,
+                }
+                .frame(),
+            )]
+            .into_iter(),
+        };
+        let started = Instant::now();
+        let mut pipeline = Pipeline::new(Strictness::Strict);
+        pipeline
+            .run(&mut source, &mut [&mut replay], &mut || {
+                started.elapsed() > Duration::from_millis(300)
+            })
+            .unwrap();
+        assert!(replay.ended.is_empty());
     }
 }

@@ -262,6 +262,16 @@ impl TripTracker {
         }
     }
 
+    /// A live bus has been silent for [`SILENT_AFTER_US`] of wall time (no frame at all, so
+    /// bus time stands still): the trip in progress ends as bus silent, as it would when
+    /// the next frame showed the gap.
+    pub fn bus_silent(&mut self) {
+        if let Some(open) = self.open.as_ref() {
+            let end_us = open.last_active_us;
+            self.close(TripEnd::BusSilent, end_us);
+        }
+    }
+
     fn close(&mut self, end: TripEnd, end_us: u64) {
         if let Some(mut open) = self.open.take() {
             let stats = open.stats_to(end_us);
