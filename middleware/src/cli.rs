@@ -169,8 +169,8 @@ pub enum Command {
         /// Run the virtual car as fast as the machine goes.
         #[arg(long)]
         fast: bool,
-        /// Stop after this many seconds.
-        #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
+        /// Stop after this many seconds (at most 30 days).
+        #[arg(long, value_name = "SECONDS", value_parser = parse_duration)]
         duration: Option<f64>,
         /// No status line (the summary at the end is still printed).
         #[arg(long)]
@@ -439,6 +439,14 @@ fn parse_version(text: &str) -> Result<Version, String> {
 
 fn parse_build_id(text: &str) -> Result<[u8; BUILD_ID_LEN], String> {
     image_tool::parse_build_id(text)
+}
+
+fn parse_duration(text: &str) -> Result<f64, String> {
+    const MAX_S: f64 = 30.0 * 86_400.0;
+    match text.parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 && s <= MAX_S => Ok(s),
+        _ => Err(format!("'{text}' is not a number of seconds in (0, {MAX_S}]")),
+    }
 }
 
 fn parse_seconds(text: &str) -> Result<f64, String> {

@@ -305,6 +305,51 @@ impl std::error::Error for ScenarioError {}
 /// Longest scenario, s.
 pub const MAX_DURATION_S: f64 = 3600.0;
 
+/// Largest scenario file read, bytes: an hour-long scenario with an input every second is
+/// about 100 KB, and a larger file is not worth parsing to refuse it.
+pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
+
+/// Longest error message, characters: whatever the input, an error stays a line or two.
+pub const MAX_MESSAGE_CHARS: usize = 300;
+
+/// Characters of the offending line shown around the place of a syntax error.
+const SNIPPET_CHARS: usize = 40;
+
+/// `text` cut to at most `max` characters, with an ellipsis where it was cut.
+fn cut(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        Some((end, _)) => format!("{}…", &text[..end]),
+        None => text.to_string(),
+    }
+}
+
+/// A TOML syntax error in a line or two: its place, the parser's message (its own excerpt
+/// of the file, which can be as long as the file's longest line, left out), and a short
+/// snippet of the line around the place.
+fn syntax_error(text: &str, error: &toml::de::Error) -> String {
+    let message = cut(error.message().trim(), 120);
+    let Some(span) = error.span() else {
+        return message;
+    };
+    let start = span.start.min(text.len());
+    let start = (0..=start)
+        .rev()
+        .find(|&i| text.is_char_boundary(i))
+        .unwrap_or(0);
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
+    let line = text[..start].matches('\n').count() + 1;
+    let column = text[line_start..start].chars().count() + 1;
+    // The snippet: up to SNIPPET_CHARS characters of the line from a little before the place.
+    let from = text[line_start..start]
+        .char_indices()
+        .rev()
+        .nth(SNIPPET_CHARS / 4)
+        .map_or(line_start, |(i, _)| line_start + i);
+    let snippet = cut(&text[from..line_end], SNIPPET_CHARS);
+    format!("line {line}, column {column}: {message} (at \"{snippet}\")")
+}
+
 /// Node names a fault may name.
 const NODE_NAMES: [&str; 9] = [
     "Engine",
@@ -322,22 +367,31 @@ impl Scenario {
     /// Reads and checks a scenario file.
     pub fn load(path: &Path) -> Result<Self, ScenarioError> {
         let source = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
+        let fail = |message: String| ScenarioError {
             source: source.clone(),
-            message: format!("cannot read: {e}"),
-        })?;
+            message,
+        };
+        let size = std::fs::metadata(path)
+            .map_err(|e| fail(format!("cannot read: {e}")))?
+            .len();
+        if size > MAX_SCENARIO_BYTES {
+            return Err(fail(format!(
+                "{size} bytes: a scenario file is at most {MAX_SCENARIO_BYTES} bytes"
+            )));
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot read: {e}")))?;
         Self::parse(&text, &source)
     }
 
     /// Parses and checks scenario text; `source` names it in errors.
     pub fn parse(text: &str, source: &str) -> Result<Self, ScenarioError> {
         let scenario: Scenario = toml::from_str(text).map_err(|e| ScenarioError {
-            source: source.to_string(),
-            message: e.to_string().trim_end().to_string(),
+            source: cut(source, MAX_MESSAGE_CHARS),
+            message: cut(&syntax_error(text, &e), MAX_MESSAGE_CHARS),
         })?;
         scenario.check().map_err(|message| ScenarioError {
-            source: source.to_string(),
-            message,
+            source: cut(source, MAX_MESSAGE_CHARS),
+            message: cut(&message, MAX_MESSAGE_CHARS),
         })?;
         Ok(scenario)
     }

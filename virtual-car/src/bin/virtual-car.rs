@@ -44,7 +44,7 @@ enum Command {
         socketcand: Option<String>,
         /// With --socketcand: wait up to this many seconds for a client in raw mode before
         /// starting.
-        #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+        #[arg(long, value_name = "SECONDS", default_value_t = 0.0, value_parser = parse_wait)]
         wait_for_client: f64,
     },
     /// Lists the scenarios in a folder with their descriptions.
@@ -53,6 +53,18 @@ enum Command {
         #[arg(default_value = "scenarios")]
         dir: PathBuf,
     },
+}
+
+/// Longest wait for a client, s (a day: longer is a mistake, not a plan).
+const MAX_WAIT_S: f64 = 86_400.0;
+
+fn parse_wait(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s.is_finite() && (0.0..=MAX_WAIT_S).contains(&s) => Ok(s),
+        _ => Err(format!(
+            "'{text}' is not a number of seconds from 0 to {MAX_WAIT_S}"
+        )),
+    }
 }
 
 fn main() -> ExitCode {
@@ -64,6 +76,13 @@ fn main() -> ExitCode {
             socketcand,
             wait_for_client,
         } => {
+            if out.exists() && !out.is_dir() {
+                eprintln!(
+                    "error: --out '{}' is a file: it must be a folder (or not exist yet)",
+                    out.display()
+                );
+                return ExitCode::from(2);
+            }
             let server = match socketcand.as_deref().map(SocketcandServer::start) {
                 None => None,
                 Some(Ok(server)) => {
@@ -94,7 +113,11 @@ fn main() -> ExitCode {
                             realtime || server.is_some(),
                             server.as_ref(),
                         ) {
-                            eprintln!("error: {}: {e}", path.display());
+                            eprintln!(
+                                "error: --out '{}': cannot write the results of {}: {e}",
+                                out.display(),
+                                path.display()
+                            );
                             failed = true;
                         }
                     }
