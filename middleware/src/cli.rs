@@ -445,7 +445,9 @@ fn parse_duration(text: &str) -> Result<f64, String> {
     const MAX_S: f64 = 30.0 * 86_400.0;
     match text.parse::<f64>() {
         Ok(s) if s.is_finite() && s > 0.0 && s <= MAX_S => Ok(s),
-        _ => Err(format!("'{text}' is not a number of seconds in (0, {MAX_S}]")),
+        _ => Err(format!(
+            "'{text}' is not a number of seconds in (0, {MAX_S}]"
+        )),
     }
 }
 

@@ -15,14 +15,25 @@
 //!
 //! The simulation thread only calls [`SocketcandServer::broadcast`] and
 //! [`SocketcandServer::try_recv`], which never block it: each client has a writer thread fed
-//! through a channel, and received frames wait in a channel until the simulation takes them.
+//! through a bounded channel, and its received frames wait in a bounded queue of its own
+//! until the simulation takes them, the clients in turn.
+//!
+//! **Limits**, for hostile clients: [`MAX_CLIENTS`] at once; [`CLIENT_TO_BUS_FRAMES`]
+//! frames per client waiting for the bus and [`CLIENT_OUTBOX_MESSAGES`] messages waiting to
+//! be written to it (beyond either, frames are dropped and counted, [`Drops`]);
+//! [`MAX_MESSAGE_BYTES`] per message; [`HANDSHAKE_TIMEOUT`] of silence before raw mode.
+//! However a connection ends (the client leaves in any state, talks nonsense, times out,
+//! stops reading, or the server stops), its threads end and its socket is closed; the
+//! frames it had queued for the bus are still sent, up to one queue's worth for all the
+//! clients that have gone together.
 
 use autoplug_can::Frame;
+use std::collections::VecDeque;
 use std::io::{self, BufWriter, Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{self, Receiver, Sender};
-use std::sync::{Arc, Mutex};
+use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread;
 use std::time::Duration;
 
@@ -35,19 +46,59 @@ pub const BUS_NAME: &str = "can0";
 /// fail (`Expected '< ok >' got: '< ok >< frame ...'`).
 pub const RAW_MODE_GRACE: Duration = Duration::from_millis(50);
 
+/// Clients at once; one more is told so and disconnected.
+pub const MAX_CLIENTS: usize = 32;
+/// Frames a client may have waiting for the bus: a whole ISO-TP message (4095 bytes, 586
+/// frames) sent at once fits. Further frames are dropped and counted, as a CAN interface's
+/// full transmit queue drops them: a flood cannot outlive its client or grow the server.
+pub const CLIENT_TO_BUS_FRAMES: usize = 1024;
+/// Messages waiting to be written to a client (about 3 s of the car's traffic): a client
+/// that reads too slowly, or not at all, loses frames (counted), never the server's memory.
+pub const CLIENT_OUTBOX_MESSAGES: usize = 4096;
+/// Longest message a client may send, bytes (a `send` of 8 bytes is under 40).
+pub const MAX_MESSAGE_BYTES: usize = 4096;
+/// How long a client may stay silent before raw mode (a connection that never gets there
+/// is not left holding a place).
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(30);
+
 /// A frame a client sent, and which client.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ClientFrame {
-    /// The client (connection number, from 1).
+    /// The client (connection number, from 1; 0 for a client that has gone).
     pub client: u64,
     /// The frame.
     pub frame: Frame,
 }
 
+/// What the server dropped because a queue was full.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Drops {
+    /// Frames from clients that found their queue toward the bus full.
+    pub to_bus: u64,
+    /// Bus frames not sent to a client whose queue toward it was full.
+    pub to_clients: u64,
+}
+
+/// What a client's reader and writer threads and the simulation share.
+#[derive(Default)]
+struct Shared {
+    raw_mode: AtomicBool,
+    to_bus: Mutex<VecDeque<Frame>>,
+}
+
 struct Client {
     id: u64,
-    raw_mode: Arc<AtomicBool>,
-    outbox: Sender<Outgoing>,
+    shared: Arc<Shared>,
+    outbox: SyncSender<Outgoing>,
+    /// A handle on the socket, to shut it down when the client is removed: the reader and
+    /// writer threads then end, and the socket closes.
+    stream: TcpStream,
+}
+
+impl Drop for Client {
+    fn drop(&mut self) {
+        let _ = self.stream.shutdown(Shutdown::Both);
+    }
 }
 
 /// What a client's writer thread is asked to do.
@@ -58,13 +109,62 @@ enum Outgoing {
     EnterRawMode,
 }
 
+/// What the server's threads share.
+#[derive(Default)]
+struct State {
+    clients: Mutex<Vec<Client>>,
+    refused: AtomicU64,
+    dropped_to_bus: AtomicU64,
+    dropped_to_clients: AtomicU64,
+    /// Where the next [`SocketcandServer::try_recv`] starts looking (round robin).
+    next_client: AtomicUsize,
+    /// Frames of clients that have gone, not yet on the bus: sent still, as an interface
+    /// sends what was handed to it before its socket closed (a `cansend`-like tool connects,
+    /// sends and leaves), but never more than one client's queue's worth.
+    leftovers: Mutex<VecDeque<Frame>>,
+    stop: AtomicBool,
+}
+
+impl State {
+    fn clients(&self) -> MutexGuard<'_, Vec<Client>> {
+        self.clients.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Removes a client: its socket is shut down, the frames it queued for the bus join the
+    /// bounded leftovers.
+    fn remove(&self, id: u64) {
+        let removed: Vec<Client> = {
+            let mut clients = self.clients();
+            let (gone, kept) = std::mem::take(&mut *clients)
+                .into_iter()
+                .partition(|c| c.id == id);
+            *clients = kept;
+            gone
+        };
+        for client in removed {
+            let queued = std::mem::take(
+                &mut *client
+                    .shared
+                    .to_bus
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner()),
+            );
+            let mut leftovers = self.leftovers.lock().unwrap_or_else(|e| e.into_inner());
+            for frame in queued {
+                if leftovers.len() < CLIENT_TO_BUS_FRAMES {
+                    leftovers.push_back(frame);
+                } else {
+                    self.dropped_to_bus.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+}
+
 /// The running server.
 pub struct SocketcandServer {
     address: SocketAddr,
-    clients: Arc<Mutex<Vec<Client>>>,
-    inbox: Receiver<ClientFrame>,
-    refused: Arc<AtomicU64>,
-    stop: Arc<AtomicBool>,
+    state: Arc<State>,
 }
 
 impl SocketcandServer {
@@ -73,23 +173,12 @@ impl SocketcandServer {
         let listener = TcpListener::bind(address)?;
         let address = listener.local_addr()?;
         listener.set_nonblocking(true)?;
-        let clients: Arc<Mutex<Vec<Client>>> = Arc::default();
-        let (to_sim, inbox) = mpsc::channel();
-        let refused = Arc::new(AtomicU64::new(0));
-        let stop = Arc::new(AtomicBool::new(false));
+        let state = Arc::new(State::default());
         {
-            let clients = Arc::clone(&clients);
-            let refused = Arc::clone(&refused);
-            let stop = Arc::clone(&stop);
-            thread::spawn(move || accept_loop(listener, clients, to_sim, refused, stop));
+            let state = Arc::clone(&state);
+            thread::spawn(move || accept_loop(listener, state));
         }
-        Ok(Self {
-            address,
-            clients,
-            inbox,
-            refused,
-            stop,
-        })
+        Ok(Self { address, state })
     }
 
     /// The address the server listens on.
@@ -99,45 +188,84 @@ impl SocketcandServer {
 
     /// Clients in raw mode, receiving frames.
     pub fn raw_clients(&self) -> usize {
-        self.lock_clients()
+        self.state
+            .clients()
             .iter()
-            .filter(|c| c.raw_mode.load(Ordering::Acquire))
+            .filter(|c| c.shared.raw_mode.load(Ordering::Acquire))
             .count()
     }
 
-    /// Sends a bus frame to every client in raw mode except `from_client` (its sender).
-    pub fn broadcast(&self, t_us: u64, frame: &Frame, from_client: Option<u64>) {
-        let text = frame_message(t_us, frame);
-        let mut clients = self.lock_clients();
-        // A client whose writer has gone (disconnected) is dropped here.
-        clients.retain(|c| {
-            if Some(c.id) == from_client || !c.raw_mode.load(Ordering::Acquire) {
-                return true;
-            }
-            c.outbox.send(Outgoing::Message(text.clone())).is_ok()
-        });
+    /// Clients connected, in any state.
+    pub fn clients(&self) -> usize {
+        self.state.clients().len()
     }
 
-    /// The next frame a client sent, if any (never blocks).
+    /// Sends a bus frame to every client in raw mode except `from_client` (its sender).
+    /// Never blocks: a client whose queue is full misses the frame (counted in
+    /// [`SocketcandServer::drops`]).
+    pub fn broadcast(&self, t_us: u64, frame: &Frame, from_client: Option<u64>) {
+        let text = frame_message(t_us, frame);
+        let mut gone = Vec::new();
+        for c in self.state.clients().iter() {
+            if Some(c.id) == from_client || !c.shared.raw_mode.load(Ordering::Acquire) {
+                continue;
+            }
+            match c.outbox.try_send(Outgoing::Message(text.clone())) {
+                Ok(()) => {}
+                Err(TrySendError::Full(_)) => {
+                    self.state
+                        .dropped_to_clients
+                        .fetch_add(1, Ordering::Relaxed);
+                }
+                Err(TrySendError::Disconnected(_)) => gone.push(c.id),
+            }
+        }
+        for id in gone {
+            self.state.remove(id);
+        }
+    }
+
+    /// The next frame a client sent, if any (never blocks). Clients take turns, so one that
+    /// floods cannot hold back the others' frames.
     pub fn try_recv(&self) -> Option<ClientFrame> {
-        self.inbox.try_recv().ok()
+        let clients = self.state.clients();
+        // The clients' queues, and the leftovers of those that have gone as one more.
+        let n = clients.len() + 1;
+        let start = self.state.next_client.load(Ordering::Relaxed);
+        for k in 0..n {
+            let i = (start + k) % n;
+            let (client, queue) = match clients.get(i) {
+                Some(c) => (c.id, &c.shared.to_bus),
+                None => (0, &self.state.leftovers),
+            };
+            let frame = queue.lock().unwrap_or_else(|e| e.into_inner()).pop_front();
+            if let Some(frame) = frame {
+                self.state.next_client.store(i + 1, Ordering::Relaxed);
+                return Some(ClientFrame { client, frame });
+            }
+        }
+        None
     }
 
     /// Client commands refused so far (malformed `send`, unknown commands).
     pub fn refused_commands(&self) -> u64 {
-        self.refused.load(Ordering::Relaxed)
+        self.state.refused.load(Ordering::Relaxed)
     }
 
-    fn lock_clients(&self) -> std::sync::MutexGuard<'_, Vec<Client>> {
-        self.clients.lock().unwrap_or_else(|e| e.into_inner())
+    /// Frames dropped so far because a queue was full.
+    pub fn drops(&self) -> Drops {
+        Drops {
+            to_bus: self.state.dropped_to_bus.load(Ordering::Relaxed),
+            to_clients: self.state.dropped_to_clients.load(Ordering::Relaxed),
+        }
     }
 }
 
 impl Drop for SocketcandServer {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        // Dropping the outboxes ends the writer threads, which close their sockets.
-        self.lock_clients().clear();
+        self.state.stop.store(true, Ordering::Release);
+        // Removing the clients shuts their sockets down: their threads end.
+        self.state.clients().clear();
     }
 }
 
@@ -155,20 +283,14 @@ fn frame_message(t_us: u64, frame: &Frame) -> String {
     )
 }
 
-fn accept_loop(
-    listener: TcpListener,
-    clients: Arc<Mutex<Vec<Client>>>,
-    to_sim: Sender<ClientFrame>,
-    refused: Arc<AtomicU64>,
-    stop: Arc<AtomicBool>,
-) {
+fn accept_loop(listener: TcpListener, state: Arc<State>) {
     let mut next_id = 1;
-    while !stop.load(Ordering::Acquire) {
+    while !state.stop.load(Ordering::Acquire) {
         match listener.accept() {
             Ok((stream, _)) => {
                 let id = next_id;
                 next_id += 1;
-                if let Err(e) = serve(stream, id, &clients, to_sim.clone(), Arc::clone(&refused)) {
+                if let Err(e) = serve(stream, id, &state) {
                     eprintln!("socketcand: client {id}: {e}");
                 }
             }
@@ -183,42 +305,53 @@ fn accept_loop(
     }
 }
 
-fn serve(
-    stream: TcpStream,
-    id: u64,
-    clients: &Arc<Mutex<Vec<Client>>>,
-    to_sim: Sender<ClientFrame>,
-    refused: Arc<AtomicU64>,
-) -> io::Result<()> {
+fn serve(mut stream: TcpStream, id: u64, state: &Arc<State>) -> io::Result<()> {
     stream.set_nonblocking(false)?;
     stream.set_nodelay(true)?;
-    let (outbox, outgoing) = mpsc::channel::<Outgoing>();
-    let raw_mode = Arc::new(AtomicBool::new(false));
-    let writer_stream = stream.try_clone()?;
-    {
-        let raw_mode = Arc::clone(&raw_mode);
-        thread::spawn(move || write_loop(writer_stream, outgoing, raw_mode));
+    if state.clients().len() >= MAX_CLIENTS {
+        let _ = stream.write_all(
+            format!("< error this server takes {MAX_CLIENTS} clients at once >").as_bytes(),
+        );
+        let _ = stream.shutdown(Shutdown::Both);
+        return Ok(());
     }
+    stream.set_read_timeout(Some(HANDSHAKE_TIMEOUT))?;
+    let (outbox, outgoing) = mpsc::sync_channel::<Outgoing>(CLIENT_OUTBOX_MESSAGES);
+    let shared = Arc::new(Shared::default());
+    let writer_stream = stream.try_clone()?;
+    let handle = stream.try_clone()?;
     outbox
         .send(Outgoing::Message("< hi >".to_string()))
         .map_err(|_| io::Error::other("writer ended"))?;
-    clients
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .push(Client {
-            id,
-            raw_mode: Arc::clone(&raw_mode),
-            outbox: outbox.clone(),
-        });
-    thread::spawn(move || read_loop(stream, id, outbox, to_sim, refused));
+    state.clients().push(Client {
+        id,
+        shared: Arc::clone(&shared),
+        outbox: outbox.clone(),
+        stream: handle,
+    });
+    {
+        let shared = Arc::clone(&shared);
+        thread::spawn(move || write_loop(writer_stream, outgoing, &shared));
+    }
+    let state = Arc::clone(state);
+    thread::spawn(move || {
+        read_loop(&stream, &outbox, &shared, &state);
+        // Whatever ended the connection, everything of it goes: the client entry (and
+        // with it the writer's last sender and the frames it had queued for the bus), the
+        // socket.
+        drop(outbox);
+        state.remove(id);
+        let _ = stream.shutdown(Shutdown::Both);
+    });
     Ok(())
 }
 
 /// One write per message: python-can compares each handshake reply as a whole `recv()`.
 /// Raw mode starts here, [`RAW_MODE_GRACE`] after its `< ok >` went out, so no frame is
-/// queued for the client before then.
-fn write_loop(stream: TcpStream, outgoing: Receiver<Outgoing>, raw_mode: Arc<AtomicBool>) {
-    let mut out = BufWriter::new(stream);
+/// queued for the client before then. A failed write shuts the socket down, which ends the
+/// reader too.
+fn write_loop(stream: TcpStream, outgoing: Receiver<Outgoing>, shared: &Shared) {
+    let mut out = BufWriter::new(&stream);
     for item in outgoing {
         match item {
             Outgoing::Message(message) => {
@@ -232,18 +365,19 @@ fn write_loop(stream: TcpStream, outgoing: Receiver<Outgoing>, raw_mode: Arc<Ato
             }
             Outgoing::EnterRawMode => {
                 thread::sleep(RAW_MODE_GRACE);
-                raw_mode.store(true, Ordering::Release);
+                shared.raw_mode.store(true, Ordering::Release);
             }
         }
     }
+    drop(out);
+    let _ = stream.shutdown(Shutdown::Both);
 }
 
 fn read_loop(
-    mut stream: TcpStream,
-    id: u64,
-    outbox: Sender<Outgoing>,
-    to_sim: Sender<ClientFrame>,
-    refused: Arc<AtomicU64>,
+    mut stream: &TcpStream,
+    outbox: &SyncSender<Outgoing>,
+    shared: &Shared,
+    state: &State,
 ) {
     let mut buffer = Vec::with_capacity(1024);
     let mut chunk = [0u8; 1024];
@@ -253,7 +387,7 @@ fn read_loop(
     let mut raw = false;
     loop {
         let n = match stream.read(&mut chunk) {
-            Ok(0) | Err(_) => break,
+            Ok(0) | Err(_) => return,
             Ok(n) => n,
         };
         buffer.extend_from_slice(&chunk[..n]);
@@ -265,34 +399,42 @@ fn read_loop(
                     Some("< ok >".to_string())
                 }
                 Ok(Command::Open(bus)) => {
-                    refused.fetch_add(1, Ordering::Relaxed);
+                    state.refused.fetch_add(1, Ordering::Relaxed);
                     Some(format!(
-                        "< error could not open bus '{bus}': this server has {BUS_NAME} >"
+                        "< error could not open bus '{}': this server has {BUS_NAME} >",
+                        bus.chars().take(32).collect::<String>()
                     ))
                 }
                 Ok(Command::RawMode) if opened => {
                     entering_raw = !raw;
                     raw = true;
+                    // A client in raw mode may listen without a word for as long as it likes.
+                    if stream.set_read_timeout(None).is_err() {
+                        return;
+                    }
                     Some("< ok >".to_string())
                 }
                 Ok(Command::RawMode) => {
-                    refused.fetch_add(1, Ordering::Relaxed);
+                    state.refused.fetch_add(1, Ordering::Relaxed);
                     Some("< error open a bus before rawmode >".to_string())
                 }
                 Ok(Command::Echo) => Some("< echo >".to_string()),
                 Ok(Command::Send(frame)) if raw => {
-                    if to_sim.send(ClientFrame { client: id, frame }).is_err() {
-                        return;
+                    let mut queue = shared.to_bus.lock().unwrap_or_else(|e| e.into_inner());
+                    if queue.len() < CLIENT_TO_BUS_FRAMES {
+                        queue.push_back(frame);
+                    } else {
+                        state.dropped_to_bus.fetch_add(1, Ordering::Relaxed);
                     }
                     None
                 }
                 Ok(Command::Send(_)) => {
-                    refused.fetch_add(1, Ordering::Relaxed);
+                    state.refused.fetch_add(1, Ordering::Relaxed);
                     Some("< error send needs rawmode >".to_string())
                 }
-                Err(reason) => {
-                    refused.fetch_add(1, Ordering::Relaxed);
-                    eprintln!("socketcand: client {id}: refused '{message}': {reason}");
+                Err(_) => {
+                    // Counted, not logged: a flood of bad commands must not flood the log.
+                    state.refused.fetch_add(1, Ordering::Relaxed);
                     None
                 }
             };
@@ -307,9 +449,12 @@ fn read_loop(
                 return;
             }
         }
-        if buffer.len() > 64 * 1024 {
-            eprintln!("socketcand: client {id}: no '>' in 64 KiB, disconnecting");
-            break;
+        if buffer.len() > MAX_MESSAGE_BYTES {
+            // No complete message in that much: not socketcand. Disconnect.
+            let _ = outbox.try_send(Outgoing::Message(format!(
+                "< error no complete message in {MAX_MESSAGE_BYTES} bytes >"
+            )));
+            return;
         }
     }
 }

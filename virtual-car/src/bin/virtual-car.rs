@@ -147,19 +147,23 @@ fn run_one(
     let dir = out.join(&scenario.name);
     std::fs::create_dir_all(&dir)?;
     let mut bus_log = BufWriter::new(File::create(dir.join("bus.log"))?);
-    // Client frames wait here while the external node's transmit queue is full: a tester
-    // sending a whole ISO-TP block at once must not lose frames to the simulation.
-    let mut from_clients = std::collections::VecDeque::new();
+    // A client frame the external node's transmit queue could not take yet waits here; the
+    // rest wait in the server's bounded per-client queues, taken in turn.
+    let mut held: Option<autoplug_can::Frame> = None;
     let record: RunRecord = report::run_streaming(scenario, &mut bus_log, |car, frames| {
         if let Some(server) = server {
-            while let Some(client) = server.try_recv() {
-                from_clients.push_back(client.frame);
-            }
-            while let Some(frame) = from_clients.front() {
-                if !car.inject(*frame) {
+            loop {
+                let frame = match held.take() {
+                    Some(frame) => frame,
+                    None => match server.try_recv() {
+                        Some(client) => client.frame,
+                        None => break,
+                    },
+                };
+                if !car.inject(frame) {
+                    held = Some(frame);
                     break;
                 }
-                from_clients.pop_front();
             }
             // Clients get every frame but their own (socketcand does not echo); frames
             // injected by clients go through the "External" node and are not sent back.
@@ -182,6 +186,16 @@ fn run_one(
         println!("  {}", scenario.description);
     }
     print!("{}", record.summary.table());
+    if let Some(server) = server {
+        let drops = server.drops();
+        println!(
+            "  {:<28} {} frame(s) dropped toward the bus, {} toward clients (queues full), {} command(s) refused",
+            "socketcand",
+            drops.to_bus,
+            drops.to_clients,
+            server.refused_commands()
+        );
+    }
     println!(
         "  {:<28} {:.3} s wall for {:.1} s simulated ({:.0}x real time)",
         "run time",
