@@ -459,8 +459,9 @@ fn read_loop(
     }
 }
 
-/// Removes and returns the first complete `< ... >` message, without the brackets.
-fn take_message(buffer: &mut Vec<u8>) -> Option<String> {
+/// Removes and returns the first complete `< ... >` message, without the brackets (and
+/// whatever came before its `<`).
+pub fn take_message(buffer: &mut Vec<u8>) -> Option<String> {
     let start = buffer.iter().position(|&b| b == b'<')?;
     let end = start + buffer[start..].iter().position(|&b| b == b'>')?;
     let message = String::from_utf8_lossy(&buffer[start + 1..end])
