@@ -114,6 +114,7 @@ enum Outgoing {
 struct State {
     clients: Mutex<Vec<Client>>,
     refused: AtomicU64,
+    accepted: AtomicU64,
     dropped_to_bus: AtomicU64,
     dropped_to_clients: AtomicU64,
     /// Where the next [`SocketcandServer::try_recv`] starts looking (round robin).
@@ -247,6 +248,11 @@ impl SocketcandServer {
         None
     }
 
+    /// Connections accepted so far (the server full or not).
+    pub fn accepted(&self) -> u64 {
+        self.state.accepted.load(Ordering::Relaxed)
+    }
+
     /// Client commands refused so far (malformed `send`, unknown commands).
     pub fn refused_commands(&self) -> u64 {
         self.state.refused.load(Ordering::Relaxed)
@@ -288,6 +294,7 @@ fn accept_loop(listener: TcpListener, state: Arc<State>) {
     while !state.stop.load(Ordering::Acquire) {
         match listener.accept() {
             Ok((stream, _)) => {
+                state.accepted.fetch_add(1, Ordering::Relaxed);
                 let id = next_id;
                 next_id += 1;
                 if let Err(e) = serve(stream, id, &state) {

@@ -60,7 +60,7 @@ fn hostile_clients_release_everything_and_cannot_take_the_server() {
 
     // A thousand connections that end in every state: before a word, mid-handshake, in raw
     // mode, after a message too long, after nonsense.
-    for i in 0..1000 {
+    for i in 0..1000u64 {
         let mut s = TcpStream::connect(server.address()).unwrap();
         match i % 5 {
             0 => {}

@@ -25,7 +25,7 @@ use autoplug_image::{
 use autoplug_middleware::names::ECUS;
 use autoplug_middleware::tester::Job;
 use autoplug_middleware::DEV_SECURITY_SECRET;
-use autoplug_uds::{Backend, DiagNode, FlashError, Identification};
+use autoplug_uds::{Backend, DiagNode, FlashError, Identification, STANDSTILL_WINDOW_US};
 use autoplug_virtual_car::socketcand::SocketcandServer;
 
 /// The seed of the key every simulated ECU trusts.
@@ -218,6 +218,19 @@ pub fn hear_vehicle_speed(diag: &mut DiagNode, now: Instant, kmh: Option<f32>) {
     }
 }
 
+/// `us` of a standing car's VehicleSpeedMsg, every 10 ms from time zero: the ECU has seen
+/// the car standing long enough to allow programming (the caller's clock goes on from `us`).
+pub fn stood_for(diag: &mut DiagNode, us: u64) {
+    let frame = Frame::new(
+        u32::from(VehicleSpeedMsg::ID),
+        &VehicleSpeedMsg { vehicle_speed: 0.0 }.encode(),
+    )
+    .expect("a catalogue frame");
+    for t in (0..=us).step_by(10_000) {
+        diag.observe(Instant::from_micros(t), &frame);
+    }
+}
+
 /// Who sent a frame.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Sender {
@@ -257,15 +270,29 @@ impl SimBus {
 
     /// The given ECUs only.
     pub fn with(nodes: &[Node]) -> Self {
-        Self {
-            now: Instant::ZERO,
+        // The clock starts where the standing history laid by `stand_for` ends.
+        let start = Instant::from_micros(STANDSTILL_WINDOW_US);
+        let mut bus = Self {
+            now: start,
             ecus: nodes.iter().map(|&n| SimEcu::new(n)).collect(),
             tester_tx: None,
-            next_tick: Instant::ZERO,
+            next_tick: start,
             frames: 0,
             dropped: 0,
             drop_rule: None,
             boot_us: DEFAULT_BOOT_US,
+        };
+        // The car has stood long enough for the ECUs to allow programming.
+        bus.stand_for(STANDSTILL_WINDOW_US);
+        bus
+    }
+
+    /// Every ECU hears the standing car's VehicleSpeedMsg every 10 ms from time zero to `us`.
+    fn stand_for(&mut self, us: u64) {
+        for ecu in &mut self.ecus {
+            if let Some(diag) = &mut ecu.diag {
+                stood_for(diag, us);
+            }
         }
     }
 
@@ -530,14 +557,19 @@ impl EcuServer {
 }
 
 pub fn serve_ecus(server: &SocketcandServer, nodes: &[Node], stop: &AtomicBool) -> Vec<MemEcu> {
+    // The ECUs' clock starts past the standing history laid below.
+    let history = Duration::from_micros(STANDSTILL_WINDOW_US);
     let epoch = WallInstant::now();
-    let now = || Instant::from_micros(epoch.elapsed().as_micros() as u64);
+    let now = || Instant::from_micros((epoch.elapsed() + history).as_micros() as u64);
     let mut ecus: Vec<(MemEcu, Option<DiagNode>, Option<Instant>)> = nodes
         .iter()
         .map(|&n| {
             (
                 MemEcu::new(n),
-                DiagNode::new(n, DEV_SECURITY_SECRET, now()),
+                DiagNode::new(n, DEV_SECURITY_SECRET, now()).map(|mut d| {
+                    stood_for(&mut d, STANDSTILL_WINDOW_US);
+                    d
+                }),
                 None,
             )
         })

@@ -40,7 +40,7 @@ pub mod obd;
 pub mod security;
 pub mod server;
 
-pub use node::DiagNode;
+pub use node::{DiagNode, STANDSTILL_WINDOW_US};
 
 /// The SecurityAccess secret of the development setup (virtual car, tests, a bench
 /// without its own): it is in this source code, so it keeps out only the careless. A

@@ -59,6 +59,14 @@ impl SentFrames {
 /// How long a VehicleSpeedMsg counts, µs: 3 of its periods, as every CAN input.
 const SPEED_VALID_US: u64 = VehicleSpeedMsg::CYCLE_TIME_MS as u64 * 1000 * STALE_AFTER_PERIODS;
 
+/// How long the car must be seen standing before programming is allowed, µs: every
+/// VehicleSpeedMsg of this window under [`crate::server::STANDING_KMH`], none missing for
+/// more than 3 periods. A single spoofed zero-speed frame between the real sender's frames
+/// proves nothing: the next real frame ends the chain. (An attacker who can silence the
+/// real sender and send its frames instead can still pass; see the README's security
+/// section.)
+pub const STANDSTILL_WINDOW_US: u64 = 500_000;
+
 /// The ECU's backend as the server sees it through the stack: what the stack knows itself
 /// (vehicle speed, the ECU's own frames for live data and OBD-II) comes from the stack,
 /// the rest from the ECU.
@@ -67,6 +75,7 @@ struct WithStack<'a, B: Backend> {
     node: Node,
     sent: SentFrames,
     speed_kmh: Option<f32>,
+    standing: bool,
 }
 
 impl<B: Backend> Backend for WithStack<'_, B> {
@@ -81,6 +90,9 @@ impl<B: Backend> Backend for WithStack<'_, B> {
     }
     fn vehicle_speed_kmh(&self) -> Option<f32> {
         self.speed_kmh
+    }
+    fn vehicle_standing(&self) -> bool {
+        self.standing
     }
     fn dtcs(&mut self) -> &mut Dtcs {
         self.ecu.dtcs()
@@ -170,6 +182,8 @@ pub struct DiagNode {
     sent: SentFrames,
     /// The last VehicleSpeedMsg on the bus (received, or sent by this ECU), and when.
     speed: Option<(Instant, f32)>,
+    /// Since when every VehicleSpeedMsg showed the car standing, without a gap.
+    standing_since: Option<Instant>,
 }
 
 impl DiagNode {
@@ -190,6 +204,7 @@ impl DiagNode {
             handed: Handed::Nothing,
             sent: SentFrames::default(),
             speed: None,
+            standing_since: None,
         })
     }
 
@@ -222,9 +237,21 @@ impl DiagNode {
     /// (no programming while the car moves).
     pub fn observe(&mut self, now: Instant, frame: &Frame) {
         if frame.id() == VehicleSpeedMsg::ID {
-            if let Ok(message) = VehicleSpeedMsg::decode(frame.data()) {
-                self.speed = Some((now, message.vehicle_speed));
-            }
+            let Ok(message) = VehicleSpeedMsg::decode(frame.data()) else {
+                // An invalid speed frame proves nothing either way, and breaks the chain.
+                self.standing_since = None;
+                return;
+            };
+            let standing = message.vehicle_speed < crate::server::STANDING_KMH;
+            let unbroken = self.speed.is_some_and(|(at, v)| {
+                v < crate::server::STANDING_KMH && now.micros_since(at) <= SPEED_VALID_US
+            });
+            self.standing_since = match (standing, unbroken) {
+                (true, true) => self.standing_since.or(Some(now)),
+                (true, false) => Some(now),
+                (false, _) => None,
+            };
+            self.speed = Some((now, message.vehicle_speed));
         }
     }
 
@@ -247,6 +274,16 @@ impl DiagNode {
             .map(|(_, v)| v)
     }
 
+    /// Whether the car is proven to stand: the speed known and standing, and every
+    /// VehicleSpeedMsg of the last [`STANDSTILL_WINDOW_US`] standing.
+    pub fn vehicle_standing(&self, now: Instant) -> bool {
+        self.vehicle_speed_kmh(now)
+            .is_some_and(|v| v < crate::server::STANDING_KMH)
+            && self
+                .standing_since
+                .is_some_and(|since| now.micros_since(since) >= STANDSTILL_WINDOW_US)
+    }
+
     /// A frame received on one of [`DiagNode::accepts`]' identifiers (others are ignored).
     pub fn on_frame(&mut self, now: Instant, frame: &Frame, ecu: &mut impl Backend) {
         if !self.accepts(frame.id()) {
@@ -267,6 +304,7 @@ impl DiagNode {
             node: self.node,
             sent: self.sent,
             speed_kmh: self.vehicle_speed_kmh(now),
+            standing: self.vehicle_standing(now),
         }
     }
 

@@ -91,6 +91,12 @@ pub trait Backend {
     fn vehicle_speed_kmh(&self) -> Option<f32> {
         None
     }
+    /// Whether the car is proven to stand (programming is refused otherwise). By default:
+    /// a known speed under 1 km/h. [`crate::DiagNode`] asks for more: every VehicleSpeedMsg
+    /// of the last half second at its period, all standing (one spoofed frame is no proof).
+    fn vehicle_standing(&self) -> bool {
+        self.vehicle_speed_kmh().is_some_and(|v| v < STANDING_KMH)
+    }
     /// The ECU's DTCs.
     fn dtcs(&mut self) -> &mut Dtcs;
     /// Unpredictable bytes for a security seed.
@@ -1095,9 +1101,12 @@ fn address_and_size(bytes: &[u8]) -> Result<(u32, u32), Nrc> {
     }
 }
 
+/// Below this the car stands, km/h (VehicleSpeedMsg has 1 km/h steps).
+pub const STANDING_KMH: f32 = 1.0;
+
 fn vehicle_stationary(backend: &impl Backend) -> bool {
     // Unknown speed counts as moving: programming needs proof that the car stands.
-    backend.vehicle_speed_kmh().is_some_and(|v| v < 1.0)
+    backend.vehicle_standing()
 }
 
 /// How long a request with a sub-function must be.

@@ -705,12 +705,24 @@ impl Wire {
             node.diag_request_id().unwrap(),
             node.diag_response_id().unwrap(),
         );
-        Self {
+        let mut wire = Self {
             ecu_node: DiagNode::new(node, SECRET, Instant::from_micros(0)).unwrap(),
             ecu: TestEcu::new(),
             tester: autoplug_isotp::Channel::new(config),
             now: Instant::from_micros(0),
             frames: 0,
+        };
+        // The car has been standing for a while: the ECU heard VehicleSpeedMsg 0 at its
+        // period.
+        wire.drive(0.0, 600);
+        wire
+    }
+
+    /// `ms` of VehicleSpeedMsg at `kmh`, every 10 ms.
+    fn drive(&mut self, kmh: f32, ms: u64) {
+        for _ in 0..ms / 10 {
+            self.now = self.now.plus_micros(10_000);
+            self.ecu_node.observe(self.now, &speed_frame(kmh));
         }
     }
 
@@ -866,4 +878,53 @@ fn the_stack_knows_the_speed_from_the_bus_and_keeps_it_while_the_bus_is_silenced
         .expect("a 0x22 response");
     assert_eq!(live.id(), 0x78E);
     assert_eq!(live.data()[..5], [0x04, 0x62, 0x01, 0x0F, 42]);
+}
+
+#[test]
+fn one_spoofed_zero_speed_frame_does_not_open_programming_at_speed() {
+    let mut wire = Wire::new();
+    assert_eq!(
+        wire.exchange(&[0x10, 0x03], 1000).unwrap()[..2],
+        [0x50, 0x03]
+    );
+    // Driving at 90 km/h for a second.
+    wire.drive(90.0, 1000);
+    assert_eq!(wire.ecu_node.vehicle_speed_kmh(wire.now), Some(90.0));
+    // An attacker's single zero-speed frame, just before the request: the last frame the
+    // ECU heard says "standing", but the car was not seen standing over the window.
+    wire.now = wire.now.plus_micros(1000);
+    wire.ecu_node.observe(wire.now, &speed_frame(0.0));
+    assert!(!wire.ecu_node.vehicle_standing(wire.now));
+    // (`exchange` itself feeds standing frames every 250 us; keep its request short.)
+    let request_at_speed = |wire: &mut Wire| {
+        wire.tester.send(wire.now, &[0x10, 0x02]).unwrap();
+        for _ in 0..400 {
+            wire.now = wire.now.plus_micros(250);
+            wire.ecu_node.poll(wire.now, &mut wire.ecu);
+            if let Some(frame) = wire.tester.poll_transmit(wire.now) {
+                wire.tester.confirm_transmit(wire.now);
+                wire.ecu_node.on_frame(wire.now, &frame, &mut wire.ecu);
+            } else if let Some(frame) = wire.ecu_node.poll_transmit(wire.now) {
+                wire.ecu_node.confirm_transmit(wire.now);
+                if let Some(autoplug_isotp::Event::Received { len, .. }) =
+                    wire.tester.on_frame(wire.now, &frame)
+                {
+                    let response = wire.tester.received()[..len].to_vec();
+                    wire.tester.release();
+                    return response;
+                }
+            }
+            while wire.tester.poll(wire.now).is_some() {}
+        }
+        panic!("no answer")
+    };
+    assert_eq!(
+        request_at_speed(&mut wire),
+        [0x7F, 0x10, 0x22],
+        "conditions not correct: the car was not seen standing"
+    );
+    // Standing for real, over the window: allowed.
+    wire.drive(0.0, 600);
+    assert!(wire.ecu_node.vehicle_standing(wire.now));
+    assert_eq!(request_at_speed(&mut wire)[..2], [0x50, 0x02]);
 }
