@@ -65,32 +65,10 @@ pub enum Command {
     Image(ImageCommand),
     /// Read the identification (part number F187, software F189, serial F18C, hardware
     /// F191) of one ECU or all nine.
-    Ids {
-        /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
-        #[arg(long, value_name = "URL", value_parser = parse_via)]
-        via: Via,
-        /// Which ECU (engine, pedals, steering, transmission, cabin, console,
-        /// differential, cruise, abs), or all.
-        #[arg(long, value_name = "NAME|all", default_value = "all", value_parser = parse_selection)]
-        ecu: EcuSelection,
-        /// UDS timing.
-        #[command(flatten)]
-        timing: TimingArgs,
-    },
+    Ids(ReadArgs),
     /// Read the trouble codes (UDS 0x19 02 FF) of one ECU or all nine, with their status
     /// and description.
-    Dtcs {
-        /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
-        #[arg(long, value_name = "URL", value_parser = parse_via)]
-        via: Via,
-        /// Which ECU (engine, pedals, steering, transmission, cabin, console,
-        /// differential, cruise, abs), or all.
-        #[arg(long, value_name = "NAME|all", default_value = "all", value_parser = parse_selection)]
-        ecu: EcuSelection,
-        /// UDS timing.
-        #[command(flatten)]
-        timing: TimingArgs,
-    },
+    Dtcs(ReadArgs),
     /// Flash an image into an ECU over CAN, with a progress bar and a timing report.
     Flash {
         /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
@@ -388,6 +366,21 @@ impl EcuSelection {
     }
 }
 
+/// What `ids` and `dtcs` read from, and whom.
+#[derive(Debug, Clone, Args)]
+pub struct ReadArgs {
+    /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
+    #[arg(long, value_name = "URL", value_parser = parse_via)]
+    pub via: Via,
+    /// Which ECU (engine, pedals, steering, transmission, cabin, console, differential,
+    /// cruise, abs), or all.
+    #[arg(long, value_name = "NAME|all", default_value = "all", value_parser = parse_selection)]
+    pub ecu: EcuSelection,
+    /// UDS timing.
+    #[command(flatten)]
+    pub timing: TimingArgs,
+}
+
 /// UDS timing options.
 #[derive(Debug, Clone, Copy, Args)]
 pub struct TimingArgs {
@@ -610,7 +603,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Dtcs { via, ecu, timing } => {
+        Command::Dtcs(ReadArgs { via, ecu, timing }) => {
             let (reports, transport) =
                 run_reading(&via, DtcJob::new(&ecu.ecus(), timing.tester_config()))?;
             write!(out, "{}", dtc_table(&reports))?;
@@ -622,7 +615,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Ids { via, ecu, timing } => {
+        Command::Ids(ReadArgs { via, ecu, timing }) => {
             let (rows, transport) =
                 run_reading(&via, IdentJob::new(&ecu.ecus(), timing.tester_config()))?;
             write!(out, "{}", identification_table(&rows))?;
