@@ -24,9 +24,10 @@ fn main() {
 mod boot {
     use core::cell::RefCell;
 
+    use autoplug_flash::twin::Twin;
     use autoplug_flash::{
-        ACTIVE, APP_VECTOR_TABLE, BOOT_STATE, BOOT_SWAP_BUFFER_SIZE, DFU, LARGE_SECTORS,
-        SMALL_SECTORS,
+        ACTIVE, APP_VECTOR_TABLE, BOOT_SWAP_BUFFER_SIZE, DFU, LARGE_SECTORS, SMALL_SECTORS,
+        STATE_COPIES,
     };
     use cortex_m_rt::{entry, exception, ExceptionFrame};
     use defmt_rtt as _;
@@ -94,14 +95,24 @@ mod boot {
         let layout = Flash::<Blocking>::new_blocking(p.FLASH).into_blocking_regions();
         let small = Mutex::<NoopRawMutex, _>::new(RefCell::new(Fed(layout.bank1_region1)));
         let large = Mutex::<NoopRawMutex, _>::new(RefCell::new(Fed(layout.bank1_region3)));
+        // embassy-boot's state lives in the two-copy persistent state: its erase of the
+        // state prepares the other copy, so a power cut there never loses a rollback.
+        let copies = STATE_COPIES.map(|copy| {
+            BlockingPartition::new(&small, copy.start - SMALL_SECTORS.start, copy.size)
+        });
+        let mut twin = match Twin::open(copies) {
+            Ok(twin) => twin,
+            Err(_) => {
+                defmt::error!("boot: the state copies cannot be read: starting the active slot");
+                feed();
+                // SAFETY: as below; nothing is pending that the bootloader could finish.
+                unsafe { cortex_m::asm::bootload(APP_VECTOR_TABLE as *const u32) }
+            }
+        };
         let config = BootLoaderConfig {
             active: BlockingPartition::new(&large, ACTIVE.start - LARGE_SECTORS.start, ACTIVE.size),
             dfu: BlockingPartition::new(&large, DFU.start - LARGE_SECTORS.start, DFU.size),
-            state: BlockingPartition::new(
-                &small,
-                BOOT_STATE.start - SMALL_SECTORS.start,
-                BOOT_STATE.size,
-            ),
+            state: twin.boot_state(),
         };
         let loader = BootLoader::prepare::<_, _, _, { BOOT_SWAP_BUFFER_SIZE }>(config);
         match loader.state {

@@ -18,12 +18,14 @@ use std::cell::RefCell;
 
 use autoplug_can::{Frame, Node, VehicleSpeedMsg, DIAG_FUNCTIONAL_REQUEST_ID};
 use autoplug_ecu::{Dtcs, Instant};
-use autoplug_flash::sim::{SimFlash, SlotPartition, SmallPartition};
-use autoplug_flash::{ACTIVE, BOOT_SWAP_BUFFER_SIZE, DFU, ECU_DATA, SECTORS, WRITE_SIZE};
+use autoplug_flash::sim::{state_twin, SimFlash, SlotPartition};
+use autoplug_flash::twin::{KEY_FAILURES_RECORD, SEED_EPOCH_RECORD};
+use autoplug_flash::{ACTIVE, BOOT_SWAP_BUFFER_SIZE, DFU, SECTORS, WRITE_SIZE};
 use autoplug_image::{
     dev, floor, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant,
     Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
 };
+use autoplug_uds::security::SeedSource;
 use autoplug_uds::{Backend, DiagNode, FlashError, Identification, DEV_SECURITY_SECRET};
 use embassy_boot::{AlignedBuffer, BlockingFirmwareState, BootLoader, BootLoaderConfig, State};
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
@@ -117,13 +119,19 @@ pub struct VirtualDiag {
     overruns: u64,
     key: [u8; 32],
     booted_at_us: u64,
-    /// Mixed into security seeds (the simulation has no entropy source).
-    seed_counter: usize,
+    /// The car's secret for security seeds: what makes this car's seeds its own.
+    car_secret: [u8; 12],
+    /// Security seeds of the current start ([`SeedSource`] over the car's secret and the
+    /// seed epoch kept in the simulated flash).
+    seeds: SeedSource,
 }
 
 impl VirtualDiag {
     /// An ECU fresh from the factory: the development-signed `variant` image of version
-    /// [`FACTORY_VERSION`] in its active slot, booted.
+    /// [`FACTORY_VERSION`] in its active slot, booted. `seed` is the car's: its serial
+    /// numbers and the secret its security seeds are drawn from (a simulation has no
+    /// entropy source, and a run must replay exactly), so two cars with other seeds never
+    /// share a seed, and no start of one car repeats an earlier start's seeds.
     pub fn new(node: Node, variant: SoftwareVariant, seed: u64) -> Self {
         let key = SigningKey::from_seed(dev::SIGNING_SEED);
         let image = build_image(node, FACTORY_VERSION, variant, FACTORY_PAYLOAD_LEN, &key);
@@ -134,6 +142,10 @@ impl VirtualDiag {
         let flash = RefCell::new(flash);
         write_floor(&flash, FACTORY_VERSION).expect("factory floor");
         let number = node.diag_node_number().expect("an ECU");
+        let mut car_secret = [0u8; 12];
+        car_secret[..8].copy_from_slice(&seed.to_le_bytes());
+        car_secret[8] = number;
+        car_secret[9..].copy_from_slice(b"VEC");
         let stack =
             Box::new(DiagNode::new(node, DEV_SECURITY_SECRET, Instant::ZERO).expect("an ECU"));
         let mut diag = Self {
@@ -151,7 +163,8 @@ impl VirtualDiag {
             overruns: 0,
             key: dev::PUBLIC_KEY,
             booted_at_us: 0,
-            seed_counter: number.into(),
+            car_secret,
+            seeds: SeedSource::new(&car_secret, 0),
         };
         diag.boot(0);
         // The scenario starts with the ECUs running: power-up is before time zero.
@@ -277,10 +290,11 @@ impl VirtualDiag {
         }
         let before = busy_us(&self.flash);
         let mut aligned = [0u8; WRITE_SIZE];
-        let confirmed =
-            BlockingFirmwareState::new(SmallPartition::state(&self.flash), &mut aligned)
+        let confirmed = state_twin(&self.flash).is_ok_and(|mut twin| {
+            BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
                 .mark_booted()
-                .is_ok();
+                .is_ok()
+        });
         if confirmed {
             self.unconfirmed = false;
             if self.installed.version > self.floor
@@ -313,16 +327,21 @@ impl VirtualDiag {
     /// holds. The caller rebuilds the ECU's logic for [`VirtualDiag::installed`]'s variant.
     pub fn boot(&mut self, t_us: u64) -> Boot {
         let before = busy_us(&self.flash);
-        let mut bootloader = BootLoader::new(BootLoaderConfig {
-            active: SlotPartition::active(&self.flash),
-            dfu: SlotPartition::dfu(&self.flash),
-            state: SmallPartition::state(&self.flash),
-        });
-        let mut buffer = AlignedBuffer([0; BOOT_SWAP_BUFFER_SIZE]);
-        // A bootloader error leaves the active slot as it is: boot what is there.
-        let state = bootloader
-            .prepare_boot(buffer.as_mut())
-            .unwrap_or(State::Boot);
+        let state = match state_twin(&self.flash) {
+            Ok(mut twin) => {
+                let mut bootloader = BootLoader::new(BootLoaderConfig {
+                    active: SlotPartition::active(&self.flash),
+                    dfu: SlotPartition::dfu(&self.flash),
+                    state: twin.boot_state(),
+                });
+                let mut buffer = AlignedBuffer([0; BOOT_SWAP_BUFFER_SIZE]);
+                // A bootloader error leaves the active slot as it is: boot what is there.
+                bootloader
+                    .prepare_boot(buffer.as_mut())
+                    .unwrap_or(State::Boot)
+            }
+            Err(_) => State::Boot,
+        };
         let took_us = busy_us(&self.flash) - before;
         let mut header = [0u8; HEADER_LEN];
         self.flash
@@ -333,12 +352,13 @@ impl VirtualDiag {
         // test of autoplug-flash): a header that does not parse would be a bug.
         self.installed = ImageHeader::parse(&header).expect("a complete image in the active slot");
         self.software_version = self.installed.version.to_string();
-        let mut aligned = [0u8; WRITE_SIZE];
-        let now_state =
-            BlockingFirmwareState::new(SmallPartition::state(&self.flash), &mut aligned)
-                .get_state()
-                .unwrap_or(State::Boot);
+        let now_state = boot_state(&self.flash);
         self.unconfirmed = now_state == State::Swap;
+        // What the application reads of its persistent state at the start: the floor, and
+        // the seed epoch, raised for this start before any seed is drawn.
+        self.floor = read_floor(&self.flash).unwrap_or(self.floor);
+        let epoch = next_seed_epoch(&self.flash);
+        self.seeds = SeedSource::new(&self.car_secret, epoch);
         *self.stack = DiagNode::new(self.node, DEV_SECURITY_SECRET, Instant::from_micros(t_us))
             .expect("an ECU");
         self.quiet = true;
@@ -386,7 +406,7 @@ macro_rules! backend {
             serial: &$diag.serial,
             floor: $diag.floor,
             key: $diag.key,
-            random: &mut $diag.seed_counter,
+            seeds: &mut $diag.seeds,
             busy_us: 0,
         }
     };
@@ -403,9 +423,7 @@ struct EcuBackend<'a> {
     serial: &'a str,
     floor: Version,
     key: [u8; 32],
-    /// Entropy for seeds: the simulation is deterministic, so seeds come from the flash's
-    /// busy time and a counter, which differ from request to request.
-    random: &'a mut usize,
+    seeds: &'a mut SeedSource,
     /// Flash busy time of the operations of this call, µs.
     busy_us: u64,
 }
@@ -418,11 +436,10 @@ impl EcuBackend<'_> {
         result
     }
 
-    fn state_is_boot(&self) -> bool {
-        let mut aligned = [0u8; WRITE_SIZE];
-        BlockingFirmwareState::new(SmallPartition::state(self.flash), &mut aligned)
-            .get_state()
-            .is_ok_and(|s| s == State::Boot)
+    /// Whether the running image is confirmed: not just swapped in (embassy-boot's
+    /// `verify_booted`: Boot, and Revert after a rollback, both count).
+    fn image_confirmed(&self) -> bool {
+        boot_state(self.flash) != State::Swap
     }
 }
 
@@ -441,15 +458,22 @@ impl Backend for EcuBackend<'_> {
     }
 
     fn fill_random(&mut self, out: &mut [u8]) {
-        let mut x = busy_us(self.flash) ^ ((*self.random as u64) << 32) ^ 0x9E37_79B9;
-        for b in out {
-            *self.random = self.random.wrapping_add(1);
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x = x.wrapping_add(*self.random as u64);
-            *b = (x >> 24) as u8;
-        }
+        self.seeds.fill(out);
+    }
+
+    fn stored_key_failures(&mut self) -> u8 {
+        state_twin(self.flash)
+            .ok()
+            .and_then(|mut twin| twin.read_record(KEY_FAILURES_RECORD).ok().flatten())
+            .map_or(0, |payload| payload[0])
+    }
+
+    fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
+        self.timed(|flash| {
+            let mut twin = state_twin(flash).map_err(|_| FlashError)?;
+            twin.write_record(KEY_FAILURES_RECORD, [failures, 0, 0, 0])
+                .map_err(|_| FlashError)
+        })
     }
 
     fn image_expectations(&self) -> Expectations {
@@ -473,7 +497,7 @@ impl Backend for EcuBackend<'_> {
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
         // embassy-boot's rule: only a confirmed image may download the next one (else the
         // bootloader would take the new one for a failed swap and revert).
-        if !self.state_is_boot() {
+        if !self.image_confirmed() {
             return Err(FlashError);
         }
         let sector = SECTORS[7].size;
@@ -501,7 +525,8 @@ impl Backend for EcuBackend<'_> {
     fn mark_updated(&mut self) -> Result<(), FlashError> {
         self.timed(|flash| {
             let mut aligned = [0u8; WRITE_SIZE];
-            BlockingFirmwareState::new(SmallPartition::state(flash), &mut aligned)
+            let mut twin = state_twin(flash).map_err(|_| FlashError)?;
+            BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
                 .mark_updated()
                 .map_err(|_| FlashError)
         })
@@ -519,29 +544,227 @@ fn pad_to_words(image: &[u8]) -> Vec<u8> {
     padded
 }
 
-/// Appends a version-floor record to the ECU data sector (erasing it when full).
+/// embassy-boot's state as the application reads it (Boot if it cannot be read).
+fn boot_state(flash: &RefCell<SimFlash>) -> State {
+    let mut aligned = [0u8; WRITE_SIZE];
+    state_twin(flash).map_or(State::Boot, |mut twin| {
+        BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
+            .get_state()
+            .unwrap_or(State::Boot)
+    })
+}
+
+/// The version floor kept in the persistent state.
+fn read_floor(flash: &RefCell<SimFlash>) -> Option<Version> {
+    let payload = state_twin(flash).ok()?.read_record(floor::KIND).ok()??;
+    Some(floor::from_payload(payload))
+}
+
+/// Records a new version floor in the persistent state.
 fn write_floor(flash: &RefCell<SimFlash>, version: Version) -> Result<(), FlashError> {
-    let mut partition = SmallPartition::ecu_data(flash);
-    let capacity = ECU_DATA.size as usize / floor::RECORD_LEN;
-    let mut slot = None;
-    for i in 0..capacity {
-        let mut bytes = [0u8; floor::RECORD_LEN];
-        partition
-            .read((i * floor::RECORD_LEN) as u32, &mut bytes)
-            .map_err(|_| FlashError)?;
-        if floor::decode(&bytes) == floor::Record::Erased {
-            slot = Some(i);
-            break;
+    state_twin(flash)
+        .and_then(|mut twin| twin.write_record(floor::KIND, floor::to_payload(version)))
+        .map_err(|_| FlashError)
+}
+
+/// Raises the seed epoch kept in the persistent state and returns the new one. If it
+/// cannot be kept, the start still gets the next number (its seeds may then repeat a later
+/// start's: the car's secret and the number of seeds drawn still differ per ECU).
+fn next_seed_epoch(flash: &RefCell<SimFlash>) -> u32 {
+    let Ok(mut twin) = state_twin(flash) else {
+        return 0;
+    };
+    let epoch = twin
+        .read_record(SEED_EPOCH_RECORD)
+        .ok()
+        .flatten()
+        .map_or(0, u32::from_le_bytes)
+        .wrapping_add(1);
+    let _ = twin.write_record(SEED_EPOCH_RECORD, epoch.to_le_bytes());
+    epoch
+}
+
+#[cfg(test)]
+mod tests {
+    use autoplug_flash::twin::{RECORDS_START, RECORD_LEN};
+    use autoplug_flash::SMALL_SECTOR_SIZE;
+    use autoplug_uds::security::key_for;
+    use autoplug_uds::{Config, Reply, Server};
+
+    use super::*;
+
+    const NODE: Node = Node::Cruise;
+
+    /// A virtual ECU and a UDS server over its backend, as after a start at `t_us`.
+    struct Ecu {
+        diag: VirtualDiag,
+        server: Server,
+        dtcs: Dtcs,
+        t_us: u64,
+    }
+
+    impl Ecu {
+        fn new(car_seed: u64) -> Self {
+            let diag = VirtualDiag::new(NODE, SoftwareVariant::Standard, car_seed);
+            Self::started(diag, 0)
+        }
+
+        fn started(diag: VirtualDiag, t_us: u64) -> Self {
+            let number = NODE.diag_node_number().expect("an ECU");
+            let mut ecu = Self {
+                diag,
+                server: Server::new(
+                    Config::new(number, DEV_SECURITY_SECRET),
+                    Instant::from_micros(t_us),
+                ),
+                dtcs: Dtcs::new(),
+                t_us,
+            };
+            let now = Instant::from_micros(t_us);
+            ecu.server.poll(now, &mut backend!(ecu.diag, &mut ecu.dtcs));
+            ecu
+        }
+
+        /// ECUReset or a power cycle: the bootloader, then a fresh application.
+        fn restart(self) -> Self {
+            let Self { mut diag, t_us, .. } = self;
+            let t_us = t_us + 1_000;
+            diag.boot(t_us);
+            Self::started(diag, t_us)
+        }
+
+        fn request(&mut self, request: &[u8]) -> Vec<u8> {
+            let mut out = [0u8; 256];
+            let now = Instant::from_micros(self.t_us);
+            let mut backend = backend!(self.diag, &mut self.dtcs);
+            match self
+                .server
+                .handle(now, request, false, &mut backend, &mut out)
+            {
+                Reply::Send(n) | Reply::SendThenReset(n, _) => out[..n].to_vec(),
+                other => panic!("unexpected reply {other:?}"),
+            }
+        }
+
+        fn seed(&mut self) -> [u8; 16] {
+            self.request(&[0x10, 0x03]);
+            let response = self.request(&[0x27, 0x01]);
+            assert_eq!(&response[..2], &[0x67, 0x01], "a seed: {response:02X?}");
+            response[2..].try_into().expect("16 bytes")
+        }
+
+        fn wrong_key(&mut self) -> Vec<u8> {
+            self.seed();
+            self.request(&[&[0x27, 0x02][..], &[0xAA; 16]].concat())
+        }
+
+        fn stored_failures(&mut self) -> u8 {
+            backend!(self.diag, &mut self.dtcs).stored_key_failures()
         }
     }
-    let slot = match slot {
-        Some(slot) => slot,
-        None => {
-            partition.erase(0, ECU_DATA.size).map_err(|_| FlashError)?;
-            0
+
+    #[test]
+    fn seeds_differ_across_cars_and_starts_and_replay_for_the_same_car() {
+        let first = Ecu::new(1).seed();
+        assert_eq!(first, Ecu::new(1).seed(), "the same car replays exactly");
+        assert_ne!(first, Ecu::new(2).seed(), "another car");
+        let mut ecu = Ecu::new(1);
+        let before = ecu.seed();
+        let mut ecu = ecu.restart();
+        let after = ecu.seed();
+        assert_ne!(before, after, "the next start");
+        let mut again = ecu.restart();
+        assert_ne!(again.seed(), after);
+    }
+
+    #[test]
+    fn the_lockout_is_kept_in_the_simulated_flash_across_a_reset() {
+        let mut ecu = Ecu::new(1);
+        assert_eq!(ecu.wrong_key(), [0x7F, 0x27, 0x35]);
+        assert_eq!(ecu.wrong_key(), [0x7F, 0x27, 0x35]);
+        assert_eq!(ecu.wrong_key(), [0x7F, 0x27, 0x36]);
+        let mut ecu = ecu.restart();
+        ecu.request(&[0x10, 0x03]);
+        assert_eq!(ecu.request(&[0x27, 0x01]), [0x7F, 0x27, 0x37]);
+        assert_eq!(ecu.stored_failures(), 3);
+        // After the delay, a good key opens it and clears the count.
+        ecu.t_us += 10_000_001;
+        let seed = ecu.seed();
+        let number = NODE.diag_node_number().expect("an ECU");
+        let key = key_for(DEV_SECURITY_SECRET, number, &seed);
+        assert_eq!(
+            ecu.request(&[&[0x27, 0x02][..], &key].concat()),
+            [0x67, 0x02]
+        );
+        assert_eq!(ecu.restart().stored_failures(), 0);
+    }
+
+    /// A power cut at every flash operation of counting a wrong key — a record write, and
+    /// with a full copy the switch to the other one — never gives a free attempt: either the
+    /// key was not judged, or the count holds it after power returns; the version floor and
+    /// the boot state survive.
+    #[test]
+    fn a_power_cut_while_counting_a_wrong_key_gives_no_free_attempt() {
+        let slots = (SMALL_SECTOR_SIZE - RECORDS_START) / RECORD_LEN;
+        for fill_copy in [false, true] {
+            let mut ecu = Ecu::new(7);
+            assert_eq!(ecu.wrong_key(), [0x7F, 0x27, 0x35]);
+            if fill_copy {
+                // Run into a fresh copy (floor, epoch and count carried over), then fill it
+                // but for one slot: the next start's epoch takes that one, and the count of
+                // the attempt below makes the switch.
+                let mut twin = state_twin(&ecu.diag.flash).expect("open");
+                let sequence = twin.sequence();
+                while twin.sequence() == sequence {
+                    twin.write_record(KEY_FAILURES_RECORD, [1, 0, 0, 0])
+                        .expect("record");
+                }
+                for _ in 0..slots - 3 - 1 {
+                    twin.write_record(KEY_FAILURES_RECORD, [1, 0, 0, 0])
+                        .expect("record");
+                }
+            }
+            let base = ecu.diag.flash.borrow().clone();
+            // A fresh start from `base` that asked for a seed, with the cut armed at `k`.
+            let attempt = |cut_at: Option<u64>| {
+                let ecu = Ecu::new(7);
+                *ecu.diag.flash.borrow_mut() = base.clone();
+                let mut ecu = ecu.restart();
+                let stored = ecu.stored_failures();
+                ecu.seed();
+                let ops_before = ecu.diag.flash.borrow().operations();
+                if let Some(k) = cut_at {
+                    ecu.diag.flash.borrow_mut().reseed(k ^ 0x5EED);
+                    ecu.diag.flash.borrow_mut().cut_power_at(k);
+                }
+                let response = ecu.request(&[&[0x27, 0x02][..], &[0xAA; 16]].concat());
+                let ops = ecu.diag.flash.borrow().operations() - ops_before;
+                (ecu, stored, response, ops)
+            };
+            let (_, stored, response, ops) = attempt(None);
+            assert_eq!((stored, response), (1, vec![0x7F, 0x27, 0x35]));
+            if fill_copy {
+                assert!(ops > 1, "the count makes the switch: {ops} operations");
+            } else {
+                assert_eq!(ops, 1, "one record");
+            }
+            for k in 0..ops {
+                let (cut, stored, response, _) = attempt(Some(k));
+                assert_eq!(
+                    response,
+                    [0x7F, 0x27, 0x22],
+                    "fill {fill_copy}, cut at {k}: no verdict without the count"
+                );
+                cut.diag.flash.borrow_mut().restore_power();
+                let mut after = cut.restart();
+                let kept = after.stored_failures();
+                assert!(
+                    kept >= stored,
+                    "fill {fill_copy}, cut at {k}: count {kept} below {stored}"
+                );
+                assert_eq!(read_floor(&after.diag.flash), Some(FACTORY_VERSION));
+                assert_eq!(boot_state(&after.diag.flash), State::Boot);
+            }
         }
-    };
-    partition
-        .write((slot * floor::RECORD_LEN) as u32, &floor::encode(version))
-        .map_err(|_| FlashError)
+    }
 }

@@ -56,6 +56,8 @@ pub struct MemEcu {
     public_key: [u8; 32],
     /// Flash busy time not yet charged by the bus.
     stall_us: u64,
+    /// Wrong SecurityAccess keys in a row, as the ECU's flash keeps them.
+    key_failures: u8,
 }
 
 impl MemEcu {
@@ -74,6 +76,7 @@ impl MemEcu {
             serial_number: format!("{number:02X}0000000042").into_bytes(),
             public_key: SigningKey::from_seed(SIGNING_SEED).public_key(),
             stall_us: 0,
+            key_failures: 0,
         }
     }
 }
@@ -100,6 +103,15 @@ impl Backend for MemEcu {
             self.random ^= self.random << 5;
             *byte = self.random as u8;
         }
+    }
+
+    fn stored_key_failures(&mut self) -> u8 {
+        self.key_failures
+    }
+
+    fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
+        self.key_failures = failures;
+        Ok(())
     }
 
     fn image_expectations(&self) -> Expectations {

@@ -11,12 +11,12 @@ use core::cell::RefCell;
 
 use autoplug_can::Node;
 use autoplug_ecu::Dtcs;
-use autoplug_flash::{
-    ACTIVE, BOOT_STATE, DFU, ECU_DATA, LARGE_SECTORS, SLOT_ERASE_SIZE, SMALL_SECTORS,
-};
+use autoplug_flash::twin::{Twin, KEY_FAILURES_RECORD, SEED_EPOCH_RECORD};
+use autoplug_flash::{ACTIVE, DFU, LARGE_SECTORS, SLOT_ERASE_SIZE, SMALL_SECTORS, STATE_COPIES};
 use autoplug_image::{
     dev, floor, Expectations, ImageHeader, Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
 };
+use autoplug_uds::security::SeedSource;
 use autoplug_uds::{Backend, FlashError, Identification};
 use embassy_boot::{BlockingFirmwareState, State};
 use embassy_embedded_hal::flash::partition::BlockingPartition;
@@ -88,23 +88,54 @@ impl EcuFlash {
     /// swapped in and has not confirmed itself yet).
     pub fn boot_state(&self) -> State {
         let mut aligned = [0u8; 4];
-        self.with_state(|state| {
-            BlockingFirmwareState::new(state, &mut aligned)
+        self.with_twin(|twin| {
+            BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
                 .get_state()
-                .unwrap_or(State::Boot)
+                .ok()
         })
+        .flatten()
+        .unwrap_or(State::Boot)
+    }
+
+    /// Raises the seed epoch kept in flash and returns the new one: every start draws its
+    /// seeds under a number no earlier start used (a failed write is logged; the seeds
+    /// still differ by the entropy of this start).
+    pub fn next_seed_epoch(&self) -> u32 {
+        let epoch = stretched(|| {
+            self.with_twin(|twin| {
+                let epoch = twin
+                    .read_record(SEED_EPOCH_RECORD)
+                    .ok()
+                    .flatten()
+                    .map_or(0, u32::from_le_bytes)
+                    .wrapping_add(1);
+                (
+                    epoch,
+                    twin.write_record(SEED_EPOCH_RECORD, epoch.to_le_bytes())
+                        .is_ok(),
+                )
+            })
+        });
+        match epoch {
+            Some((epoch, true)) => epoch,
+            Some((epoch, false)) => {
+                defmt::warn!("the seed epoch {} could not be kept", epoch);
+                epoch
+            }
+            None => 0,
+        }
     }
 
     /// Confirms the running image after its self-test and raises the version floor to it.
     pub fn confirm(&mut self) -> bool {
         let mut aligned = [0u8; 4];
         let confirmed = stretched(|| {
-            self.with_state(|state| {
-                BlockingFirmwareState::new(state, &mut aligned)
+            self.with_twin(|twin| {
+                BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
                     .mark_booted()
                     .is_ok()
             })
-        });
+        }) == Some(true);
         if let Some(version) = self.header.map(|h| h.version) {
             if confirmed && version > self.floor && stretched(|| self.write_floor(version)).is_ok()
             {
@@ -114,72 +145,33 @@ impl EcuFlash {
         confirmed
     }
 
-    fn with_state<T>(
-        &self,
-        op: impl FnOnce(&mut BlockingPartition<'_, NoopRawMutex, Bank1Region1<'static, Blocking>>) -> T,
-    ) -> T {
-        let mut state = BlockingPartition::new(
-            &self.small,
-            BOOT_STATE.start - SMALL_SECTORS.start,
-            BOOT_STATE.size,
-        );
-        op(&mut state)
+    /// Runs `op` on the two-copy persistent state (embassy-boot's state and the ECU
+    /// data records); `None` if the copies cannot be read.
+    fn with_twin<T>(&self, op: impl FnOnce(&mut Twin<SmallRegion<'_>>) -> T) -> Option<T> {
+        let copies = STATE_COPIES.map(|copy| {
+            BlockingPartition::new(&self.small, copy.start - SMALL_SECTORS.start, copy.size)
+        });
+        let mut twin = Twin::open(copies).ok()?;
+        Some(op(&mut twin))
     }
 
-    /// The last valid floor record of the ECU data sector.
+    /// The version floor kept in flash.
     fn read_floor(&self) -> Option<Version> {
-        let mut last = None;
-        for slot in 0..ECU_DATA.size / floor::RECORD_LEN as u32 {
-            match floor::decode(&self.floor_record(slot)?) {
-                floor::Record::Erased => break,
-                floor::Record::Floor(version) => last = Some(version),
-                floor::Record::Invalid => {}
-            }
-        }
-        last
+        self.with_twin(|twin| twin.read_record(floor::KIND).ok().flatten())
+            .flatten()
+            .map(floor::from_payload)
     }
 
-    fn floor_record(&self, slot: u32) -> Option<[u8; floor::RECORD_LEN]> {
-        let at = ECU_DATA.start - SMALL_SECTORS.start + slot * floor::RECORD_LEN as u32;
-        let mut record = [0u8; floor::RECORD_LEN];
-        self.small
-            .lock(|r| r.borrow_mut().blocking_read(at, &mut record))
-            .ok()?;
-        Some(record)
-    }
-
-    /// Appends a floor record, erasing the sector first when it is full.
+    /// Records a new version floor.
     fn write_floor(&self, version: Version) -> Result<(), FlashError> {
-        let base = ECU_DATA.start - SMALL_SECTORS.start;
-        let slots = ECU_DATA.size / floor::RECORD_LEN as u32;
-        let mut free = None;
-        for slot in 0..slots {
-            let record = self.floor_record(slot).ok_or(FlashError)?;
-            if floor::decode(&record) == floor::Record::Erased {
-                free = Some(slot);
-                break;
-            }
-        }
-        self.small.lock(|r| {
-            let mut region = r.borrow_mut();
-            let slot = match free {
-                Some(slot) => slot,
-                None => {
-                    region
-                        .blocking_erase(base, base + ECU_DATA.size)
-                        .map_err(|_| FlashError)?;
-                    0
-                }
-            };
-            region
-                .blocking_write(
-                    base + slot * floor::RECORD_LEN as u32,
-                    &floor::encode(version),
-                )
-                .map_err(|_| FlashError)
-        })
+        self.with_twin(|twin| twin.write_record(floor::KIND, floor::to_payload(version)))
+            .and_then(Result::ok)
+            .ok_or(FlashError)
     }
 }
+
+/// A partition of the 16 KiB sectors (flash region 1).
+type SmallRegion<'a> = BlockingPartition<'a, NoopRawMutex, Bank1Region1<'static, Blocking>>;
 
 /// The MCU's 96-bit unique ID in hex: the ECU serial number (UDS F18C).
 fn hex_uid() -> [u8; 24] {
@@ -264,10 +256,8 @@ pub struct FirmwareBackend<'a> {
     pub flash: &'a mut EcuFlash,
     /// The logic's DTCs.
     pub dtcs: &'a mut Dtcs,
-    /// Time in µs, mixed into security seeds with the UID (the F446 has no RNG).
-    pub now_us: u64,
-    /// Counter mixed into seeds.
-    pub seed_counter: &'a mut u32,
+    /// Where security seeds come from (see [`crate::entropy`]).
+    pub seeds: &'a mut SeedSource,
 }
 
 impl Backend for FirmwareBackend<'_> {
@@ -291,18 +281,27 @@ impl Backend for FirmwareBackend<'_> {
     }
 
     fn fill_random(&mut self, out: &mut [u8]) {
-        // No RNG on the F446: the time of the request (µs, jittered by the bus and the
-        // tester) and a counter, whitened with the UID. Enough for seeds that must not
-        // repeat; not a cryptographic generator.
-        let uid = embassy_stm32::uid::uid();
-        let mut x = self.now_us ^ u64::from_le_bytes(uid[..8].try_into().unwrap_or([0; 8]));
-        for b in out {
-            *self.seed_counter = self.seed_counter.wrapping_add(1);
-            x = x
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(u64::from(*self.seed_counter) | 1);
-            *b = (x >> 33) as u8;
-        }
+        // The moment of the request, to the CPU cycle, is one more input.
+        self.seeds
+            .add_entropy(&cortex_m::peripheral::DWT::cycle_count().to_le_bytes());
+        self.seeds.fill(out);
+    }
+
+    fn stored_key_failures(&mut self) -> u8 {
+        self.flash
+            .with_twin(|twin| twin.read_record(KEY_FAILURES_RECORD).ok().flatten())
+            .flatten()
+            .map_or(0, |payload| payload[0])
+    }
+
+    fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
+        let flash = &*self.flash;
+        // A record is one word program; when a copy is full, a switch erases 16 KiB.
+        stretched(|| {
+            flash.with_twin(|twin| twin.write_record(KEY_FAILURES_RECORD, [failures, 0, 0, 0]))
+        })
+        .and_then(Result::ok)
+        .ok_or(FlashError)
     }
 
     fn image_expectations(&self) -> Expectations {
@@ -324,8 +323,9 @@ impl Backend for FirmwareBackend<'_> {
     }
 
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
-        // embassy-boot's rule: only a confirmed image may download the next one.
-        if self.flash.boot_state() != State::Boot {
+        // embassy-boot's rule (`verify_booted`): only a confirmed image may download the
+        // next one; Revert, after a rollback, counts as confirmed.
+        if self.flash.boot_state() == State::Swap {
             return Err(FlashError);
         }
         let from = DFU.start - LARGE_SECTORS.start + step * SLOT_ERASE_SIZE;
@@ -361,11 +361,12 @@ impl Backend for FirmwareBackend<'_> {
         let flash = &*self.flash;
         let mut aligned = [0u8; 4];
         stretched(|| {
-            flash.with_state(|state| {
-                BlockingFirmwareState::new(state, &mut aligned)
+            flash.with_twin(|twin| {
+                BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
                     .mark_updated()
                     .map_err(|_| FlashError)
             })
         })
+        .unwrap_or(Err(FlashError))
     }
 }

@@ -8,6 +8,7 @@
 //! - [`runtime`]: the control loop (logic step on a ticker, frames in and out, outputs,
 //!   watchdog, DTC log) generic over [`autoplug_ecu::EcuLogic`];
 //! - [`io`]: analog inputs and PWM outputs with their scaling, for the board modules;
+//! - `entropy`: the sources of the security seeds (the F446 has no RNG);
 //! - `fault`: panics and HardFaults logged through defmt, then a reset;
 //! - [`analog`] and [`reset`]: the pure parts (ADC and PWM scaling, the reset cause), which
 //!   also build on the host, where their unit tests run.
@@ -25,6 +26,8 @@ pub mod can_io;
 pub mod clocks;
 #[cfg(target_os = "none")]
 pub mod diag;
+#[cfg(target_os = "none")]
+pub mod entropy;
 #[cfg(target_os = "none")]
 mod fault;
 #[cfg(target_os = "none")]

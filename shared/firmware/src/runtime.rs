@@ -24,6 +24,7 @@ use embassy_time::{Duration, Ticker, Timer};
 
 use crate::can_io::{self, RxQueue, TxQueue};
 use crate::diag::{EcuFlash, FirmwareBackend};
+use crate::entropy;
 use crate::reset::{ResetCause, ResetFlags};
 
 static RX_QUEUE: RxQueue = RxQueue::new();
@@ -107,7 +108,7 @@ where
     let mut ecu_flash = EcuFlash::new(layout.bank1_region1, layout.bank1_region3);
     let mut unconfirmed = ecu_flash.boot_state() == State::Swap;
     let mut diag = DiagNode::new(E::NODE, DEV_SECURITY_SECRET, now()).expect("an ECU");
-    let mut seed_counter = 0u32;
+    let mut seeds = entropy::seed_source(ecu_flash.next_seed_epoch());
 
     let timeout_us = WATCHDOG_TIMEOUT_PERIODS * E::STEP_PERIOD_US;
     let mut watchdog = IndependentWatchdog::new(watchdog, timeout_us as u32);
@@ -131,8 +132,7 @@ where
                 node: E::NODE,
                 flash: &mut ecu_flash,
                 dtcs: ecu.dtcs_mut(),
-                now_us: now().as_micros(),
-                seed_counter: &mut seed_counter,
+                seeds: &mut seeds,
             }
         };
     }
@@ -158,6 +158,7 @@ where
                 }
             }
             Either3::Second(frame) => {
+                entropy::note_frame(&mut seeds);
                 if diag.accepts(frame.id()) {
                     diag.on_frame(now(), &frame, &mut backend!());
                 } else {

@@ -5,6 +5,8 @@
 //!   compile-time checks of what embassy-boot 0.7 needs of them. Its items are re-exported at
 //!   the crate root.
 //! - [`timing`] (no_std): how long programming and erasing keep the flash busy (DS10693).
+//! - [`twin`] (no_std): the ECU's persistent state (embassy-boot's state, the ECU data
+//!   records) in two sectors written alternately, so that a power cut never loses it.
 //! - `sim` (feature `sim`, std): `sim::SimFlash`, the whole 512 KiB flash with NOR
 //!   semantics, busy-time accounting and power cuts at a chosen operation, and
 //!   `sim::SimPartition`, partition handles implementing embedded-storage's `NorFlash` so
@@ -17,6 +19,7 @@
 
 pub mod map;
 pub mod timing;
+pub mod twin;
 
 #[cfg(feature = "sim")]
 pub mod sim;

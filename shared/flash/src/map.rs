@@ -6,8 +6,8 @@
 //! | sectors | address       | size    | use                                               |
 //! |---------|---------------|---------|---------------------------------------------------|
 //! | 0–1     | `0x0800_0000` | 32 KiB  | bootloader ([`BOOTLOADER`])                       |
-//! | 2       | `0x0800_8000` | 16 KiB  | embassy-boot's STATE partition ([`BOOT_STATE`])   |
-//! | 3       | `0x0800_C000` | 16 KiB  | ECU data: serial number, version floor ([`ECU_DATA`]) |
+//! | 2       | `0x0800_8000` | 16 KiB  | persistent state, copy A ([`STATE_COPY_A`])       |
+//! | 3       | `0x0800_C000` | 16 KiB  | persistent state, copy B ([`STATE_COPY_B`])       |
 //! | 4       | `0x0801_0000` | 64 KiB  | spare ([`SPARE`])                                 |
 //! | 5       | `0x0802_0000` | 128 KiB | active slot ([`ACTIVE`])                          |
 //! | 6–7     | `0x0804_0000` | 256 KiB | DFU slot ([`DFU`])                                |
@@ -231,18 +231,22 @@ pub const BOOTLOADER: Region = Region {
     size: 2 * SMALL_SECTOR_SIZE,
 };
 
-/// embassy-boot's STATE partition (swap magic and copy progress): sector 2.
-pub const BOOT_STATE: Region = Region {
+/// The ECU's persistent state, copy A: sector 2. embassy-boot's state (swap magic and copy
+/// progress) and the ECU data records (version floor, failed SecurityAccess attempts, seed
+/// epoch) live in one of the two copies, written alternately ([`crate::twin`]).
+pub const STATE_COPY_A: Region = Region {
     start: 0x0800_8000,
     size: SMALL_SECTOR_SIZE,
 };
 
-/// ECU data (serial number, anti-rollback version floor and such, written rarely): sector 3.
-/// A sector of its own so that erasing it never touches the bootloader state.
-pub const ECU_DATA: Region = Region {
+/// The ECU's persistent state, copy B: sector 3 ([`STATE_COPY_A`]).
+pub const STATE_COPY_B: Region = Region {
     start: 0x0800_C000,
     size: SMALL_SECTOR_SIZE,
 };
+
+/// Both copies of the persistent state, in the order [`crate::twin::Twin::open`] takes them.
+pub const STATE_COPIES: [Region; 2] = [STATE_COPY_A, STATE_COPY_B];
 
 /// Sector 4, unused (64 KiB: its size does not fit the 128 KiB slot pages).
 pub const SPARE: Region = Region {
@@ -264,7 +268,7 @@ pub const DFU: Region = Region {
 };
 
 /// The 16 KiB sectors 0–3: embassy-stm32's flash region 1 of the F446 (`bank1_region1`),
-/// whose offsets count from its start. The boot state and the ECU data are in it.
+/// whose offsets count from its start. The state copies are in it.
 pub const SMALL_SECTORS: Region = Region {
     start: FLASH_BASE,
     size: 4 * SMALL_SECTOR_SIZE,
@@ -280,8 +284,8 @@ pub const LARGE_SECTORS: Region = Region {
 /// Every partition of the map with a name for messages, in address order.
 pub const PARTITIONS: [(&str, Region); 6] = [
     ("bootloader", BOOTLOADER),
-    ("boot state", BOOT_STATE),
-    ("ECU data", ECU_DATA),
+    ("state copy A", STATE_COPY_A),
+    ("state copy B", STATE_COPY_B),
     ("spare", SPARE),
     ("active slot", ACTIVE),
     ("DFU slot", DFU),
@@ -309,7 +313,7 @@ pub const APP_VECTOR_TABLE: u32 = ACTIVE.start + IMAGE_HEADER_SIZE;
 /// Erase size of the slot partitions ([`ACTIVE`], [`DFU`]): the 128 KiB sectors.
 pub const SLOT_ERASE_SIZE: u32 = LARGE_SECTOR_SIZE;
 
-/// Erase size of [`BOOT_STATE`] and [`ECU_DATA`]: the 16 KiB sectors.
+/// Erase size of the state copies ([`STATE_COPIES`]): the 16 KiB sectors.
 pub const SMALL_ERASE_SIZE: u32 = SMALL_SECTOR_SIZE;
 
 /// embassy-boot's page, its unit of swapping: the larger of the active and DFU partitions'
@@ -355,7 +359,9 @@ const fn unwrap_size(size: Option<u32>) -> u32 {
 const _: () = {
     assert!(SMALL_SECTORS.start == SECTORS[0].start);
     assert!(LARGE_SECTORS.start == SECTORS[5].start);
-    assert!(SMALL_SECTORS.contains_region(BOOT_STATE) && SMALL_SECTORS.contains_region(ECU_DATA));
+    assert!(
+        SMALL_SECTORS.contains_region(STATE_COPY_A) && SMALL_SECTORS.contains_region(STATE_COPY_B)
+    );
     assert!(LARGE_SECTORS.contains_region(ACTIVE) && LARGE_SECTORS.contains_region(DFU));
 };
 
@@ -404,14 +410,12 @@ const _: () = {
 const _: () = {
     // Each partition has one erase size (its `NorFlash::ERASE_SIZE`).
     assert!(ACTIVE_ERASE == SLOT_ERASE_SIZE && DFU_ERASE == SLOT_ERASE_SIZE);
+    // Each state copy is one erase unit, the same size (what `Twin::open` checks).
     assert!(matches!(
-        BOOT_STATE.uniform_erase_size(),
+        STATE_COPY_A.uniform_erase_size(),
         Some(SMALL_ERASE_SIZE)
     ));
-    assert!(matches!(
-        ECU_DATA.uniform_erase_size(),
-        Some(SMALL_ERASE_SIZE)
-    ));
+    assert!(STATE_COPY_A.size == SMALL_ERASE_SIZE && STATE_COPY_B.size == SMALL_ERASE_SIZE);
     // Page size is a multiple of the slots' write and erase sizes.
     assert!(BOOT_PAGE_SIZE % WRITE_SIZE as u32 == 0);
     assert!(BOOT_PAGE_SIZE % SLOT_ERASE_SIZE == 0);
@@ -419,7 +423,10 @@ const _: () = {
     assert!(ACTIVE.size % BOOT_PAGE_SIZE == 0 && DFU.size % BOOT_PAGE_SIZE == 0);
     assert!(DFU.size >= ACTIVE.size + BOOT_PAGE_SIZE);
     // The state partition holds the magic, the validity word and all progress words.
-    assert!(state_words_needed(ACTIVE.size, BOOT_PAGE_SIZE) <= BOOT_STATE.size / STATE_WRITE_SIZE);
+    assert!(
+        state_words_needed(ACTIVE.size, BOOT_PAGE_SIZE)
+            <= crate::twin::BOOT_STATE_LEN / STATE_WRITE_SIZE
+    );
     // The swap buffer divides the page, holds a state word, and is whole write units.
     assert!(BOOT_PAGE_SIZE % BOOT_SWAP_BUFFER_SIZE as u32 == 0);
     assert!(BOOT_SWAP_BUFFER_SIZE >= STATE_WRITE_SIZE as usize);
@@ -474,8 +481,8 @@ mod tests {
     fn partitions_are_the_documented_sectors() {
         let indices = |region: Region| region.sectors().iter().map(|s| s.index).collect::<Vec<_>>();
         assert_eq!(indices(BOOTLOADER), [0, 1]);
-        assert_eq!(indices(BOOT_STATE), [2]);
-        assert_eq!(indices(ECU_DATA), [3]);
+        assert_eq!(indices(STATE_COPY_A), [2]);
+        assert_eq!(indices(STATE_COPY_B), [3]);
         assert_eq!(indices(SPARE), [4]);
         assert_eq!(indices(ACTIVE), [5]);
         assert_eq!(indices(DFU), [6, 7]);
@@ -528,6 +535,6 @@ mod tests {
     fn state_partition_has_room_to_spare() {
         // Magic, validity, 2 swap + 2 revert progress words for the one-page active slot.
         assert_eq!(state_words_needed(ACTIVE.size, BOOT_PAGE_SIZE), 6);
-        assert_eq!(BOOT_STATE.size / STATE_WRITE_SIZE, 4096);
+        assert_eq!(crate::twin::BOOT_STATE_LEN / STATE_WRITE_SIZE, 256);
     }
 }

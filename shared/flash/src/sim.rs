@@ -59,10 +59,11 @@ use embedded_storage::nor_flash::{
 };
 
 use crate::map::{
-    partition_of, Region, Sector, ACTIVE, BOOT_STATE, DFU, ECU_DATA, ERASE_VALUE, FLASH,
-    FLASH_BASE, SECTORS, SLOT_ERASE_SIZE, SMALL_ERASE_SIZE, WRITE_SIZE,
+    partition_of, Region, Sector, ACTIVE, DFU, ERASE_VALUE, FLASH, FLASH_BASE, SECTORS,
+    SLOT_ERASE_SIZE, SMALL_ERASE_SIZE, STATE_COPIES, WRITE_SIZE,
 };
 use crate::timing::{sector_erase_time, WORD_PROGRAM_TIME};
+use crate::twin::{Twin, TwinError};
 
 /// A word as it reads when erased.
 const ERASED_WORD: u32 = u32::from_le_bytes([ERASE_VALUE; 4]);
@@ -305,6 +306,8 @@ impl SeededRng {
 }
 
 /// The whole 512 KiB main flash of an STM32F446RE, simulated. See the [module docs](self).
+/// A clone is the same flash at the same moment (for sweeps that start many runs there).
+#[derive(Clone)]
 pub struct SimFlash {
     memory: Vec<u8>,
     rng: SeededRng,
@@ -388,6 +391,11 @@ impl SimFlash {
     pub fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         let result = self.erase_inner(from, to);
         self.note(result)
+    }
+
+    /// Reseeds the generator that decides what interrupted operations leave.
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = SeededRng(seed);
     }
 
     /// Arms a power cut: the `operation`-th erase or program from now (0-based) is
@@ -691,21 +699,18 @@ impl<'a> SlotPartition<'a> {
 }
 
 impl<'a> SmallPartition<'a> {
-    /// embassy-boot's state partition ([`BOOT_STATE`]).
-    pub fn state(flash: &'a RefCell<SimFlash>) -> Self {
-        SimPartition {
-            flash,
-            region: BOOT_STATE,
-        }
+    /// The two copies of the persistent state ([`STATE_COPIES`]).
+    pub fn state_copies(flash: &'a RefCell<SimFlash>) -> [Self; 2] {
+        STATE_COPIES.map(|region| SimPartition { flash, region })
     }
+}
 
-    /// The ECU data partition ([`ECU_DATA`]).
-    pub fn ecu_data(flash: &'a RefCell<SimFlash>) -> Self {
-        SimPartition {
-            flash,
-            region: ECU_DATA,
-        }
-    }
+/// The ECU's persistent state over the simulated flash, as the bootloader and the
+/// application open it at each use.
+pub fn state_twin(
+    flash: &RefCell<SimFlash>,
+) -> Result<Twin<SmallPartition<'_>>, TwinError<FlashError>> {
+    Twin::open(SmallPartition::state_copies(flash))
 }
 
 impl<const ERASE_SIZE: u32> ErrorType for SimPartition<'_, ERASE_SIZE> {
@@ -807,7 +812,7 @@ mod tests {
     #[test]
     fn programming_only_clears_bits() {
         let mut flash = SimFlash::new(1);
-        let at = ECU_DATA.start;
+        let at = STATE_COPIES[1].start;
         flash
             .program(at, &words(&[0x1234_5678, 0x0000_00FF]))
             .expect("erased words");
@@ -836,7 +841,7 @@ mod tests {
         assert_eq!(flash.operations(), 2, "a refused call starts no operation");
         let message = error.to_string();
         assert!(
-            message.contains("0x0800_C004") && message.contains("ECU data"),
+            message.contains("0x0800_C004") && message.contains("state copy B"),
             "{message}"
         );
     }
@@ -845,15 +850,15 @@ mod tests {
     fn erase_restores_a_whole_sector() {
         let mut flash = SimFlash::new(1);
         flash
-            .program(BOOT_STATE.start + 0x100, &words(&[0, 0]))
+            .program(STATE_COPIES[0].start + 0x100, &words(&[0, 0]))
             .expect("program");
         flash
-            .program(ECU_DATA.start, &words(&[0]))
+            .program(STATE_COPIES[1].start, &words(&[0]))
             .expect("program");
         flash.erase_sector(2).expect("erase");
         assert!(sector_contents(&flash, 2).iter().all(|&b| b == ERASE_VALUE));
         assert_eq!(
-            word(&flash, ECU_DATA.start),
+            word(&flash, STATE_COPIES[1].start),
             0,
             "the next sector is untouched"
         );
@@ -1088,7 +1093,7 @@ mod tests {
         flash.record_trace(true);
         flash.erase(DFU.start, DFU.end()).expect("erase");
         flash
-            .program(BOOT_STATE.start + 4, &[0; 4])
+            .program(STATE_COPIES[0].start + 4, &[0; 4])
             .expect("program");
         let trace: Vec<String> = flash.trace().iter().map(|op| op.to_string()).collect();
         assert_eq!(
@@ -1096,7 +1101,7 @@ mod tests {
             [
                 "erase of sector 6 (DFU slot, 128 KiB at 0x0804_0000)",
                 "erase of sector 7 (DFU slot, 128 KiB at 0x0806_0000)",
-                "program of 4 bytes at 0x0800_8004 (boot state + 0x4)",
+                "program of 4 bytes at 0x0800_8004 (state copy A + 0x4)",
             ]
         );
         flash.record_trace(false);
@@ -1150,10 +1155,9 @@ mod tests {
             Err(NorFlashErrorKind::NotAligned)
         );
 
-        let mut state = SmallPartition::state(&flash);
-        state.erase(0, 0x4000).expect("one 16 KiB sector");
-        assert_eq!(state.region(), BOOT_STATE);
-        assert_eq!(SmallPartition::ecu_data(&flash).region(), ECU_DATA);
+        let [mut a, b] = SmallPartition::state_copies(&flash);
+        a.erase(0, 0x4000).expect("one 16 KiB sector");
+        assert_eq!([a.region(), b.region()], STATE_COPIES);
         assert_eq!(SlotPartition::active(&flash).region(), ACTIVE);
     }
 
@@ -1161,7 +1165,7 @@ mod tests {
     fn a_partition_must_match_its_sectors() {
         let flash = RefCell::new(SimFlash::new(1));
         assert!(SlotPartition::new(&flash, ACTIVE).is_ok());
-        assert!(SmallPartition::new(&flash, BOOT_STATE).is_ok());
+        assert!(SmallPartition::new(&flash, STATE_COPIES[0]).is_ok());
         let error = SlotPartition::new(&flash, SPARE).expect_err("64 KiB sector");
         assert_eq!(
             error,

@@ -100,6 +100,12 @@ impl<B: Backend> Backend for WithStack<'_, B> {
     fn fill_random(&mut self, out: &mut [u8]) {
         self.ecu.fill_random(out)
     }
+    fn stored_key_failures(&mut self) -> u8 {
+        self.ecu.stored_key_failures()
+    }
+    fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
+        self.ecu.store_key_failures(failures)
+    }
     fn image_expectations(&self) -> Expectations {
         self.ecu.image_expectations()
     }

@@ -99,8 +99,15 @@ pub trait Backend {
     }
     /// The ECU's DTCs.
     fn dtcs(&mut self) -> &mut Dtcs;
-    /// Unpredictable bytes for a security seed.
+    /// Unpredictable bytes for a security seed (a [`crate::security::SeedSource`]).
     fn fill_random(&mut self, out: &mut [u8]);
+    /// Wrong SecurityAccess keys in a row as the ECU keeps them across resets and power
+    /// cycles (ISO 14229-1: the delay survives a reset). Read once after the start.
+    fn stored_key_failures(&mut self) -> u8;
+    /// Keeps the count of wrong keys in a row. The server counts an attempt *before* it
+    /// checks the key, so a power cut at the check costs the attacker the attempt; `Err`
+    /// (nothing kept) refuses the check.
+    fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError>;
     /// What an image must be to be installed here.
     fn image_expectations(&self) -> Expectations;
     /// The key images are signed with.
@@ -240,6 +247,8 @@ pub struct Server {
     last_request: Instant,
     security: Security,
     failed_keys: u8,
+    /// Whether `failed_keys` was read from the ECU's flash since the start.
+    failures_loaded: bool,
     locked_until: Option<Instant>,
     normal_rx: bool,
     normal_tx: bool,
@@ -323,6 +332,7 @@ impl Server {
             last_request: now,
             security: Security::Locked,
             failed_keys: 0,
+            failures_loaded: false,
             locked_until: None,
             normal_rx: true,
             normal_tx: true,
@@ -418,7 +428,21 @@ impl Server {
         {
             self.enter_default_session(backend);
         }
+        self.load_key_failures(now, backend);
         self.lockout_active(now);
+    }
+
+    /// Takes the wrong keys counted before the last reset; if they reached the limit, the
+    /// delay runs again from the start (the ECU has no clock that survives a reset).
+    fn load_key_failures(&mut self, now: Instant, backend: &mut impl Backend) {
+        if self.failures_loaded {
+            return;
+        }
+        self.failures_loaded = true;
+        self.failed_keys = backend.stored_key_failures();
+        if self.failed_keys >= self.config.max_key_attempts {
+            self.locked_until = Some(now.plus_micros(self.config.lockout_us));
+        }
     }
 
     /// Handles one request PDU; writes the response into `out`, which must hold at least
@@ -705,6 +729,7 @@ impl Server {
         if self.session == Session::Default {
             return Err(Nrc::ServiceNotSupportedInActiveSession);
         }
+        self.load_key_failures(now, backend);
         match sub & 0x7F {
             0x01 => {
                 if request.len() != 2 {
@@ -734,15 +759,22 @@ impl Server {
                 if request.len() != 2 + KEY_LEN {
                     return Err(Nrc::IncorrectMessageLengthOrInvalidFormat);
                 }
+                // A seed is good for one try.
+                self.security = Security::Locked;
+                // The attempt is counted in flash before the key is looked at.
+                let failures = self.failed_keys.saturating_add(1);
+                if backend.store_key_failures(failures).is_err() {
+                    return Err(Nrc::ConditionsNotCorrect);
+                }
                 let expected = key_for(self.config.security_secret, self.config.node, &seed);
                 if keys_match(&request[2..], &expected) {
                     self.security = Security::Unlocked;
                     self.failed_keys = 0;
+                    // Not kept: the next reset counts one attempt too many, never too few.
+                    let _ = backend.store_key_failures(0);
                     return Ok(positive(request, &[sub], out));
                 }
-                // A seed is good for one try.
-                self.security = Security::Locked;
-                self.failed_keys = self.failed_keys.saturating_add(1);
+                self.failed_keys = failures;
                 if self.failed_keys >= self.config.max_key_attempts {
                     self.locked_until = Some(now.plus_micros(self.config.lockout_us));
                     return Err(Nrc::ExceededNumberOfAttempts);

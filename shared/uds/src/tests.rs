@@ -32,6 +32,12 @@ struct TestEcu {
     writes: usize,
     key: SigningKey,
     floor: Version,
+    /// Wrong keys in a row as the flash keeps them (survives a server reset).
+    stored_failures: u8,
+    /// Every count written, in order.
+    failure_writes: Vec<u8>,
+    /// The flash refuses the write of the count.
+    failures_unwritable: bool,
 }
 
 impl TestEcu {
@@ -45,6 +51,9 @@ impl TestEcu {
             writes: 0,
             key: SigningKey::from_seed([7; 32]),
             floor: Version::new(1, 0, 0),
+            stored_failures: 0,
+            failure_writes: Vec::new(),
+            failures_unwritable: false,
         }
     }
 }
@@ -75,6 +84,17 @@ impl Backend for TestEcu {
             self.random = self.random.wrapping_add(37);
             *b = self.random;
         }
+    }
+    fn stored_key_failures(&mut self) -> u8 {
+        self.stored_failures
+    }
+    fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
+        if self.failures_unwritable {
+            return Err(FlashError);
+        }
+        self.stored_failures = failures;
+        self.failure_writes.push(failures);
+        Ok(())
     }
     fn image_expectations(&self) -> Expectations {
         Expectations {
@@ -145,6 +165,19 @@ impl Bench {
             pending_seen: 0,
             reset: None,
         }
+    }
+
+    /// The ECU restarts (ECUReset or a power cycle): a new server, the flash as it was.
+    fn restart(&mut self) {
+        self.server = Server::new(Config::new(NODE, SECRET), self.now);
+        self.server.poll(self.now, &mut self.ecu);
+    }
+
+    /// Sends a wrong key for a fresh seed; returns the response.
+    fn wrong_key(&mut self) -> Vec<u8> {
+        let seed = self.request(&[0x27, 0x01]);
+        assert_eq!(&seed[..2], &[0x67, 0x01], "a seed");
+        self.request(&[&[0x27, 0x02][..], &[0xAA; 16]].concat())
     }
 
     fn advance_ms(&mut self, ms: u64) {
@@ -362,6 +395,80 @@ fn security_access_seed_key_and_lockout() {
     let mut send = vec![0x27, 0x02];
     send.extend_from_slice(&key_for(SECRET, NODE + 1, &seed));
     assert_eq!(bench.request(&send), [0x7F, 0x27, 0x35]);
+}
+
+#[test]
+fn the_lockout_survives_a_reset_and_a_power_cycle() {
+    let mut bench = Bench::new();
+    bench.request(&[0x10, 0x03]);
+    for _ in 0..2 {
+        assert_eq!(bench.wrong_key(), [0x7F, 0x27, 0x35]);
+    }
+    assert_eq!(bench.wrong_key(), [0x7F, 0x27, 0x36]);
+    assert_eq!(bench.ecu.stored_failures, 3);
+    // ECUReset needs no security: before, it gave three fresh guesses.
+    assert_eq!(bench.request(&[0x11, 0x01]), [0x51, 0x01]);
+    bench.restart();
+    bench.request(&[0x10, 0x03]);
+    assert_eq!(bench.request(&[0x27, 0x01]), [0x7F, 0x27, 0x37]);
+    // The delay runs again from the start: 9 s after the reset, still locked.
+    bench.advance_ms(4_000);
+    bench.request(&[0x3E, 0x00]);
+    bench.advance_ms(4_000);
+    bench.request(&[0x3E, 0x00]);
+    bench.advance_ms(1_000);
+    assert_eq!(bench.request(&[0x27, 0x01]), [0x7F, 0x27, 0x37]);
+    // A power cycle during the delay starts it again too.
+    bench.restart();
+    bench.request(&[0x10, 0x03]);
+    assert_eq!(bench.request(&[0x27, 0x01]), [0x7F, 0x27, 0x37]);
+    bench.advance_ms(4_000);
+    bench.request(&[0x3E, 0x00]);
+    bench.advance_ms(4_000);
+    bench.request(&[0x3E, 0x00]);
+    bench.advance_ms(2_001);
+    bench.unlock();
+    assert_eq!(bench.ecu.stored_failures, 0, "a good key clears the count");
+}
+
+#[test]
+fn a_reset_between_wrong_keys_gives_no_fresh_attempts() {
+    let mut bench = Bench::new();
+    bench.request(&[0x10, 0x03]);
+    assert_eq!(bench.wrong_key(), [0x7F, 0x27, 0x35]);
+    assert_eq!(bench.wrong_key(), [0x7F, 0x27, 0x35]);
+    bench.restart();
+    bench.request(&[0x10, 0x03]);
+    assert_eq!(
+        bench.wrong_key(),
+        [0x7F, 0x27, 0x36],
+        "the third in all locks"
+    );
+    assert_eq!(bench.ecu.failure_writes, [1, 2, 3]);
+}
+
+#[test]
+fn an_attempt_is_counted_in_flash_before_the_key_is_checked() {
+    let mut bench = Bench::new();
+    bench.request(&[0x10, 0x03]);
+    // The right key, but the count cannot be kept: refused, and not unlocked.
+    bench.ecu.failures_unwritable = true;
+    let seed: [u8; 16] = bench.request(&[0x27, 0x01])[2..].try_into().unwrap();
+    let key = key_for(SECRET, NODE, &seed);
+    assert_eq!(
+        bench.request(&[&[0x27, 0x02][..], &key].concat()),
+        [0x7F, 0x27, 0x22]
+    );
+    assert!(!bench.server.unlocked());
+    // The seed was used up: the same key again is out of sequence.
+    assert_eq!(
+        bench.request(&[&[0x27, 0x02][..], &key].concat()),
+        [0x7F, 0x27, 0x24]
+    );
+    // A good key: the attempt is written (1) before the check, then cleared (0).
+    bench.ecu.failures_unwritable = false;
+    bench.unlock();
+    assert_eq!(bench.ecu.failure_writes, [1, 0]);
 }
 
 #[test]
@@ -927,4 +1034,32 @@ fn one_spoofed_zero_speed_frame_does_not_open_programming_at_speed() {
     wire.drive(0.0, 600);
     assert!(wire.ecu_node.vehicle_standing(wire.now));
     assert_eq!(request_at_speed(&mut wire)[..2], [0x50, 0x02]);
+}
+
+#[test]
+fn seeds_differ_across_cars_starts_and_draws_and_replay_per_car() {
+    use crate::security::SeedSource;
+    let draw = |entropy: &[u8], epoch: u32, nth: usize| {
+        let mut source = SeedSource::new(entropy, epoch);
+        let mut seed = [0u8; 16];
+        for _ in 0..=nth {
+            source.fill(&mut seed);
+        }
+        seed
+    };
+    let first = draw(b"car 1", 1, 0);
+    assert_eq!(
+        first,
+        draw(b"car 1", 1, 0),
+        "the same car and start replays"
+    );
+    assert_ne!(first, draw(b"car 2", 1, 0), "another car");
+    assert_ne!(first, draw(b"car 1", 2, 0), "the next start");
+    assert_ne!(first, draw(b"car 1", 1, 1), "the next seed");
+    let mut mixed = SeedSource::new(b"car 1", 1);
+    mixed.add_entropy(&[0x5A]);
+    let mut seed = [0u8; 16];
+    mixed.fill(&mut seed);
+    assert_ne!(first, seed, "entropy added changes the seeds");
+    assert_eq!(mixed.epoch(), 1);
 }
