@@ -153,6 +153,10 @@ pub const BRAKING_THRESHOLD: f32 = 2.0;
 /// so that the car comes to rest, and the 1 km/h speed reference is too coarse there.
 pub const ABS_MIN_SPEED_KMH: f32 = 5.0;
 
+/// Wheel speed at or above which a wheel counts as turning, km/h: the ABS ECU refuses to be
+/// reprogrammed then, whatever VehicleSpeedMsg says (the UDS server's standstill limit).
+pub const WHEEL_TURNING_KMH: f32 = 1.0;
+
 /// Slip above which a wheel is slipping and its ABS channel engages. Just below the target
 /// so that an engaged channel keeps being seen as acting while it regulates.
 pub const SLIP_THRESHOLD: f32 = 0.10;
@@ -461,6 +465,8 @@ pub struct AbsEcu {
     failsafe_brake: f32,
     implausible_since: [Option<Instant>; 4],
     sensor_fault: bool,
+    /// At the last step, valid wheel speeds showed a wheel turning.
+    wheels_turning: bool,
     status: Status,
     last_step: Option<Instant>,
     tx_wheels: PeriodicTx,
@@ -491,6 +497,7 @@ impl AbsEcu {
             failsafe_brake: 0.0,
             implausible_since: [None; 4],
             sensor_fault: false,
+            wheels_turning: false,
             status: Status::default(),
             last_step: None,
             tx_wheels: PeriodicTx::of::<WheelSpeedMsg>(),
@@ -854,6 +861,7 @@ impl EcuLogic for AbsEcu {
         let speed_stale = supervise(&mut self.vehicle_speed, &mut self.dtcs, now);
         let pedal_stale = supervise(&mut self.pedal_brake, &mut self.dtcs, now);
         let (wheels, readings_valid) = self.check_wheel_sensors(now, &sensors.wheel_speed_kmh);
+        self.wheels_turning = readings_valid && wheels.iter().any(|&w| w >= WHEEL_TURNING_KMH);
         let (brake, brake_source) = self.brake_command(now, pedal_stale, dt_s);
         let v = limit(
             self.vehicle_speed.value().vehicle_speed,
@@ -931,6 +939,10 @@ impl EcuLogic for AbsEcu {
 
     fn dtcs_mut(&mut self) -> &mut Dtcs {
         &mut self.dtcs
+    }
+
+    fn own_sensors_show_motion(&self) -> bool {
+        self.wheels_turning
     }
 }
 

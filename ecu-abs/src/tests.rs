@@ -83,3 +83,30 @@ mod properties {
         }
     }
 }
+
+/// Turning wheels veto reprogramming, whatever the bus says of the vehicle speed; standing
+/// wheels, or readings the ECU does not trust, do not.
+#[test]
+fn turning_wheels_veto_programming() {
+    use crate::*;
+    use autoplug_ecu::{EcuLogic, Instant};
+    let mut ecu = AbsEcu::new(Variant::Correct, Instant::ZERO);
+    assert!(!ecu.own_sensors_show_motion(), "before the first step");
+    let mut now = Instant::ZERO;
+    for (wheels, vetoes) in [
+        ([0.0; 4], false),
+        ([0.0, 0.0, 0.0, 0.9], false),
+        ([0.0, 0.0, 3.0, 0.0], true),
+        ([90.0; 4], true),
+        ([0.0; 4], false),
+    ] {
+        now = now.plus_micros(STEP_PERIOD_US);
+        ecu.step(
+            now,
+            &Sensors {
+                wheel_speed_kmh: wheels,
+            },
+        );
+        assert_eq!(ecu.own_sensors_show_motion(), vetoes, "{wheels:?}");
+    }
+}

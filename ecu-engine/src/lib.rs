@@ -31,6 +31,10 @@ use autoplug_can::{AccMsg, EngineMode, EngineMsg, Frame, Node};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_scaling::clamp_finite;
 
+/// Highest engine speed at which the engine ECU lets itself be reprogrammed, rpm: engine
+/// off or idling (the EVO VI idles at 850 rpm), never while driven.
+pub const PROGRAMMING_MAX_RPM: f32 = 1200.0;
+
 /// Highest engine speed EngineMsg carries, rpm (raw 255); above the EVO VI's red line.
 pub const ENGINE_RPM_MAX: f32 = 9000.0;
 
@@ -94,6 +98,8 @@ impl Default for Status {
 /// The engine ECU's logic.
 #[derive(Clone, Debug)]
 pub struct EngineEcu {
+    /// Engine speed at the last step, rpm.
+    last_rpm: f32,
     console: Input<AccMsg>,
     tx_engine: PeriodicTx,
     dtcs: Dtcs,
@@ -129,6 +135,7 @@ impl EngineEcu {
     /// The ECU at power-up (`now`).
     pub fn new(now: Instant) -> Self {
         Self {
+            last_rpm: 0.0,
             console: Input::new(now),
             tx_engine: PeriodicTx::of::<EngineMsg>(),
             dtcs: Dtcs::new(),
@@ -155,8 +162,9 @@ impl EcuLogic for EngineEcu {
         } else {
             self.console.value().engine_mode
         };
+        self.last_rpm = clamp_finite(sensors.engine_rpm, 0.0, ENGINE_RPM_MAX);
         let status = Status {
-            engine_rpm: clamp_finite(sensors.engine_rpm, 0.0, ENGINE_RPM_MAX),
+            engine_rpm: self.last_rpm,
             fuel_level_l: clamp_finite(sensors.fuel_level_l, 0.0, FUEL_LEVEL_MAX_L),
             engine_mode,
             fuel_used_ml: self.fuel.integrate(now, sensors.fuel_flow_l_per_h),
@@ -180,6 +188,10 @@ impl EcuLogic for EngineEcu {
 
     fn dtcs_mut(&mut self) -> &mut Dtcs {
         &mut self.dtcs
+    }
+
+    fn own_sensors_show_motion(&self) -> bool {
+        self.last_rpm > PROGRAMMING_MAX_RPM
     }
 }
 

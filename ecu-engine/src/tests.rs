@@ -33,3 +33,27 @@ proptest! {
         prop_assert_eq!(msg.engine_mode, status.engine_mode);
     }
 }
+
+/// Engine off or idling lets the ECU be reprogrammed; above idle its own RPM vetoes,
+/// whatever the bus says of the vehicle speed.
+#[test]
+fn rpm_above_idle_vetoes_programming() {
+    let mut ecu = EngineEcu::new(Instant::ZERO);
+    assert!(!ecu.own_sensors_show_motion(), "before the first step");
+    let sensors = |engine_rpm| Sensors {
+        engine_rpm,
+        fuel_level_l: 30.0,
+        fuel_flow_l_per_h: 0.0,
+    };
+    for (rpm, vetoes) in [
+        (0.0, false),
+        (850.0, false),
+        (1200.0, false),
+        (1201.0, true),
+        (6000.0, true),
+        (f32::NAN, false),
+    ] {
+        ecu.step(Instant::ZERO, &sensors(rpm));
+        assert_eq!(ecu.own_sensors_show_motion(), vetoes, "{rpm} rpm");
+    }
+}

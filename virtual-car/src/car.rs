@@ -103,6 +103,7 @@ where
         // A stalled core runs no step; the ticker catches up afterwards, one step per tick.
         if t_us >= self.next_step_us && !self.diag.stalled(t_us) {
             let outputs = self.ecu.step(Instant::from_micros(t_us), &sensors());
+            self.diag.set_own_motion(self.ecu.own_sensors_show_motion());
             self.outputs = Some(outputs);
             self.next_step_us += E::STEP_PERIOD_US;
             self.steps_since_boot = self.steps_since_boot.saturating_add(1);

@@ -121,6 +121,8 @@ pub struct VirtualDiag {
     booted_at_us: u64,
     /// The car's secret for security seeds: what makes this car's seeds its own.
     car_secret: [u8; 12],
+    /// The logic's own sensors showed motion at its last step (a veto on programming).
+    own_motion: bool,
     /// Security seeds of the current start ([`SeedSource`] over the car's secret and the
     /// seed epoch kept in the simulated flash).
     seeds: SeedSource,
@@ -164,6 +166,7 @@ impl VirtualDiag {
             key: dev::PUBLIC_KEY,
             booted_at_us: 0,
             car_secret,
+            own_motion: false,
             seeds: SeedSource::new(&car_secret, 0),
         };
         diag.boot(0);
@@ -312,6 +315,12 @@ impl VirtualDiag {
         self.stall(t_us, busy);
     }
 
+    /// What the logic's own sensors showed at its last step: motion vetoes programming
+    /// (`EcuLogic::own_sensors_show_motion`).
+    pub fn set_own_motion(&mut self, moving: bool) {
+        self.own_motion = moving;
+    }
+
     /// Whether the running image still has to confirm itself.
     pub fn unconfirmed(&self) -> bool {
         self.unconfirmed
@@ -407,6 +416,7 @@ macro_rules! backend {
             floor: $diag.floor,
             key: $diag.key,
             seeds: &mut $diag.seeds,
+            own_motion: $diag.own_motion,
             busy_us: 0,
         }
     };
@@ -424,6 +434,7 @@ struct EcuBackend<'a> {
     floor: Version,
     key: [u8; 32],
     seeds: &'a mut SeedSource,
+    own_motion: bool,
     /// Flash busy time of the operations of this call, µs.
     busy_us: u64,
 }
@@ -455,6 +466,10 @@ impl Backend for EcuBackend<'_> {
 
     fn dtcs(&mut self) -> &mut Dtcs {
         self.dtcs
+    }
+
+    fn own_sensors_show_motion(&self) -> bool {
+        self.own_motion
     }
 
     fn fill_random(&mut self, out: &mut [u8]) {

@@ -74,6 +74,14 @@ pub trait EcuLogic {
 
     /// The DTCs, for the diagnostic server: cleared by 0x14, paused by 0x85.
     fn dtcs_mut(&mut self) -> &mut Dtcs;
+
+    /// Whether the ECU's own sensors, at the last step, show the car moving or the engine
+    /// above idle: a veto on reprogramming whatever the bus says (a spoofed standstill on
+    /// the bus does not stop the ABS's wheels turning). `false` for an ECU without such
+    /// sensors.
+    fn own_sensors_show_motion(&self) -> bool {
+        false
+    }
 }
 
 /// Offers a frame to an input. A refused frame records "invalid data" against the

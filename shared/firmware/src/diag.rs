@@ -258,6 +258,8 @@ pub struct FirmwareBackend<'a> {
     pub dtcs: &'a mut Dtcs,
     /// Where security seeds come from (see [`crate::entropy`]).
     pub seeds: &'a mut SeedSource,
+    /// The logic's own sensors show the car moving (a veto on programming).
+    pub own_motion: bool,
 }
 
 impl Backend for FirmwareBackend<'_> {
@@ -278,6 +280,10 @@ impl Backend for FirmwareBackend<'_> {
 
     fn dtcs(&mut self) -> &mut Dtcs {
         self.dtcs
+    }
+
+    fn own_sensors_show_motion(&self) -> bool {
+        self.own_motion
     }
 
     fn fill_random(&mut self, out: &mut [u8]) {

@@ -131,6 +131,7 @@ where
             FirmwareBackend {
                 node: E::NODE,
                 flash: &mut ecu_flash,
+                own_motion: ecu.own_sensors_show_motion(),
                 dtcs: ecu.dtcs_mut(),
                 seeds: &mut seeds,
             }

@@ -92,7 +92,10 @@ impl<B: Backend> Backend for WithStack<'_, B> {
         self.speed_kmh
     }
     fn vehicle_standing(&self) -> bool {
-        self.standing
+        self.standing && !self.ecu.own_sensors_show_motion()
+    }
+    fn own_sensors_show_motion(&self) -> bool {
+        self.ecu.own_sensors_show_motion()
     }
     fn dtcs(&mut self) -> &mut Dtcs {
         self.ecu.dtcs()

@@ -96,6 +96,12 @@ pub trait Backend {
     /// of the last half second at its period, all standing (one spoofed frame is no proof).
     fn vehicle_standing(&self) -> bool {
         self.vehicle_speed_kmh().is_some_and(|v| v < STANDING_KMH)
+            && !self.own_sensors_show_motion()
+    }
+    /// Whether the ECU's own sensors show the car moving or the engine above idle
+    /// (`autoplug_ecu::EcuLogic::own_sensors_show_motion`): a veto on programming.
+    fn own_sensors_show_motion(&self) -> bool {
+        false
     }
     /// The ECU's DTCs.
     fn dtcs(&mut self) -> &mut Dtcs;

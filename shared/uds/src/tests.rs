@@ -38,6 +38,8 @@ struct TestEcu {
     failure_writes: Vec<u8>,
     /// The flash refuses the write of the count.
     failures_unwritable: bool,
+    /// The ECU's own sensors show the car moving.
+    own_motion: bool,
 }
 
 impl TestEcu {
@@ -54,6 +56,7 @@ impl TestEcu {
             stored_failures: 0,
             failure_writes: Vec::new(),
             failures_unwritable: false,
+            own_motion: false,
         }
     }
 }
@@ -87,6 +90,9 @@ impl Backend for TestEcu {
     }
     fn stored_key_failures(&mut self) -> u8 {
         self.stored_failures
+    }
+    fn own_sensors_show_motion(&self) -> bool {
+        self.own_motion
     }
     fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
         if self.failures_unwritable {
@@ -1030,9 +1036,19 @@ fn one_spoofed_zero_speed_frame_does_not_open_programming_at_speed() {
         [0x7F, 0x10, 0x22],
         "conditions not correct: the car was not seen standing"
     );
-    // Standing for real, over the window: allowed.
+    // Zero-speed frames over the whole window, as from an attacker who silenced the real
+    // sender: the ECU's own sensors (wheels turning, engine above idle) still veto.
     wire.drive(0.0, 600);
     assert!(wire.ecu_node.vehicle_standing(wire.now));
+    wire.ecu.own_motion = true;
+    assert_eq!(
+        request_at_speed(&mut wire),
+        [0x7F, 0x10, 0x22],
+        "the ECU's own sensors show motion"
+    );
+    // Standing for real, over the window, by the bus and the ECU's sensors: allowed.
+    wire.ecu.own_motion = false;
+    wire.drive(0.0, 600);
     assert_eq!(request_at_speed(&mut wire)[..2], [0x50, 0x02]);
 }
 
