@@ -371,15 +371,19 @@ impl Scenario {
             source: source.clone(),
             message,
         };
-        let size = std::fs::metadata(path)
-            .map_err(|e| fail(format!("cannot read: {e}")))?
-            .len();
-        if size > MAX_SCENARIO_BYTES {
+        // Read at most one byte more than allowed: a device or a growing file (`/dev/zero`)
+        // reports no size, and must not be read for ever.
+        use std::io::Read as _;
+        let file = std::fs::File::open(path).map_err(|e| fail(format!("cannot read: {e}")))?;
+        let mut text = String::new();
+        file.take(MAX_SCENARIO_BYTES + 1)
+            .read_to_string(&mut text)
+            .map_err(|e| fail(format!("cannot read: {e}")))?;
+        if text.len() as u64 > MAX_SCENARIO_BYTES {
             return Err(fail(format!(
-                "{size} bytes: a scenario file is at most {MAX_SCENARIO_BYTES} bytes"
+                "more than {MAX_SCENARIO_BYTES} bytes: a scenario file is at most that"
             )));
         }
-        let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot read: {e}")))?;
         Self::parse(&text, &source)
     }
 

@@ -56,6 +56,19 @@ fn errors_on_huge_or_hostile_scenario_files_stay_short() {
     assert!(text.contains("line 1, column"), "{text}");
 }
 
+/// A device with no end and no size (`/dev/zero`) is read only as far as the limit.
+#[cfg(unix)]
+#[test]
+fn an_endless_scenario_file_is_refused_at_the_size_limit() {
+    let output = virtual_car(&["run", "/dev/zero"]);
+    assert_eq!(output.status.code(), Some(1), "{output:?}");
+    let text = stderr(&output);
+    assert!(
+        text.contains("/dev/zero") && text.contains("at most"),
+        "{text}"
+    );
+}
+
 #[test]
 fn a_wrong_output_folder_is_named_as_such() {
     let dir = tempfile::tempdir().unwrap();

@@ -79,9 +79,10 @@ pub struct LogSource {
 impl LogSource {
     /// Opens a log file of any supported format (candump, ASC, BLF).
     pub fn open(path: &std::path::Path) -> Result<Self, SourceError> {
+        // The open error's own text is the reason alone: the path is said once, here.
         let reader = autoplug_logs::open(path).map_err(|e| SourceError {
             source: path.display().to_string(),
-            message: e.to_string(),
+            message: e.error.to_string(),
         })?;
         let (sender, batches) = sync_channel(READ_AHEAD_BATCHES);
         std::thread::Builder::new()
