@@ -16,6 +16,8 @@ struct Ecu {
     dfu: Vec<u8>,
     dtcs: Dtcs,
     speed: Option<f32>,
+    /// Wrong keys in a row, as the flash keeps them.
+    key_failures: u8,
 }
 
 impl Backend for Ecu {
@@ -41,6 +43,13 @@ impl Backend for Ecu {
     }
     fn fill_random(&mut self, out: &mut [u8]) {
         out.fill(0x5A);
+    }
+    fn stored_key_failures(&mut self) -> u8 {
+        self.key_failures
+    }
+    fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
+        self.key_failures = failures;
+        Ok(())
     }
     fn image_expectations(&self) -> Expectations {
         Expectations {
@@ -86,6 +95,7 @@ fuzz_target!(|data: &[u8]| {
         dfu: vec![0xFF; 2 * SECTOR],
         dtcs: Dtcs::new(),
         speed: Some(0.0),
+        key_failures: 0,
     };
     let mut server = Server::new(Config::new(0x0D, SECRET), Instant::from_micros(0));
     let mut now = 0u64;
