@@ -81,6 +81,96 @@ impl SeedSource {
         let mut nonce = [0u8; 8];
         nonce[..4].copy_from_slice(&self.epoch.to_le_bytes());
         nonce[4..].copy_from_slice(&self.drawn.to_le_bytes());
-        rfc6979::HmacDrbg::<Sha256>::new(&entropy, &nonce, SEED_PERSONALIZATION).fill_bytes(out);
+        HmacDrbg::new(&[&entropy, &nonce, SEED_PERSONALIZATION]).fill(out);
+    }
+}
+
+/// HMAC_DRBG with HMAC-SHA-256 (NIST SP 800-90A rev. 1, 10.1.2): instantiate, generate,
+/// no reseed, no additional input. Written here over the firmware's one `Hmac<Sha256>`
+/// rather than taken from `rfc6979` (whose `HmacDrbg` the tests compare it with): that
+/// crate brings a second HMAC implementation (656 bytes more in cruise-fw).
+struct HmacDrbg {
+    key: [u8; 32],
+    value: [u8; 32],
+}
+
+impl HmacDrbg {
+    /// Instantiate with the seed material `entropy_input ‖ nonce ‖ personalization`.
+    fn new(seed_material: &[&[u8]]) -> Self {
+        let mut drbg = Self {
+            key: [0x00; 32],
+            value: [0x01; 32],
+        };
+        drbg.update(seed_material);
+        drbg
+    }
+
+    /// HMAC_DRBG_Update: K = HMAC(K, V ‖ 0x00 ‖ data), V = HMAC(K, V), and again with 0x01
+    /// when there is data.
+    fn update(&mut self, data: &[&[u8]]) {
+        for round in [0x00u8, 0x01] {
+            if round == 0x01 && data.iter().all(|d| d.is_empty()) {
+                break;
+            }
+            let mut mac = mac_with(&self.key);
+            mac.update(&self.value);
+            mac.update(&[round]);
+            for part in data {
+                mac.update(part);
+            }
+            self.key = mac.finalize().into_bytes().into();
+            let mut mac = mac_with(&self.key);
+            mac.update(&self.value);
+            self.value = mac.finalize().into_bytes().into();
+        }
+    }
+
+    /// HMAC_DRBG_Generate of `out.len()` bytes.
+    fn fill(&mut self, out: &mut [u8]) {
+        for chunk in out.chunks_mut(32) {
+            let mut mac = mac_with(&self.key);
+            mac.update(&self.value);
+            self.value = mac.finalize().into_bytes().into();
+            chunk.copy_from_slice(&self.value[..chunk.len()]);
+        }
+        self.update(&[]);
+    }
+}
+
+fn mac_with(key: &[u8; 32]) -> Hmac<Sha256> {
+    // HMAC takes a key of any length: `new_from_slice` cannot fail for it.
+    <Hmac<Sha256> as Mac>::new_from_slice(key).unwrap_or_else(|_| unreachable!())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The same bytes as RustCrypto's HMAC_DRBG (rfc6979's) for the same seed material,
+    /// over several calls and lengths (partial blocks included).
+    #[test]
+    fn the_drbg_matches_rustcrypto_hmac_drbg() {
+        for (entropy, nonce, personalization) in [
+            (
+                &b"totally random0123456789"[..],
+                &b"secret nonce"[..],
+                &b"my drbg"[..],
+            ),
+            (&[0u8; 32][..], &[][..], &[][..]),
+            (
+                &[0xA5; 55][..],
+                &[1, 2, 3, 4, 5, 6, 7, 8][..],
+                SEED_PERSONALIZATION,
+            ),
+        ] {
+            let mut ours = HmacDrbg::new(&[entropy, nonce, personalization]);
+            let mut theirs = rfc6979::HmacDrbg::<Sha256>::new(entropy, nonce, personalization);
+            for len in [16, 32, 1, 70, 64] {
+                let (mut a, mut b) = ([0u8; 70], [0u8; 70]);
+                ours.fill(&mut a[..len]);
+                theirs.fill_bytes(&mut b[..len]);
+                assert_eq!(a[..len], b[..len], "{len} bytes");
+            }
+        }
     }
 }
