@@ -161,6 +161,15 @@ pub enum Command {
         /// Seconds of bus time between two readings of the trouble codes.
         #[arg(long, value_name = "SECONDS", default_value_t = 60.0, value_parser = parse_seconds, requires = "transmit")]
         dtc_interval: f64,
+        /// Serve the car's decoded signals live over WebSocket (ws://ADDR/api/stream, the
+        /// dashboard's stream) on this address, e.g. 127.0.0.1:8080. Keep it on loopback
+        /// unless the bus must be watched from elsewhere.
+        #[arg(long, value_name = "ADDR")]
+        web: Option<std::net::SocketAddr>,
+        /// A browser origin besides the server's own that may open the stream
+        /// (http://host:port); repeatable.
+        #[arg(long = "web-origin", value_name = "ORIGIN", requires = "web")]
+        web_origins: Vec<String>,
     },
     /// The trips in the database.
     #[command(subcommand)]
@@ -694,6 +703,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             quiet,
             transmit,
             dtc_interval,
+            web,
+            web_origins,
         } => {
             let options = GatewayOptions {
                 transmit: transmit.then_some((dtc_interval * 1e6) as u64),
@@ -708,6 +719,11 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 fast,
                 duration,
                 quiet,
+                web: web.map(|addr| autoplug_web::WebConfig {
+                    addr,
+                    allowed_origins: web_origins,
+                    max_clients: autoplug_web::server::DEFAULT_MAX_CLIENTS,
+                }),
             };
             gateway(&bus, options, out)
         }
@@ -832,6 +848,8 @@ struct GatewayOptions {
     fast: bool,
     duration: Option<f64>,
     quiet: bool,
+    /// Serve the live stream.
+    web: Option<autoplug_web::WebConfig>,
 }
 
 /// Set by Ctrl-C: the live gateway stops at the next frame or idle moment.
@@ -899,6 +917,18 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     let deadline = options
         .duration
         .map(|s| Instant::now() + Duration::from_secs_f64(s));
+    let mut publisher = None;
+    let _web_server = match options.web {
+        Some(config) => {
+            let table = std::sync::Arc::new(autoplug_web::LiveTable::new());
+            let server = autoplug_web::WebServer::start(config, table.clone())
+                .map_err(|e| CliError::Log(e.to_string()))?;
+            writeln!(out, "live stream on ws://{}/api/stream", server.addr())?;
+            publisher = Some(autoplug_web::Publisher::new(table));
+            Some(server)
+        }
+        None => None,
+    };
     let mut pipeline = Pipeline::new(Strictness::Strict);
     let mut status_out = io::stderr();
     let mut watch = Watch::new(trip_log);
@@ -913,6 +943,9 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         let mut observers: Vec<&mut dyn Observer> = vec![&mut watch];
         if let Some(sink) = recording.as_mut() {
             observers.push(sink);
+        }
+        if let Some(publisher) = publisher.as_mut() {
+            observers.push(publisher);
         }
         pipeline.run(source.as_mut(), &mut observers, &mut || {
             STOP.load(Ordering::SeqCst) || deadline.is_some_and(|d| Instant::now() >= d)

@@ -394,3 +394,65 @@ fn the_gateway_on_socketcand_watches_the_car_and_talks_to_its_ecus() {
         "{paced:?}"
     );
 }
+
+/// `autoplug gateway --web`: the live stream serves what the virtual car puts on the bus.
+#[test]
+fn the_gateway_serves_the_car_live_over_http_and_websocket() {
+    use std::io::{BufRead, BufReader, Read, Write};
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .args([
+            "gateway",
+            "--bus",
+            "virtual:../scenarios/drive-cycle.toml",
+            "--web",
+            "127.0.0.1:0",
+            "--no-db",
+            "--quiet",
+            "--duration",
+            "20",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("autoplug runs");
+    let stdout = child.stdout.take().expect("stdout");
+    let mut lines = BufReader::new(stdout).lines();
+    let addr = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|line| {
+            line.strip_prefix("live stream on ws://")
+                .and_then(|rest| rest.strip_suffix("/api/stream"))
+                .map(str::to_string)
+        })
+        .expect("the address is printed");
+    let get = |path: &str| {
+        let mut stream = std::net::TcpStream::connect(&addr).expect("connect");
+        write!(
+            stream,
+            "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+        )
+        .expect("request");
+        let mut response = String::new();
+        stream.read_to_string(&mut response).expect("response");
+        response
+    };
+    // The car runs in real time: within a few seconds the speed is on the stream.
+    let mut state = String::new();
+    for _ in 0..50 {
+        std::thread::sleep(std::time::Duration::from_millis(200));
+        state = get("/api/state");
+        if state.contains("\"Vehicle.Speed\":") && !state.contains("\"Vehicle.Speed\":null") {
+            break;
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(state.starts_with("HTTP/1.1 200"), "{state}");
+    assert!(
+        !state.contains("\"Vehicle.Speed\":null"),
+        "the speed is live: {state}"
+    );
+    assert!(state.contains("\"frames\":"), "{state}");
+}

@@ -1,0 +1,33 @@
+//! The AutoPlug dashboard's server: the car's decoded signals, live.
+//!
+//! - [`live`]: the live table the gateway's pipeline publishes into, each signal stamped
+//!   with the version that last changed it;
+//! - [`server`]: HTTP and WebSocket on a thread of its own (tokio, axum), loopback by
+//!   default.
+//!
+//! # The stream (`GET /api/stream`, WebSocket, JSON text messages)
+//!
+//! The server sends, in this order:
+//! 1. `{"type":"catalog","signals":[{"path":"Vehicle.Speed","name":"VehicleSpeedMsg.VehicleSpeed","unit":"km/h","cycle_ms":10,"labels":[]}, …]}`:
+//!    every signal of the CAN catalogue by its COVESA VSS path, with its DBC name, unit,
+//!    its message's cycle time and, for an enumeration, the value table as `[raw, label]`
+//!    pairs;
+//! 2. `{"type":"update","version":N,"t":SECONDS,"signals":{PATH: VALUE, …},"bus":{…}}`
+//!    with every signal: its value in the unit of the catalogue, `null` while stale (no
+//!    valid frame for 3 periods of its message) or never received; `t` is bus time;
+//!    `bus` holds `frames`, `error_frames`, `unknown_frames`, `diagnostic_frames`;
+//! 3. then, at most every 50 ms (20 Hz) and only when something changed, an `update` with
+//!    only the signals that changed since the last one sent to this client (`bus` only if
+//!    it changed). A client that reads slowly gets fewer updates with the latest values,
+//!    never a backlog.
+//!
+//! A client may send `{"type":"ping"}` (answered `{"type":"pong"}`); anything else is
+//! answered `{"type":"error","error":"…"}` and the stream goes on. `GET /api/catalog` and
+//! `GET /api/state` give the first two messages over plain HTTP.
+#![deny(missing_docs)]
+
+pub mod live;
+pub mod server;
+
+pub use live::{LiveTable, Publisher};
+pub use server::{WebConfig, WebServer};

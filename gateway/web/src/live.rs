@@ -1,0 +1,281 @@
+//! The live table: the car's decoded signals and bus counters as the dashboard streams them,
+//! each entry stamped with the version that last changed it.
+//!
+//! The gateway's pipeline publishes into it (a few microseconds, under a short lock; it
+//! never waits for a client), and each client's task takes what changed since the version
+//! it last sent. A slow client therefore gets fewer, larger updates — the latest value of
+//! each signal, never a backlog — and memory does not depend on the number of clients or
+//! on how far behind they are.
+
+use std::fmt::Write as _;
+use std::sync::Mutex;
+
+use autoplug_gateway::{CarState, SignalState};
+use serde::Serialize;
+use tokio::sync::watch;
+
+/// One signal as the table keeps it.
+#[derive(Clone, Debug, PartialEq)]
+struct Entry {
+    /// Its COVESA VSS path: the key of the stream.
+    path: &'static str,
+    /// Latest value, `None` while stale or never received.
+    value: Option<f64>,
+    /// Version that last changed it.
+    changed: u64,
+}
+
+/// The bus counters streamed with the signals.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct BusFigures {
+    /// Frames received.
+    pub frames: u64,
+    /// Error frames.
+    pub error_frames: u64,
+    /// Frames of identifiers outside the catalogue.
+    pub unknown_frames: u64,
+    /// Diagnostic transport frames.
+    pub diagnostic_frames: u64,
+}
+
+#[derive(Debug, Default)]
+struct Table {
+    version: u64,
+    bus_time_us: u64,
+    entries: Vec<Entry>,
+    bus: BusFigures,
+    bus_changed: u64,
+}
+
+/// The live table (see the module docs).
+#[derive(Debug)]
+pub struct LiveTable {
+    table: Mutex<Table>,
+    version: watch::Sender<u64>,
+}
+
+/// A signal of the catalogue, as the stream's first message describes it.
+#[derive(Clone, Debug, Serialize)]
+pub struct SignalInfo {
+    /// COVESA VSS path (the key in updates).
+    pub path: &'static str,
+    /// `Message.Signal`, as in the DBC file.
+    pub name: String,
+    /// Unit of the value.
+    pub unit: &'static str,
+    /// The message's cycle time, ms.
+    pub cycle_ms: u32,
+    /// Value table of an enumeration: raw value and label.
+    pub labels: Vec<(i64, &'static str)>,
+}
+
+impl Default for LiveTable {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LiveTable {
+    /// A table with every signal of the catalogue, none received yet.
+    pub fn new() -> Self {
+        let state = CarState::new();
+        let entries = state
+            .signals()
+            .iter()
+            .map(|s| Entry {
+                path: s.vss(),
+                value: None,
+                changed: 0,
+            })
+            .collect();
+        Self {
+            table: Mutex::new(Table {
+                entries,
+                ..Table::default()
+            }),
+            version: watch::channel(0).0,
+        }
+    }
+
+    /// The catalogue's signals, in the table's order.
+    pub fn catalog() -> Vec<SignalInfo> {
+        CarState::new()
+            .signals()
+            .iter()
+            .map(|s: &SignalState| SignalInfo {
+                path: s.vss(),
+                name: format!("{}.{}", s.message.name, s.spec.name),
+                unit: s.spec.unit,
+                cycle_ms: s.message.cycle_time_ms,
+                labels: s.spec.values.to_vec(),
+            })
+            .collect()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Table> {
+        // A panic elsewhere while holding the lock leaves plain data: keep serving it.
+        self.table.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Takes the car state in: every signal whose value or freshness changed, and the bus
+    /// counters, get the next version. Returns the version (unchanged if nothing changed).
+    pub fn publish(&self, state: &CarState) -> u64 {
+        let now = state.now_us();
+        let counters = state.counters();
+        let bus = BusFigures {
+            frames: counters.frames,
+            error_frames: counters.error_frames,
+            unknown_frames: counters.unknown_frames,
+            diagnostic_frames: counters.diagnostic_frames,
+        };
+        let mut table = self.lock();
+        let next = table.version + 1;
+        let mut changed = false;
+        for (entry, signal) in table.entries.iter_mut().zip(state.signals()) {
+            let value = signal.is_fresh(now).then_some(signal.value);
+            if entry.value != value {
+                entry.value = value;
+                entry.changed = next;
+                changed = true;
+            }
+        }
+        if table.bus != bus {
+            table.bus = bus;
+            table.bus_changed = next;
+            changed = true;
+        }
+        table.bus_time_us = now;
+        if changed {
+            table.version = next;
+            self.version.send_replace(next);
+        }
+        table.version
+    }
+
+    /// The latest version.
+    pub fn version(&self) -> u64 {
+        self.lock().version
+    }
+
+    /// A receiver that wakes when the version changes.
+    pub fn subscribe(&self) -> watch::Receiver<u64> {
+        self.version.subscribe()
+    }
+
+    /// The update message with everything changed after version `since` (all of it for
+    /// 0), and the version it brings the client to.
+    pub fn update_since(&self, since: u64) -> (String, u64) {
+        let table = self.lock();
+        let mut json = String::with_capacity(64 + 40 * table.entries.len());
+        let _ = write!(
+            json,
+            "{{\"type\":\"update\",\"version\":{},\"t\":{:.6},\"signals\":{{",
+            table.version,
+            table.bus_time_us as f64 / 1e6
+        );
+        let mut first = true;
+        for entry in table
+            .entries
+            .iter()
+            .filter(|e| since == 0 || e.changed > since)
+        {
+            if !first {
+                json.push(',');
+            }
+            first = false;
+            // VSS paths are dotted identifiers: no character needs escaping.
+            let _ = match entry.value {
+                Some(v) if v.is_finite() => write!(json, "\"{}\":{}", entry.path, v),
+                _ => write!(json, "\"{}\":null", entry.path),
+            };
+        }
+        json.push('}');
+        if since == 0 || table.bus_changed > since {
+            let _ = write!(
+                json,
+                ",\"bus\":{}",
+                serde_json::to_string(&table.bus).unwrap_or_else(|_| "null".into())
+            );
+        }
+        json.push('}');
+        (json, table.version)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_catalogue_signal_has_a_unique_path() {
+        let catalog = LiveTable::catalog();
+        assert_eq!(catalog.len(), CarState::new().signals().len());
+        let mut paths: Vec<_> = catalog.iter().map(|s| s.path).collect();
+        paths.sort_unstable();
+        paths.dedup();
+        assert_eq!(paths.len(), catalog.len(), "VSS paths are unique");
+        assert!(paths.iter().all(|p| p
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '_')));
+    }
+
+    #[test]
+    fn an_empty_state_changes_nothing_after_the_first_publish() {
+        let table = LiveTable::new();
+        let state = CarState::new();
+        assert_eq!(
+            table.publish(&state),
+            0,
+            "nothing received: all null, as before"
+        );
+        let (json, version) = table.update_since(0);
+        assert_eq!(version, 0);
+        let parsed: serde_json::Value = serde_json::from_str(&json).expect("JSON");
+        assert_eq!(parsed["type"], "update");
+        assert!(parsed["signals"]["Vehicle.Speed"].is_null());
+    }
+}
+
+/// Bus time between two publications of the [`Publisher`], µs: the fastest messages come
+/// every 10 ms, so nothing a client could see is skipped, and a fast replay does not spend
+/// its time comparing.
+pub const PUBLISH_EVERY_US: u64 = 10_000;
+
+/// The pipeline's observer that publishes the car state into a [`LiveTable`].
+#[derive(Debug)]
+pub struct Publisher {
+    table: std::sync::Arc<LiveTable>,
+    last_us: Option<u64>,
+}
+
+impl Publisher {
+    /// Publishes into `table`.
+    pub fn new(table: std::sync::Arc<LiveTable>) -> Self {
+        Self {
+            table,
+            last_us: None,
+        }
+    }
+}
+
+impl autoplug_gateway::Observer for Publisher {
+    fn on_frame(
+        &mut self,
+        _frame: &autoplug_logs::LogFrame,
+        _update: autoplug_gateway::Update,
+        state: &CarState,
+    ) {
+        let now = state.now_us();
+        if self
+            .last_us
+            .is_none_or(|last| now.saturating_sub(last) >= PUBLISH_EVERY_US || now < last)
+        {
+            self.table.publish(state);
+            self.last_us = Some(now);
+        }
+    }
+
+    fn on_idle(&mut self, state: &CarState) {
+        self.table.publish(state);
+    }
+}

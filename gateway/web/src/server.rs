@@ -1,0 +1,289 @@
+//! The HTTP and WebSocket server, on a thread of its own with a single-threaded tokio
+//! runtime: the gateway's pipeline only publishes into the [`LiveTable`] and never waits
+//! for the network.
+//!
+//! Built for hostile clients: at most [`WebConfig::max_clients`] streams at once (more get
+//! 503), an `Origin` header that is not the server's own (or configured) gets 403, incoming
+//! WebSocket messages are limited to [`MAX_INCOMING_BYTES`], a client that does not take an
+//! update within [`SEND_TIMEOUT`] is dropped, and a slow one gets coalesced updates (see
+//! [`crate::live`]). Every error is a JSON body `{"error": "..."}` that says what was wrong.
+
+use std::net::{SocketAddr, TcpListener};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::State;
+use axum::http::{header, HeaderMap, StatusCode, Uri};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use axum::{Json, Router};
+use serde::Deserialize;
+use tokio::sync::oneshot;
+
+use crate::live::LiveTable;
+
+/// How often a client gets an update at most (20 Hz, the dashboard's rate).
+pub const UPDATE_PERIOD: Duration = Duration::from_millis(50);
+/// A client that does not take a message in this time is dropped.
+pub const SEND_TIMEOUT: Duration = Duration::from_secs(2);
+/// Largest WebSocket message a client may send (commands are small).
+pub const MAX_INCOMING_BYTES: usize = 4096;
+/// Streams at once by default.
+pub const DEFAULT_MAX_CLIENTS: usize = 64;
+
+/// Where and for whom the server listens.
+#[derive(Clone, Debug)]
+pub struct WebConfig {
+    /// The address: loopback unless the user says otherwise.
+    pub addr: SocketAddr,
+    /// Origins besides the server's own that may open the stream from a browser
+    /// (`http://host:port`).
+    pub allowed_origins: Vec<String>,
+    /// Streams at once.
+    pub max_clients: usize,
+}
+
+impl WebConfig {
+    /// Loopback on `port` (0: any free port).
+    pub fn loopback(port: u16) -> Self {
+        Self {
+            addr: SocketAddr::from(([127, 0, 0, 1], port)),
+            allowed_origins: Vec::new(),
+            max_clients: DEFAULT_MAX_CLIENTS,
+        }
+    }
+}
+
+struct Shared {
+    table: Arc<LiveTable>,
+    config: WebConfig,
+    clients: AtomicUsize,
+}
+
+/// The running server; dropping it stops it.
+pub struct WebServer {
+    addr: SocketAddr,
+    stop: Option<oneshot::Sender<()>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl WebServer {
+    /// Binds `config.addr` (an error names the address) and serves `table` from a thread.
+    pub fn start(config: WebConfig, table: Arc<LiveTable>) -> std::io::Result<Self> {
+        let listener = TcpListener::bind(config.addr).map_err(|e| {
+            std::io::Error::new(e.kind(), format!("cannot listen on {}: {e}", config.addr))
+        })?;
+        listener.set_nonblocking(true)?;
+        let addr = listener.local_addr()?;
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_io()
+            .enable_time()
+            .build()?;
+        let (stop, stopped) = oneshot::channel::<()>();
+        let shared = Arc::new(Shared {
+            table,
+            config,
+            clients: AtomicUsize::new(0),
+        });
+        let thread = std::thread::Builder::new()
+            .name("web server".into())
+            .spawn(move || {
+                runtime.block_on(async move {
+                    let Ok(listener) = tokio::net::TcpListener::from_std(listener) else {
+                        return;
+                    };
+                    let app = router(shared);
+                    let _ = axum::serve(listener, app)
+                        .with_graceful_shutdown(async {
+                            let _ = stopped.await;
+                        })
+                        .await;
+                });
+            })?;
+        Ok(Self {
+            addr,
+            stop: Some(stop),
+            thread: Some(thread),
+        })
+    }
+
+    /// The address it listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+}
+
+impl Drop for WebServer {
+    fn drop(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        // Open streams end at their next tick; the thread goes when they have.
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+fn router(shared: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/api/catalog", get(catalog))
+        .route("/api/state", get(state))
+        .route("/api/stream", get(stream))
+        .fallback(not_found)
+        .with_state(shared)
+}
+
+/// An error answer: the status and a JSON body naming what was wrong.
+fn error(status: StatusCode, message: impl Into<String>) -> Response {
+    (status, Json(serde_json::json!({ "error": message.into() }))).into_response()
+}
+
+async fn not_found(uri: Uri) -> Response {
+    let path: String = uri.path().chars().take(200).collect();
+    error(StatusCode::NOT_FOUND, format!("no such path: {path}"))
+}
+
+async fn catalog() -> Response {
+    Json(serde_json::json!({ "type": "catalog", "signals": LiveTable::catalog() })).into_response()
+}
+
+async fn state(State(shared): State<Arc<Shared>>) -> Response {
+    let (json, _) = shared.table.update_since(0);
+    ([(header::CONTENT_TYPE, "application/json")], json).into_response()
+}
+
+/// Whether a browser's `Origin` may open the stream: the server's own host, or one the
+/// user allowed. Tools that send no `Origin` (python, PlotJuggler) are not browsers
+/// running someone else's page, and may.
+fn origin_allowed(headers: &HeaderMap, config: &WebConfig) -> bool {
+    let Some(origin) = headers.get(header::ORIGIN) else {
+        return true;
+    };
+    let Ok(origin) = origin.to_str() else {
+        return false;
+    };
+    let own = headers
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok())
+        .is_some_and(|host| origin == format!("http://{host}"));
+    own || config.allowed_origins.iter().any(|o| o == origin)
+}
+
+/// Counts a stream while it lives.
+struct ClientSlot(Arc<Shared>);
+
+impl Drop for ClientSlot {
+    fn drop(&mut self) {
+        self.0.clients.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+async fn stream(
+    State(shared): State<Arc<Shared>>,
+    headers: HeaderMap,
+    upgrade: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
+) -> Response {
+    if !origin_allowed(&headers, &shared.config) {
+        return error(
+            StatusCode::FORBIDDEN,
+            "this origin may not open the stream (start the gateway with --web-origin to allow it)",
+        );
+    }
+    let upgrade = match upgrade {
+        Ok(upgrade) => upgrade,
+        Err(rejection) => {
+            return error(
+                StatusCode::BAD_REQUEST,
+                format!("/api/stream is a WebSocket: {rejection}"),
+            )
+        }
+    };
+    let taken = shared.clients.fetch_add(1, Ordering::SeqCst);
+    let slot = ClientSlot(shared.clone());
+    if taken >= shared.config.max_clients {
+        return error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!("{} streams already open", shared.config.max_clients),
+        );
+    }
+    upgrade
+        .max_message_size(MAX_INCOMING_BYTES)
+        .max_frame_size(MAX_INCOMING_BYTES)
+        .on_upgrade(move |socket| serve_stream(socket, slot))
+}
+
+/// What a client may send.
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+enum Command {
+    /// Answered with `{"type":"pong"}`.
+    Ping,
+}
+
+async fn send(socket: &mut WebSocket, text: String) -> bool {
+    matches!(
+        tokio::time::timeout(SEND_TIMEOUT, socket.send(Message::Text(text.into()))).await,
+        Ok(Ok(()))
+    )
+}
+
+async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
+    let table = slot.0.table.clone();
+    let catalog = serde_json::json!({ "type": "catalog", "signals": LiveTable::catalog() });
+    if !send(&mut socket, catalog.to_string()).await {
+        return;
+    }
+    let (first, mut version) = table.update_since(0);
+    if !send(&mut socket, first).await {
+        return;
+    }
+    let mut changes = table.subscribe();
+    let mut ticker = tokio::time::interval(UPDATE_PERIOD);
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            changed = changes.changed() => {
+                if changed.is_err() {
+                    return; // the table is gone: the gateway stopped
+                }
+                // At most one update per period: what changes meanwhile is coalesced.
+                ticker.tick().await;
+                let (update, now) = table.update_since(version);
+                if now > version {
+                    if !send(&mut socket, update).await {
+                        return;
+                    }
+                    version = now;
+                }
+            }
+            incoming = socket.recv() => {
+                let reply = match incoming {
+                    None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
+                    Some(Ok(Message::Text(text))) => match serde_json::from_str::<Command>(&text) {
+                        Ok(Command::Ping) => serde_json::json!({ "type": "pong" }),
+                        Err(e) => serde_json::json!({
+                            "type": "error",
+                            "error": format!("not a command: {}", cut(&e.to_string(), 200)),
+                        }),
+                    },
+                    Some(Ok(Message::Binary(_))) => serde_json::json!({
+                        "type": "error",
+                        "error": "binary messages are not understood: send JSON text",
+                    }),
+                    Some(Ok(_)) => continue, // ping and pong: the library answers
+                };
+                if !send(&mut socket, reply.to_string()).await {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+fn cut(text: &str, max: usize) -> String {
+    text.chars().take(max).collect()
+}

@@ -1,0 +1,251 @@
+//! The server against a real WebSocket client: what the stream sends, what it refuses, and
+//! that a bad client gets an error while the server goes on.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use autoplug_can::{CanMessage, SteeringMsg, VehicleSpeedMsg};
+use autoplug_gateway::CarState;
+use autoplug_logs::LogFrame;
+use autoplug_web::{LiveTable, WebConfig, WebServer};
+use futures_util::{SinkExt, StreamExt};
+use serde_json::Value;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::Message;
+
+type Client =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+fn speed(t_ms: u64, kmh: f32) -> LogFrame {
+    LogFrame::from_can(
+        t_ms * 1000,
+        0,
+        &VehicleSpeedMsg { vehicle_speed: kmh }.frame(),
+    )
+}
+
+fn server(max_clients: usize) -> (Arc<LiveTable>, WebServer) {
+    let table = Arc::new(LiveTable::new());
+    let mut config = WebConfig::loopback(0);
+    config.max_clients = max_clients;
+    let server = WebServer::start(config, table.clone()).expect("server");
+    (table, server)
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+async fn connect(server: &WebServer) -> Client {
+    let url = format!("ws://{}/api/stream", server.addr());
+    tokio_tungstenite::connect_async(url)
+        .await
+        .expect("connect")
+        .0
+}
+
+async fn next_json(client: &mut Client) -> Value {
+    loop {
+        let message = tokio::time::timeout(Duration::from_secs(5), client.next())
+            .await
+            .expect("a message within 5 s")
+            .expect("open")
+            .expect("no error");
+        if let Message::Text(text) = message {
+            return serde_json::from_str(&text).expect("JSON");
+        }
+    }
+}
+
+#[test]
+fn the_stream_sends_the_catalog_everything_then_only_changes() {
+    let (table, server) = server(8);
+    let mut state = CarState::new();
+    state.update(&speed(0, 42.0));
+    table.publish(&state);
+    runtime().block_on(async {
+        let mut client = connect(&server).await;
+        let catalog = next_json(&mut client).await;
+        assert_eq!(catalog["type"], "catalog");
+        let signals = catalog["signals"].as_array().expect("signals");
+        let speed_info = signals
+            .iter()
+            .find(|s| s["path"] == "Vehicle.Speed")
+            .expect("Vehicle.Speed");
+        assert_eq!(speed_info["unit"], "km/h");
+        assert_eq!(speed_info["name"], "VehicleSpeedMsg.VehicleSpeed");
+
+        let first = next_json(&mut client).await;
+        assert_eq!(first["type"], "update");
+        assert_eq!(first["signals"]["Vehicle.Speed"], 42.0);
+        assert!(first["signals"]["Vehicle.Chassis.SteeringWheel.Angle"].is_null());
+        assert_eq!(first["bus"]["frames"], 1);
+        assert_eq!(
+            first["signals"].as_object().expect("map").len(),
+            signals.len(),
+            "the first update has every signal"
+        );
+
+        // The next frame changes the speed only.
+        state.update(&speed(10, 43.0));
+        table.publish(&state);
+        let update = next_json(&mut client).await;
+        let changed = update["signals"].as_object().expect("map");
+        assert_eq!(changed.len(), 1, "{update}");
+        assert_eq!(update["signals"]["Vehicle.Speed"], 43.0);
+        assert_eq!(update["bus"]["frames"], 2);
+        assert!((update["t"].as_f64().expect("t") - 0.010).abs() < 1e-9);
+
+        // A message goes stale 3 periods after its last frame: null.
+        state.update(&LogFrame::from_can(
+            200_000,
+            0,
+            &SteeringMsg {
+                steering_angle: 10.0,
+            }
+            .frame(),
+        ));
+        table.publish(&state);
+        let update = next_json(&mut client).await;
+        assert!(update["signals"]["Vehicle.Speed"].is_null(), "{update}");
+    });
+}
+
+#[test]
+fn many_changes_between_two_reads_arrive_as_one_update_with_the_latest_values() {
+    let (table, server) = server(8);
+    let mut state = CarState::new();
+    runtime().block_on(async {
+        let mut client = connect(&server).await;
+        next_json(&mut client).await; // catalog
+        next_json(&mut client).await; // everything
+                                      // A thousand frames while the client is busy elsewhere.
+        for i in 0..1000u64 {
+            state.update(&speed(i, (i % 200) as f32));
+            table.publish(&state);
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        let mut last = Value::Null;
+        // What is waiting: at most a few updates (one per 50 ms), the last with 999 % 200.
+        while let Ok(Some(Ok(Message::Text(text)))) =
+            tokio::time::timeout(Duration::from_millis(300), client.next()).await
+        {
+            last = serde_json::from_str(&text).expect("JSON");
+        }
+        assert_eq!(last["signals"]["Vehicle.Speed"], 199.0, "{last}");
+        assert_eq!(last["bus"]["frames"], 1000);
+    });
+}
+
+#[test]
+fn a_bad_message_gets_an_error_and_the_stream_goes_on() {
+    let (_table, server) = server(8);
+    runtime().block_on(async {
+        let mut client = connect(&server).await;
+        next_json(&mut client).await;
+        next_json(&mut client).await;
+        for bad in [
+            Message::Text("not json".into()),
+            Message::Text("{\"type\":\"launch\"}".into()),
+            Message::Binary(vec![0xFF; 16].into()),
+        ] {
+            client.send(bad).await.expect("send");
+            let answer = next_json(&mut client).await;
+            assert_eq!(answer["type"], "error", "{answer}");
+            assert!(!answer["error"].as_str().expect("text").is_empty());
+        }
+        client
+            .send(Message::Text("{\"type\":\"ping\"}".into()))
+            .await
+            .expect("send");
+        assert_eq!(next_json(&mut client).await["type"], "pong");
+        // Over the size limit: the connection is closed, the server goes on.
+        let _ = client.send(Message::Text("x".repeat(100_000).into())).await;
+        let mut other = connect(&server).await;
+        assert_eq!(next_json(&mut other).await["type"], "catalog");
+    });
+}
+
+#[test]
+fn foreign_origins_and_extra_clients_are_refused_with_a_reason() {
+    let (_table, server) = server(2);
+    runtime().block_on(async {
+        let url = format!("ws://{}/api/stream", server.addr());
+        let mut request = url.as_str().into_client_request().expect("request");
+        request
+            .headers_mut()
+            .insert("Origin", "http://evil.example".parse().expect("header"));
+        match tokio_tungstenite::connect_async(request).await {
+            Err(tokio_tungstenite::tungstenite::Error::Http(response)) => {
+                assert_eq!(response.status(), 403);
+                let body =
+                    String::from_utf8_lossy(response.body().as_deref().unwrap_or(&[])).to_string();
+                assert!(body.contains("origin"), "{body}");
+            }
+            other => panic!("a foreign origin must be refused: {other:?}"),
+        }
+        // The server's own origin is fine.
+        let mut request = url.as_str().into_client_request().expect("request");
+        let own = format!("http://{}", server.addr());
+        request
+            .headers_mut()
+            .insert("Origin", own.parse().expect("header"));
+        let (mut first, _) = tokio_tungstenite::connect_async(request)
+            .await
+            .expect("own origin");
+        next_json(&mut first).await;
+        let mut second = connect(&server).await;
+        next_json(&mut second).await;
+        match tokio_tungstenite::connect_async(url.as_str()).await {
+            Err(tokio_tungstenite::tungstenite::Error::Http(response)) => {
+                assert_eq!(response.status(), 503);
+            }
+            other => panic!("a third stream must be refused: {other:?}"),
+        }
+        // A client that leaves frees its place.
+        drop(first);
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        let mut third = connect(&server).await;
+        assert_eq!(next_json(&mut third).await["type"], "catalog");
+    });
+}
+
+#[test]
+fn http_errors_say_what_was_wrong() {
+    let (table, server) = server(8);
+    let mut state = CarState::new();
+    state.update(&speed(0, 12.0));
+    table.publish(&state);
+    let get = |path: &str| {
+        use std::io::{Read, Write};
+        let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
+        write!(
+            stream,
+            "GET {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            server.addr()
+        )
+        .expect("request");
+        let mut response = String::new();
+        stream.read_to_string(&mut response).expect("response");
+        response
+    };
+    let missing = get("/nothing/here");
+    assert!(missing.starts_with("HTTP/1.1 404"), "{missing}");
+    assert!(missing.contains("no such path: /nothing/here"), "{missing}");
+    let not_ws = get("/api/stream");
+    assert!(not_ws.starts_with("HTTP/1.1 400"), "{not_ws}");
+    assert!(not_ws.contains("WebSocket"), "{not_ws}");
+    let state = get("/api/state");
+    assert!(state.starts_with("HTTP/1.1 200"), "{state}");
+    assert!(state.contains("\"Vehicle.Speed\":12"), "{state}");
+    // Garbage instead of HTTP: the connection is answered or closed, the server goes on.
+    {
+        use std::io::Write;
+        let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
+        let _ = stream.write_all(&[0u8; 300]);
+    }
+    assert!(get("/api/catalog").starts_with("HTTP/1.1 200"));
+}
