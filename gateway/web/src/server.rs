@@ -233,6 +233,9 @@ async fn send(socket: &mut WebSocket, text: String) -> bool {
 
 async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
     let table = slot.0.table.clone();
+    // Subscribed before the first snapshot: a change published while it is taken or sent
+    // still wakes this client (subscribing later would mark it seen, and lose it).
+    let mut changes = table.subscribe();
     let catalog = serde_json::json!({ "type": "catalog", "signals": LiveTable::catalog() });
     if !send(&mut socket, catalog.to_string()).await {
         return;
@@ -241,7 +244,6 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
     if !send(&mut socket, first).await {
         return;
     }
-    let mut changes = table.subscribe();
     let mut ticker = tokio::time::interval(UPDATE_PERIOD);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
