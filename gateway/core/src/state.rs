@@ -84,6 +84,9 @@ pub struct MessageStats {
     pub min_interval_us: Option<u64>,
     /// Longest interval between two frames, µs.
     pub max_interval_us: Option<u64>,
+    /// Data of the latest frame of the right length (the catalogue's length of bytes of
+    /// it), as it came: the raw view's "last data".
+    pub last_data: [u8; 8],
 }
 
 impl MessageStats {
@@ -343,6 +346,7 @@ impl CarState {
             }
         }
         let stats = &mut self.stats[index];
+        stats.last_data[..data.len()].copy_from_slice(data);
         stats.count += 1;
         if !valid {
             stats.invalid += 1;

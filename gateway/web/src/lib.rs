@@ -15,10 +15,12 @@
 //! 2. `{"type":"update","version":N,"t":SECONDS,"signals":{PATH: VALUE, …},"bus":{…}}`
 //!    with every signal: its value in the unit of the catalogue, `null` while stale (no
 //!    valid frame for 3 periods of its message) or never received; `t` is bus time;
-//!    `bus` holds `frames`, `error_frames`, `unknown_frames`, `diagnostic_frames`;
+//!    `messages` holds each catalogue message's reception by name (`id`, `count`,
+//!    `wrong_length`, `invalid`, measured `period_ms` and `jitter_ms`, the last `data` in
+//!    hex); `bus` holds `frames`, `error_frames`, `unknown_frames`, `diagnostic_frames`;
 //! 3. then, at most every 50 ms (20 Hz) and only when something changed, an `update` with
-//!    only the signals that changed since the last one sent to this client (`bus` only if
-//!    it changed). A client that reads slowly gets fewer updates with the latest values,
+//!    only the signals that changed since the last one sent to this client (`messages` and
+//!    `bus` only with what changed). A client that reads slowly gets fewer updates with the latest values,
 //!    never a backlog.
 //!
 //! A client may send `{"type":"ping"}` (answered `{"type":"pong"}`); anything else is

@@ -38,11 +38,27 @@ pub struct BusFigures {
     pub diagnostic_frames: u64,
 }
 
+/// One catalogue message's reception, as the raw bus view shows it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct MessageEntry {
+    name: &'static str,
+    id: u16,
+    dlc: u8,
+    count: u64,
+    wrong_length: u64,
+    invalid: u64,
+    period_ms: Option<f64>,
+    jitter_ms: Option<f64>,
+    data: [u8; 8],
+    changed: u64,
+}
+
 #[derive(Debug, Default)]
 struct Table {
     version: u64,
     bus_time_us: u64,
     entries: Vec<Entry>,
+    messages: Vec<MessageEntry>,
     bus: BusFigures,
     bus_changed: u64,
 }
@@ -88,9 +104,19 @@ impl LiveTable {
                 changed: 0,
             })
             .collect();
+        let messages = autoplug_can::MESSAGES
+            .iter()
+            .map(|m| MessageEntry {
+                name: m.name,
+                id: m.id,
+                dlc: m.dlc,
+                ..MessageEntry::default()
+            })
+            .collect();
         Self {
             table: Mutex::new(Table {
                 entries,
+                messages,
                 ..Table::default()
             }),
             version: watch::channel(0).0,
@@ -135,6 +161,18 @@ impl LiveTable {
             let value = signal.is_fresh(now).then_some(signal.value);
             if entry.value != value {
                 entry.value = value;
+                entry.changed = next;
+                changed = true;
+            }
+        }
+        for (entry, stats) in table.messages.iter_mut().zip(state.stats()) {
+            if entry.count != stats.count || entry.wrong_length != stats.wrong_length {
+                entry.count = stats.count;
+                entry.wrong_length = stats.wrong_length;
+                entry.invalid = stats.invalid;
+                entry.period_ms = stats.period_ms();
+                entry.jitter_ms = stats.jitter_ms();
+                entry.data = stats.last_data;
                 entry.changed = next;
                 changed = true;
             }
@@ -190,6 +228,39 @@ impl LiveTable {
             };
         }
         json.push('}');
+        let mut first = true;
+        for m in table
+            .messages
+            .iter()
+            .filter(|m| since == 0 || m.changed > since)
+        {
+            json.push_str(if first { ",\"messages\":{" } else { "," });
+            first = false;
+            let number = |v: Option<f64>| match v {
+                Some(v) if v.is_finite() => format!("{v:.3}"),
+                _ => "null".to_string(),
+            };
+            let data: String = m.data[..usize::from(m.dlc)]
+                .iter()
+                .map(|b| format!("{b:02X}"))
+                .collect();
+            // Message names are DBC identifiers: no character needs escaping.
+            let _ = write!(
+                json,
+                "\"{}\":{{\"id\":{},\"count\":{},\"wrong_length\":{},\"invalid\":{},\"period_ms\":{},\"jitter_ms\":{},\"data\":\"{}\"}}",
+                m.name,
+                m.id,
+                m.count,
+                m.wrong_length,
+                m.invalid,
+                number(m.period_ms),
+                number(m.jitter_ms),
+                data
+            );
+        }
+        if !first {
+            json.push('}');
+        }
         if since == 0 || table.bus_changed > since {
             let _ = write!(
                 json,

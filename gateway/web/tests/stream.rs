@@ -83,6 +83,15 @@ fn the_stream_sends_the_catalog_everything_then_only_changes() {
         assert_eq!(first["signals"]["Vehicle.Speed"], 42.0);
         assert!(first["signals"]["Vehicle.Chassis.SteeringWheel.Angle"].is_null());
         assert_eq!(first["bus"]["frames"], 1);
+        let vehicle_speed = &first["messages"]["VehicleSpeedMsg"];
+        assert_eq!(vehicle_speed["id"], 3);
+        assert_eq!(vehicle_speed["count"], 1);
+        assert_eq!(vehicle_speed["data"], "2A", "42 km/h");
+        assert!(
+            vehicle_speed["period_ms"].is_null(),
+            "one frame: no period yet"
+        );
+        assert_eq!(first["messages"]["EngineMsg"]["count"], 0);
         assert_eq!(
             first["signals"].as_object().expect("map").len(),
             signals.len(),
@@ -97,6 +106,11 @@ fn the_stream_sends_the_catalog_everything_then_only_changes() {
         assert_eq!(changed.len(), 1, "{update}");
         assert_eq!(update["signals"]["Vehicle.Speed"], 43.0);
         assert_eq!(update["bus"]["frames"], 2);
+        let messages = update["messages"].as_object().expect("messages");
+        assert_eq!(messages.len(), 1, "only the message that came: {update}");
+        assert_eq!(messages["VehicleSpeedMsg"]["count"], 2);
+        assert_eq!(messages["VehicleSpeedMsg"]["period_ms"], 10.0);
+        assert_eq!(messages["VehicleSpeedMsg"]["data"], "2B");
         assert!((update["t"].as_f64().expect("t") - 0.010).abs() < 1e-9);
 
         // A message goes stale 3 periods after its last frame: null.
