@@ -19,7 +19,6 @@ use std::cell::RefCell;
 use autoplug_can::{Frame, Node, VehicleSpeedMsg, DIAG_FUNCTIONAL_REQUEST_ID};
 use autoplug_ecu::{Dtcs, Instant};
 use autoplug_flash::sim::{state_twin, SimFlash, SlotPartition};
-use autoplug_flash::twin::{KEY_FAILURES_RECORD, SEED_EPOCH_RECORD};
 use autoplug_flash::{ACTIVE, BOOT_SWAP_BUFFER_SIZE, DFU, SECTORS, WRITE_SIZE};
 use autoplug_image::{
     dev, floor, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant,
@@ -479,15 +478,14 @@ impl Backend for EcuBackend<'_> {
     fn stored_key_failures(&mut self) -> u8 {
         state_twin(self.flash)
             .ok()
-            .and_then(|mut twin| twin.read_record(KEY_FAILURES_RECORD).ok().flatten())
-            .map_or(0, |payload| payload[0])
+            .and_then(|mut twin| twin.key_failures().ok())
+            .unwrap_or(0)
     }
 
     fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
         self.timed(|flash| {
             let mut twin = state_twin(flash).map_err(|_| FlashError)?;
-            twin.write_record(KEY_FAILURES_RECORD, [failures, 0, 0, 0])
-                .map_err(|_| FlashError)
+            twin.store_key_failures(failures).map_err(|_| FlashError)
         })
     }
 
@@ -582,21 +580,9 @@ fn write_floor(flash: &RefCell<SimFlash>, version: Version) -> Result<(), FlashE
         .map_err(|_| FlashError)
 }
 
-/// Raises the seed epoch kept in the persistent state and returns the new one. If it
-/// cannot be kept, the start still gets the next number (its seeds may then repeat a later
-/// start's: the car's secret and the number of seeds drawn still differ per ECU).
+/// Raises the seed epoch kept in the persistent state and returns the new one.
 fn next_seed_epoch(flash: &RefCell<SimFlash>) -> u32 {
-    let Ok(mut twin) = state_twin(flash) else {
-        return 0;
-    };
-    let epoch = twin
-        .read_record(SEED_EPOCH_RECORD)
-        .ok()
-        .flatten()
-        .map_or(0, u32::from_le_bytes)
-        .wrapping_add(1);
-    let _ = twin.write_record(SEED_EPOCH_RECORD, epoch.to_le_bytes());
-    epoch
+    state_twin(flash).map_or(0, |mut twin| twin.raise_seed_epoch().0)
 }
 
 #[cfg(test)]
@@ -731,12 +717,10 @@ mod tests {
                 let mut twin = state_twin(&ecu.diag.flash).expect("open");
                 let sequence = twin.sequence();
                 while twin.sequence() == sequence {
-                    twin.write_record(KEY_FAILURES_RECORD, [1, 0, 0, 0])
-                        .expect("record");
+                    twin.store_key_failures(1).expect("record");
                 }
                 for _ in 0..slots - 3 - 1 {
-                    twin.write_record(KEY_FAILURES_RECORD, [1, 0, 0, 0])
-                        .expect("record");
+                    twin.store_key_failures(1).expect("record");
                 }
             }
             let base = ecu.diag.flash.borrow().clone();

@@ -11,7 +11,7 @@ use core::cell::RefCell;
 
 use autoplug_can::Node;
 use autoplug_ecu::Dtcs;
-use autoplug_flash::twin::{Twin, KEY_FAILURES_RECORD, SEED_EPOCH_RECORD};
+use autoplug_flash::twin::Twin;
 use autoplug_flash::{ACTIVE, DFU, LARGE_SECTORS, SLOT_ERASE_SIZE, SMALL_SECTORS, STATE_COPIES};
 use autoplug_image::{
     dev, floor, Expectations, ImageHeader, Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
@@ -101,24 +101,10 @@ impl EcuFlash {
     /// seeds under a number no earlier start used (a failed write is logged; the seeds
     /// still differ by the entropy of this start).
     pub fn next_seed_epoch(&self) -> u32 {
-        let epoch = stretched(|| {
-            self.with_twin(|twin| {
-                let epoch = twin
-                    .read_record(SEED_EPOCH_RECORD)
-                    .ok()
-                    .flatten()
-                    .map_or(0, u32::from_le_bytes)
-                    .wrapping_add(1);
-                (
-                    epoch,
-                    twin.write_record(SEED_EPOCH_RECORD, epoch.to_le_bytes())
-                        .is_ok(),
-                )
-            })
-        });
+        let epoch = stretched(|| self.with_twin(|twin| twin.raise_seed_epoch()));
         match epoch {
-            Some((epoch, true)) => epoch,
-            Some((epoch, false)) => {
+            Some((epoch, Ok(()))) => epoch,
+            Some((epoch, Err(_))) => {
                 defmt::warn!("the seed epoch {} could not be kept", epoch);
                 epoch
             }
@@ -295,19 +281,17 @@ impl Backend for FirmwareBackend<'_> {
 
     fn stored_key_failures(&mut self) -> u8 {
         self.flash
-            .with_twin(|twin| twin.read_record(KEY_FAILURES_RECORD).ok().flatten())
+            .with_twin(|twin| twin.key_failures().ok())
             .flatten()
-            .map_or(0, |payload| payload[0])
+            .unwrap_or(0)
     }
 
     fn store_key_failures(&mut self, failures: u8) -> Result<(), FlashError> {
         let flash = &*self.flash;
         // A record is one word program; when a copy is full, a switch erases 16 KiB.
-        stretched(|| {
-            flash.with_twin(|twin| twin.write_record(KEY_FAILURES_RECORD, [failures, 0, 0, 0]))
-        })
-        .and_then(Result::ok)
-        .ok_or(FlashError)
+        stretched(|| flash.with_twin(|twin| twin.store_key_failures(failures)))
+            .and_then(Result::ok)
+            .ok_or(FlashError)
     }
 
     fn image_expectations(&self) -> Expectations {

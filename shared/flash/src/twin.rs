@@ -290,6 +290,31 @@ impl<F: NorFlash> Twin<F> {
         }
     }
 
+    /// Wrong SecurityAccess keys in a row as kept ([`KEY_FAILURES_RECORD`]; 0 if never
+    /// written).
+    pub fn key_failures(&mut self) -> Result<u8, TwinError<F::Error>> {
+        Ok(self.read_record(KEY_FAILURES_RECORD)?.map_or(0, |p| p[0]))
+    }
+
+    /// Keeps the count of wrong SecurityAccess keys in a row.
+    pub fn store_key_failures(&mut self, failures: u8) -> Result<(), TwinError<F::Error>> {
+        self.write_record(KEY_FAILURES_RECORD, [failures, 0, 0, 0])
+    }
+
+    /// Raises the seed epoch ([`SEED_EPOCH_RECORD`]) for a new start and returns it, with
+    /// whether it was kept: if not, the start still gets the next number (its seeds may
+    /// then share the epoch of a later start; the ECU's entropy still tells them apart).
+    pub fn raise_seed_epoch(&mut self) -> (u32, Result<(), TwinError<F::Error>>) {
+        let epoch = match self.read_record(SEED_EPOCH_RECORD) {
+            Ok(payload) => payload.map_or(0, u32::from_le_bytes).wrapping_add(1),
+            Err(e) => return (1, Err(e)),
+        };
+        (
+            epoch,
+            self.write_record(SEED_EPOCH_RECORD, epoch.to_le_bytes()),
+        )
+    }
+
     /// Makes the other copy current: erased boot state (or the current one's words when
     /// `keep_boot_state`), the latest record of each kind, `extra` last.
     fn switch(
