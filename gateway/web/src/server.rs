@@ -96,11 +96,13 @@ impl WebServer {
                         return;
                     };
                     let app = router(shared);
-                    let _ = axum::serve(listener, app)
-                        .with_graceful_shutdown(async {
-                            let _ = stopped.await;
-                        })
-                        .await;
+                    // No graceful shutdown: it would wait for open streams, which end only
+                    // when their client leaves. Leaving `block_on` drops the runtime, which
+                    // cancels every connection's task and closes its socket.
+                    tokio::select! {
+                        _ = axum::serve(listener, app) => {}
+                        _ = stopped => {}
+                    }
                 });
             })?;
         Ok(Self {
@@ -121,7 +123,6 @@ impl Drop for WebServer {
         if let Some(stop) = self.stop.take() {
             let _ = stop.send(());
         }
-        // Open streams end at their next tick; the thread goes when they have.
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }

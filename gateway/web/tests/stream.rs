@@ -263,3 +263,30 @@ fn http_errors_say_what_was_wrong() {
     }
     assert!(get("/api/catalog").starts_with("HTTP/1.1 200"));
 }
+
+#[test]
+fn stopping_the_server_closes_open_streams_at_once() {
+    let (_table, server) = server(8);
+    runtime().block_on(async {
+        let mut client = connect(&server).await;
+        next_json(&mut client).await;
+        let started = std::time::Instant::now();
+        drop(server);
+        assert!(
+            started.elapsed() < Duration::from_secs(1),
+            "{:?}",
+            started.elapsed()
+        );
+        // The client sees its stream end.
+        let end = tokio::time::timeout(Duration::from_secs(5), async {
+            loop {
+                match client.next().await {
+                    None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
+                    Some(Ok(_)) => {}
+                }
+            }
+        })
+        .await;
+        assert!(end.is_ok(), "the stream ended");
+    });
+}
