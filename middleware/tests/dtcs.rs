@@ -9,7 +9,7 @@ use autoplug_gateway::{Pipeline, Strictness, VecSource};
 use autoplug_logs::LogFrame;
 use autoplug_middleware::names::ECUS;
 use autoplug_middleware::on_car::OnCar;
-use autoplug_middleware::tester::{dtc_table, DtcJob, TesterConfig};
+use autoplug_middleware::tester::{dtc_table, ClearDtcsJob, DtcJob, TesterConfig};
 use autoplug_virtual_car::car::VirtualCar;
 use autoplug_virtual_car::scenario::Scenario;
 
@@ -73,4 +73,49 @@ fn a_silent_console_is_reported_by_its_receivers_over_uds_and_heard_by_the_gatew
         .collect();
     assert_eq!(heard, asked);
     assert!(describe_dtc(lost).contains("Console"));
+}
+
+#[test]
+fn clearing_removes_the_codes_of_a_fault_that_has_gone_and_each_ecu_answers() {
+    let scenario = Scenario::parse(
+        "name = \"console-back\"\nduration_s = 20.0\n[[at]]\nt_s = 1.0\nfault = { silence = \"Console\" }\n[[at]]\nt_s = 2.0\nfault = { restore = \"Console\" }\n",
+        "test",
+    )
+    .unwrap();
+    let mut car = VirtualCar::new(&scenario);
+    while car.time_us() < 3_000_000 {
+        car.tick();
+    }
+    let lost = lost_communication(Node::Console);
+    let read = |car: &mut VirtualCar| {
+        let mut job = OnCar::new(DtcJob::new(&ECUS, TesterConfig::DEFAULT), car);
+        job.run(car, 5_000_000).expect("read within 5 s").unwrap()
+    };
+    let with_lost = |reports: &[autoplug_middleware::tester::EcuDtcReport]| -> Vec<Node> {
+        reports
+            .iter()
+            .filter(|r| {
+                r.entries
+                    .as_ref()
+                    .is_ok_and(|e| e.iter().any(|e| e.dtc == lost))
+            })
+            .map(|r| r.ecu)
+            .collect()
+    };
+    // The console is back, but the codes stay stored until a tester clears them.
+    assert_eq!(with_lost(&read(&mut car)), [Node::Engine, Node::Transmission]);
+
+    let mut clear = OnCar::new(ClearDtcsJob::new(&ECUS, TesterConfig::DEFAULT), &mut car);
+    let cleared = clear
+        .run(&mut car, 5_000_000)
+        .expect("the clear ends within 5 s")
+        .unwrap();
+    assert_eq!(cleared.len(), 9);
+    assert!(
+        cleared.iter().all(|r| r.outcome.is_ok()),
+        "every ECU confirms the clear: {cleared:?}"
+    );
+    let after = read(&mut car);
+    assert!(with_lost(&after).is_empty(), "{}", dtc_table(&after));
+    assert!(after.iter().all(|r| r.entries.is_ok()));
 }

@@ -32,11 +32,13 @@
 //! number), so a multi-frame response to a functional request gets its flow control like
 //! any other.
 
+mod clear;
 mod dtcs;
 mod flash;
 mod ident;
 mod job;
 
+pub use clear::{ClearDtcsJob, EcuClearReport, CLEAR_ALL_DTCS};
 pub use dtcs::{dtc_table, parse_report, DtcJob, EcuDtcReport, REPORT_ALL_DTCS};
 pub use flash::{
     FlashConfig, FlashError, FlashFailure, FlashJob, FlashReport, Phase, PhaseTiming, Progress,
