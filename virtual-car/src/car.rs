@@ -7,7 +7,8 @@
 //! a fixed phase offset, as independent boards would, which also spreads the bus traffic.
 
 use crate::diag::VirtualDiag;
-use crate::driver::{DriverControls, Timeline};
+use crate::driver::{DriverControls, ManualDriver, Timeline};
+use crate::scenario::FRICTION_RANGE;
 use crate::scenario::{Activation, Event, GearName, Scenario, Software};
 use autoplug_can::{Frame, Gear as CanGear, Node};
 use autoplug_ecu::{Dtcs, EcuLogic, Instant, Variant};
@@ -289,6 +290,8 @@ pub struct VirtualCar {
     ecus: Ecus,
     external: NodeId,
     timeline: Timeline,
+    /// A person driving instead of the timeline, once one took the wheel.
+    manual: Option<ManualDriver>,
     controls: DriverControls,
     t_us: u64,
     log: Vec<LoggedFrame>,
@@ -417,6 +420,7 @@ impl VirtualCar {
             external,
             controls: *timeline.initial_controls(),
             timeline,
+            manual: None,
             t_us: 0,
             log: Vec::with_capacity(1 << 16),
             node_names,
@@ -451,6 +455,46 @@ impl VirtualCar {
     /// The driver's controls now.
     pub fn controls(&self) -> &DriverControls {
         &self.controls
+    }
+
+    /// A person takes the wheel (the dashboard's Drive view): from the next tick the
+    /// controls are theirs, starting from where the timeline left them, and the timeline
+    /// only changes the road and the faults. Returns the driver to move the controls.
+    pub fn take_wheel(&mut self) -> &mut ManualDriver {
+        let controls = self.controls;
+        self.manual
+            .get_or_insert_with(|| ManualDriver::taking_over(&controls))
+    }
+
+    /// The person at the wheel, if one took it.
+    pub fn manual_driver(&self) -> Option<&ManualDriver> {
+        self.manual.as_ref()
+    }
+
+    /// Changes the road's friction (the simulator's track, not a driver control): left
+    /// and right wheels, [`FRICTION_RANGE`]. Refused outside it.
+    pub fn set_friction(&mut self, mu_left: f64, mu_right: f64) -> Result<(), String> {
+        for mu in [mu_left, mu_right] {
+            if !(FRICTION_RANGE.contains(&mu)) {
+                return Err(format!(
+                    "friction {mu} is outside {}..={}",
+                    FRICTION_RANGE.start(),
+                    FRICTION_RANGE.end()
+                ));
+            }
+        }
+        let mut env = self.environment;
+        env.mu = [mu_left, mu_right, mu_left, mu_right];
+        if env != self.environment {
+            self.environment = env;
+            self.vehicle.set_environment(env);
+        }
+        Ok(())
+    }
+
+    /// The road's friction now: left and right wheels.
+    pub fn friction(&self) -> (f64, f64) {
+        (self.environment.mu[0], self.environment.mu[1])
     }
 
     /// The bus, for statistics.
@@ -629,6 +673,9 @@ impl VirtualCar {
         self.controls = self
             .timeline
             .advance(t_s, |event| road_changes.push(event.clone()));
+        if let Some(person) = self.manual.as_mut() {
+            self.controls = person.controls_at(t_s);
+        }
         for event in road_changes {
             self.apply_event(&event);
         }

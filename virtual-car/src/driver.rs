@@ -160,13 +160,141 @@ impl Timeline {
             c.set_temp_f = v;
         }
         for button in &event.press {
-            let index = match button {
-                Button::CruiseOn => 0,
-                Button::CruiseOff => 1,
-                Button::ShiftUp => 2,
-                Button::ShiftDown => 3,
-            };
-            self.pressed_at[index] = Some(event.t_s);
+            self.pressed_at[button_index(*button)] = Some(event.t_s);
         }
+    }
+}
+
+/// What a person at the wheel holds at a moment (the buttons are pressed separately: see
+/// [`ManualDriver::press`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeldControls {
+    /// Accelerator pedal, % (0..100).
+    pub accelerator: f64,
+    /// Brake pedal, % (0..100).
+    pub brake: f64,
+    /// Steering wheel angle, degrees, positive to the left.
+    pub steering_deg: f64,
+    /// Headlight switch.
+    pub headlights: bool,
+    /// Engine-mode switch (true: economy).
+    pub economy_mode: bool,
+    /// Transmission-mode switch (true: manual).
+    pub manual_mode: bool,
+    /// Cabin set-temperature knob, °F.
+    pub set_temp_f: f64,
+}
+
+impl HeldControls {
+    /// The same values, clamped into the range of each control; `None` if one is not a
+    /// number.
+    pub fn clamped(self) -> Option<Self> {
+        let ok = [
+            self.accelerator,
+            self.brake,
+            self.steering_deg,
+            self.set_temp_f,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        ok.then(|| Self {
+            accelerator: self.accelerator.clamp(0.0, 100.0),
+            brake: self.brake.clamp(0.0, 100.0),
+            steering_deg: self.steering_deg.clamp(-MAX_STEERING_DEG, MAX_STEERING_DEG),
+            set_temp_f: self.set_temp_f.clamp(MIN_SET_TEMP_F, MAX_SET_TEMP_F),
+            ..self
+        })
+    }
+}
+
+/// The steering wheel's travel either way, degrees: the steering sensor's range.
+pub const MAX_STEERING_DEG: f64 = ecu_steering::STEERING_LIMIT_DEG as f64;
+/// The cabin knob's range, °F: the set-temperature sensor's.
+pub const MIN_SET_TEMP_F: f64 = ecu_cabin::SET_TEMP_MIN_F as f64;
+/// The cabin knob's range, °F.
+pub const MAX_SET_TEMP_F: f64 = ecu_cabin::SET_TEMP_MAX_F as f64;
+
+/// A person driving instead of the scenario's timeline (the dashboard's Drive view): the
+/// controls they hold, and each steering-wheel button held for [`BUTTON_PRESS_S`] from
+/// the moment they pressed it, as the timeline holds a scenario's presses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ManualDriver {
+    held: HeldControls,
+    /// Press times per button, in `Button` order; `None` until pressed.
+    pressed_at: [Option<f64>; 4],
+    /// Presses waiting for the next tick's time.
+    pending: [bool; 4],
+}
+
+impl ManualDriver {
+    /// Takes over from `controls` as they are.
+    pub fn taking_over(controls: &DriverControls) -> Self {
+        Self {
+            held: HeldControls {
+                accelerator: controls.accelerator,
+                brake: controls.brake,
+                steering_deg: controls.steering_deg,
+                headlights: controls.headlights,
+                economy_mode: controls.economy_mode,
+                manual_mode: controls.manual_mode,
+                set_temp_f: controls.set_temp_f,
+            },
+            pressed_at: [None; 4],
+            pending: [false; 4],
+        }
+    }
+
+    /// What the person holds now.
+    pub fn held(&self) -> &HeldControls {
+        &self.held
+    }
+
+    /// The person moves the controls (values clamped to each control's range; a value
+    /// that is not a number leaves the controls as they were and is refused).
+    pub fn hold(&mut self, held: HeldControls) -> Result<(), &'static str> {
+        self.held = held
+            .clamped()
+            .ok_or("a driver control is not a number")?;
+        Ok(())
+    }
+
+    /// The person presses a steering-wheel button (held from the next tick).
+    pub fn press(&mut self, button: Button) {
+        self.pending[button_index(button)] = true;
+    }
+
+    /// The controls at `t_s`.
+    pub fn controls_at(&mut self, t_s: f64) -> DriverControls {
+        for (pending, at) in self.pending.iter_mut().zip(&mut self.pressed_at) {
+            if std::mem::take(pending) {
+                *at = Some(t_s);
+            }
+        }
+        let held = |start: Option<f64>| start.is_some_and(|s| t_s >= s && t_s < s + BUTTON_PRESS_S);
+        let h = self.held;
+        DriverControls {
+            accelerator: h.accelerator,
+            brake: h.brake,
+            steering_deg: h.steering_deg,
+            headlights: h.headlights,
+            economy_mode: h.economy_mode,
+            manual_mode: h.manual_mode,
+            set_temp_f: h.set_temp_f,
+            buttons: Buttons {
+                cruise_on: held(self.pressed_at[0]),
+                cruise_off: held(self.pressed_at[1]),
+                shift_up: held(self.pressed_at[2]),
+                shift_down: held(self.pressed_at[3]),
+            },
+        }
+    }
+}
+
+fn button_index(button: Button) -> usize {
+    match button {
+        Button::CruiseOn => 0,
+        Button::CruiseOff => 1,
+        Button::ShiftUp => 2,
+        Button::ShiftDown => 3,
     }
 }

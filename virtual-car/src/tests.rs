@@ -535,3 +535,90 @@ fn a_pass_through_neutral_is_not_a_shift() {
     assert_eq!(shifts(&[0]), 0);
     assert_eq!(shifts(&[]), 0);
 }
+
+#[test]
+fn a_person_at_the_wheel_drives_the_car_through_its_sensors() {
+    use crate::car::VirtualCar;
+    use crate::driver::HeldControls;
+    let scenario = Scenario::parse(
+        "name = \"free\"\nduration_s = 600.0\n[driver]\nbrake = 30.0\n[[at]]\nt_s = 1.0\nbrake = 0.0\naccelerator = 50.0\n",
+        "test",
+    )
+    .unwrap();
+    let mut car = VirtualCar::new(&scenario);
+    let run = |car: &mut VirtualCar, s: f64| {
+        let until = car.time_us() + (s * 1e6) as u64;
+        while car.time_us() < until {
+            car.tick();
+        }
+    };
+    run(&mut car, 0.5);
+    // The person takes over from the timeline's brake, and the timeline's later
+    // accelerator event no longer moves the pedal.
+    let person = car.take_wheel();
+    assert_eq!(person.held().brake, 30.0);
+    let release = HeldControls {
+        brake: 0.0,
+        ..*person.held()
+    };
+    person.hold(release).unwrap();
+    run(&mut car, 3.0);
+    assert_eq!(car.controls().accelerator, 0.0, "the timeline no longer drives");
+    assert!(car.vehicle().speed_kmh() < 1.0);
+    assert!(!car.trace_row().brake_lights);
+
+    car.take_wheel()
+        .hold(HeldControls {
+            accelerator: 100.0,
+            ..release
+        })
+        .unwrap();
+    run(&mut car, 5.0);
+    let fast = car.vehicle().speed_kmh();
+    assert!(fast > 30.0, "full throttle for 5 s: {fast} km/h");
+
+    car.take_wheel()
+        .hold(HeldControls {
+            brake: 80.0,
+            ..release
+        })
+        .unwrap();
+    run(&mut car, 0.3);
+    assert!(car.trace_row().brake_lights, "the console lights the brake lights");
+    run(&mut car, 5.0);
+    assert!(car.vehicle().speed_kmh() < fast - 20.0);
+
+    // Out-of-range values are clamped, a NaN is refused and changes nothing.
+    let person = car.take_wheel();
+    person
+        .hold(HeldControls {
+            accelerator: 250.0,
+            steering_deg: -1e6,
+            ..release
+        })
+        .unwrap();
+    assert_eq!(person.held().accelerator, 100.0);
+    assert_eq!(
+        person.held().steering_deg,
+        -crate::driver::MAX_STEERING_DEG
+    );
+    assert!(person
+        .hold(HeldControls {
+            brake: f64::NAN,
+            ..release
+        })
+        .is_err());
+    assert_eq!(person.held().accelerator, 100.0);
+
+    // A pressed button is held for the scenario's press time, from the next tick.
+    car.take_wheel().press(Button::ShiftUp);
+    car.tick();
+    assert!(car.controls().buttons.shift_up);
+    run(&mut car, 0.2);
+    assert!(!car.controls().buttons.shift_up);
+
+    assert!(car.set_friction(0.2, 1.0).is_ok());
+    assert_eq!(car.friction(), (0.2, 1.0));
+    assert!(car.set_friction(0.0, 1.0).is_err());
+    assert!(car.set_friction(f64::NAN, 1.0).is_err());
+}
