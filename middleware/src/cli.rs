@@ -19,9 +19,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::bus_tester::BusTester;
 use crate::demo::Demo;
 use crate::driver::{self, DriveError};
+use crate::driving::DriverDesk;
 use crate::image_tool::{self, BuildOptions, ImageToolError, PayloadKind, SignatureCheck};
 use crate::live::{BusUrl, Outbox, Transmitting};
 use crate::names::{ecu_label, parse_ecu, ECUS, ECU_NAME_LIST};
+use crate::session::{Session, SourceKind};
 use crate::tester::{
     dtc_table, identification_table, DtcJob, FlashConfig, FlashError, FlashJob, IdentJob,
     TesterConfig,
@@ -170,6 +172,49 @@ pub enum Command {
         /// (http://host:port); repeatable.
         #[arg(long = "web-origin", value_name = "ORIGIN", requires = "web")]
         web_origins: Vec<String>,
+    },
+    /// The dashboard (the main command): the virtual car in real time (or a live bus), the
+    /// gateway on its bus, trips and recordings in a data folder, and the web dashboard on
+    /// loopback. Prints the page's address with the write token; runs until Ctrl-C.
+    Dashboard {
+        /// The bus: virtual (the virtual car, standing until you drive it from the page),
+        /// virtual:SCENARIO.toml, socketcand://HOST:PORT/BUS or socketcan://IFACE.
+        #[arg(long, value_name = "URL", default_value = "virtual", value_parser = parse_bus)]
+        bus: BusUrl,
+        /// The data folder: trips.db, recordings/, images/ (created if missing).
+        #[arg(long, value_name = "DIR", default_value = "autoplug-data")]
+        data: PathBuf,
+        /// Where the dashboard listens. Keep it on loopback unless others must reach it.
+        #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:8080")]
+        listen: std::net::SocketAddr,
+        /// The write token (default: a new random one; or AUTOPLUG_TOKEN).
+        #[arg(
+            long,
+            value_name = "TOKEN",
+            env = "AUTOPLUG_TOKEN",
+            hide_env_values = true
+        )]
+        token: Option<String>,
+        /// Only show: no write actions at all (no token).
+        #[arg(long, conflicts_with = "token")]
+        read_only: bool,
+        /// A browser origin besides the server's own that may open the stream
+        /// (http://host:port); repeatable.
+        #[arg(long = "web-origin", value_name = "ORIGIN")]
+        web_origins: Vec<String>,
+        /// On a real bus, let the gateway transmit (identification, trouble codes,
+        /// flashing). The virtual car's gateway always may.
+        #[arg(long)]
+        transmit: bool,
+        /// The vehicle's name (a VIN) in the trip database.
+        #[arg(long, value_name = "NAME", default_value = "local")]
+        vehicle: String,
+        /// Stop after this many seconds (at most 30 days).
+        #[arg(long, value_name = "SECONDS", value_parser = parse_duration)]
+        duration: Option<f64>,
+        /// Also print the status line every second.
+        #[arg(long)]
+        status: bool,
     },
     /// The trips in the database.
     #[command(subcommand)]
@@ -722,8 +767,59 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 web: web.map(|addr| autoplug_web::WebConfig {
                     addr,
                     allowed_origins: web_origins,
-                    max_clients: autoplug_web::server::DEFAULT_MAX_CLIENTS,
+                    ..autoplug_web::WebConfig::loopback(0)
                 }),
+                recordings_dir: None,
+            };
+            gateway(&bus, options, out)
+        }
+        Command::Dashboard {
+            bus,
+            data,
+            listen,
+            token,
+            read_only,
+            web_origins,
+            transmit,
+            vehicle,
+            duration,
+            status,
+        } => {
+            let folder = crate::dashboard::DataFolder::prepare(&data).map_err(CliError::Log)?;
+            let virtual_car = !matches!(bus, BusUrl::Transport(_));
+            if virtual_car {
+                for name in folder.add_demo_images().map_err(CliError::Log)? {
+                    writeln!(out, "firmware library: added {name}")?;
+                }
+            }
+            let token = match (token, read_only) {
+                (_, true) => None,
+                (Some(token), false) => {
+                    crate::dashboard::check_token(&token).map_err(CliError::Log)?;
+                    Some(token)
+                }
+                (None, false) => Some(crate::dashboard::new_token().map_err(CliError::Log)?),
+            };
+            let options = GatewayOptions {
+                transmit: (virtual_car || transmit).then_some(60_000_000),
+                record: None,
+                rotate: autoplug_logs::RotatePolicy::default(),
+                db: Some(folder.trips_db()),
+                vehicle,
+                speed: None,
+                fast: false,
+                duration,
+                quiet: !status,
+                web: Some(autoplug_web::WebConfig {
+                    addr: listen,
+                    allowed_origins: web_origins,
+                    token,
+                    trips_db: Some(folder.trips_db()),
+                    recordings_dir: Some(folder.recordings()),
+                    images_dir: Some(folder.images()),
+                    ..autoplug_web::WebConfig::loopback(0)
+                }),
+                recordings_dir: Some(folder.recordings()),
             };
             gateway(&bus, options, out)
         }
@@ -848,8 +944,10 @@ struct GatewayOptions {
     fast: bool,
     duration: Option<f64>,
     quiet: bool,
-    /// Serve the live stream.
+    /// Serve the dashboard.
     web: Option<autoplug_web::WebConfig>,
+    /// Where the dashboard's recordings go (`record` starts one at once).
+    recordings_dir: Option<PathBuf>,
 }
 
 /// Set by Ctrl-C: the live gateway stops at the next frame or idle moment.
@@ -857,8 +955,8 @@ static STOP: AtomicBool = AtomicBool::new(false);
 
 fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result<(), CliError> {
     let pace = match bus {
-        BusUrl::Virtual(_) if options.fast => None,
-        BusUrl::Virtual(_) => Some(options.speed.unwrap_or(1.0)),
+        BusUrl::Virtual(_) | BusUrl::Dashboard if options.fast => None,
+        BusUrl::Virtual(_) | BusUrl::Dashboard => Some(options.speed.unwrap_or(1.0)),
         BusUrl::Transport(_) if options.fast || options.speed.is_some() => {
             return Err(CliError::Log(
                 "--speed and --fast pace the virtual car only: a real bus goes at its own pace"
@@ -867,7 +965,14 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         }
         BusUrl::Transport(_) => None,
     };
-    let mut source = bus.open(pace).map_err(CliError::Log)?;
+    // With the dashboard, a person may drive the virtual car.
+    let desk = match (bus, &options.web) {
+        (BusUrl::Virtual(_) | BusUrl::Dashboard, Some(_)) => {
+            Some(Rc::new(RefCell::new(DriverDesk::new())))
+        }
+        _ => None,
+    };
+    let mut source = bus.open(pace, desk.clone()).map_err(CliError::Log)?;
     let mut tester = None;
     if let Some(dtc_interval_us) = options.transmit {
         let outbox: Outbox = Rc::new(RefCell::new(VecDeque::new()));
@@ -883,20 +988,14 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         Some(db) => Some(open_trip_log(db, &options.vehicle, &source.describe())?),
         None => None,
     };
-    let mut recording = match &options.record {
-        Some(dir) => {
-            std::fs::create_dir_all(dir).map_err(|e| {
-                CliError::Log(format!(
-                    "cannot create the recording directory '{}': {e}",
-                    dir.display()
-                ))
-            })?;
-            let recorder = autoplug_logs::Recorder::start(dir, "gateway", options.rotate)
-                .map_err(|e| CliError::Log(e.to_string()))?;
-            Some(RecordingSink::new(recorder))
-        }
-        None => None,
-    };
+    if let Some(dir) = &options.record {
+        std::fs::create_dir_all(dir).map_err(|e| {
+            CliError::Log(format!(
+                "cannot create the recording directory '{}': {e}",
+                dir.display()
+            ))
+        })?;
+    }
     // A second handler cannot be set (a test running several gateways): Ctrl-C then stops
     // the first one's way, through the same flag.
     STOP.store(false, Ordering::SeqCst);
@@ -917,18 +1016,6 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     let deadline = options
         .duration
         .map(|s| Instant::now() + Duration::from_secs_f64(s));
-    let mut publisher = None;
-    let _web_server = match options.web {
-        Some(config) => {
-            let table = std::sync::Arc::new(autoplug_web::LiveTable::new());
-            let server = autoplug_web::WebServer::start(config, table.clone())
-                .map_err(|e| CliError::Log(e.to_string()))?;
-            writeln!(out, "live stream on ws://{}/api/stream", server.addr())?;
-            publisher = Some(autoplug_web::Publisher::new(table));
-            Some(server)
-        }
-        None => None,
-    };
     let mut pipeline = Pipeline::new(Strictness::Strict);
     let mut status_out = io::stderr();
     let mut watch = Watch::new(trip_log);
@@ -939,35 +1026,82 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     if !options.quiet {
         watch.status = Some(StatusLine::new(&mut status_out, Duration::from_secs(1)));
     }
-    let result = {
-        let mut observers: Vec<&mut dyn Observer> = vec![&mut watch];
-        if let Some(sink) = recording.as_mut() {
-            observers.push(sink);
+    let mut stop = || STOP.load(Ordering::SeqCst) || deadline.is_some_and(|d| Instant::now() >= d);
+    let (result, mut watch, recorded) = match options.web {
+        Some(config) => {
+            // The dashboard: the session takes the watch, the recording and the commands.
+            let table = std::sync::Arc::new(autoplug_web::LiveTable::new());
+            let (control, commands) = autoplug_web::control::channel();
+            let token = config.token.clone();
+            let server = autoplug_web::WebServer::start(config, table.clone(), Some(control))
+                .map_err(|e| CliError::Log(e.to_string()))?;
+            let page = match &token {
+                Some(token) => format!("http://{}/#token={token}", server.addr()),
+                None => format!("http://{}/ (read only: no token)", server.addr()),
+            };
+            writeln!(out, "dashboard on {page}")?;
+            writeln!(out, "live stream on ws://{}/api/stream", server.addr())?;
+            out.flush()?;
+            let kind = match bus {
+                BusUrl::Virtual(_) | BusUrl::Dashboard => SourceKind::Virtual,
+                BusUrl::Transport(_) => SourceKind::Bus,
+            };
+            let mut session = Session::new(watch, table, commands, kind, source.describe());
+            if let Some(desk) = desk {
+                session = session.with_desk(desk);
+            }
+            if let Some(dir) = options.recordings_dir.clone().or(options.record.clone()) {
+                session = session.with_recordings(dir, options.rotate);
+            }
+            if options.record.is_some() {
+                session.start_recording().map_err(CliError::Log)?;
+            }
+            let result = pipeline.run(source.as_mut(), &mut [&mut session], &mut stop);
+            let recorded = session.stop_recording();
+            drop(server);
+            (result, session.watch, recorded)
         }
-        if let Some(publisher) = publisher.as_mut() {
-            observers.push(publisher);
+        None => {
+            let mut recording = match &options.record {
+                Some(dir) => {
+                    let recorder = autoplug_logs::Recorder::start(dir, "gateway", options.rotate)
+                        .map_err(|e| CliError::Log(e.to_string()))?;
+                    Some(RecordingSink::new(recorder))
+                }
+                None => None,
+            };
+            let result = {
+                let mut observers: Vec<&mut dyn Observer> = vec![&mut watch];
+                if let Some(sink) = recording.as_mut() {
+                    observers.push(sink);
+                }
+                pipeline.run(source.as_mut(), &mut observers, &mut stop)
+            };
+            let recorded = match recording.as_mut() {
+                Some(sink) => {
+                    if let Some(failure) = sink.failure() {
+                        writeln!(out, "{failure}")?;
+                    }
+                    let summary = sink.stop().map_err(|e| CliError::Log(e.to_string()))?;
+                    for file in &summary.files {
+                        writeln!(out, "recorded {}", file.display())?;
+                    }
+                    Some(format!(
+                        "recording: {} frames, {} bytes in {} file(s)",
+                        summary.frames,
+                        summary.bytes,
+                        summary.files.len()
+                    ))
+                }
+                None => None,
+            };
+            (result, watch, recorded)
         }
-        pipeline.run(source.as_mut(), &mut observers, &mut || {
-            STOP.load(Ordering::SeqCst) || deadline.is_some_and(|d| Instant::now() >= d)
-        })
     };
     watch.status = None;
     watch.finish(pipeline.state());
-    if let Some(sink) = recording.as_mut() {
-        if let Some(failure) = sink.failure() {
-            writeln!(out, "{failure}")?;
-        }
-        let summary = sink.stop().map_err(|e| CliError::Log(e.to_string()))?;
-        for file in &summary.files {
-            writeln!(out, "recorded {}", file.display())?;
-        }
-        writeln!(
-            out,
-            "recording: {} frames, {} bytes in {} file(s)",
-            summary.frames,
-            summary.bytes,
-            summary.files.len()
-        )?;
+    if let Some(recorded) = recorded {
+        writeln!(out, "{recorded}")?;
     }
     let state = pipeline.state();
     writeln!(

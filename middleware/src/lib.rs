@@ -40,13 +40,16 @@
 
 pub mod bus_tester;
 pub mod cli;
+pub mod dashboard;
 pub mod demo;
 pub mod driver;
+pub mod driving;
 pub mod gateway;
 pub mod image_tool;
 pub mod live;
 pub mod names;
 pub mod on_car;
+pub mod session;
 pub mod tester;
 pub mod transport;
 pub mod watch;

@@ -22,6 +22,7 @@ use crate::transport::{Transport, TransportError, Via};
 pub struct VirtualCarSource {
     car: VirtualCar,
     pending: VecDeque<LogFrame>,
+    desk: Option<Rc<RefCell<crate::driving::DriverDesk>>>,
 }
 
 impl VirtualCarSource {
@@ -30,6 +31,15 @@ impl VirtualCarSource {
         Self {
             car,
             pending: VecDeque::new(),
+            desk: None,
+        }
+    }
+
+    /// The same, with a person at the `desk` who may take the wheel (the dashboard).
+    pub fn with_desk(car: VirtualCar, desk: Rc<RefCell<crate::driving::DriverDesk>>) -> Self {
+        Self {
+            desk: Some(desk),
+            ..Self::new(car)
         }
     }
 
@@ -39,14 +49,28 @@ impl VirtualCarSource {
     }
 }
 
+/// Simulated time the car runs on a silent bus before its source reports idle (and its
+/// clock), so the gateway's timers run on while no ECU transmits (during a flash, with
+/// normal communication off).
+pub const SILENCE_STEP_US: u64 = 5_000;
+
 impl FrameSource for VirtualCarSource {
     fn poll(&mut self, _max_wait: Duration) -> Result<Poll, SourceError> {
+        let silent_since = self.car.time_us();
         loop {
             if let Some(frame) = self.pending.pop_front() {
                 return Ok(Poll::Frame(frame));
             }
-            if self.car.finished() {
+            // With a person at the desk the car runs until the dashboard stops: the
+            // scenario's duration only ends its timeline.
+            if self.car.finished() && self.desk.is_none() {
                 return Ok(Poll::End);
+            }
+            if self.car.time_us() >= silent_since + SILENCE_STEP_US {
+                return Ok(Poll::Idle);
+            }
+            if let Some(desk) = &self.desk {
+                desk.borrow_mut().apply(&mut self.car);
             }
             self.car.tick();
             // Taken, not copied: a long live run keeps no frames in the car.
@@ -66,6 +90,10 @@ impl FrameSource for VirtualCarSource {
     fn transmit(&mut self, frame: &Frame) -> Result<bool, SourceError> {
         Ok(self.car.inject(*frame))
     }
+
+    fn clock_us(&self) -> Option<u64> {
+        Some(self.car.time_us())
+    }
 }
 
 /// A real-time transport (socketcand, SocketCAN) as a live source. Frames carry the bus
@@ -74,6 +102,8 @@ impl FrameSource for VirtualCarSource {
 pub struct TransportSource {
     transport: Box<dyn Transport>,
     opened: Instant,
+    /// The last frame's bus time and when it came, for the clock between frames.
+    last: Option<(u64, Instant)>,
 }
 
 impl TransportSource {
@@ -82,6 +112,7 @@ impl TransportSource {
         Self {
             transport,
             opened: Instant::now(),
+            last: None,
         }
     }
 }
@@ -93,6 +124,7 @@ impl FrameSource for TransportSource {
                 let t_us = at.bus_us.unwrap_or_else(|| {
                     at.host.saturating_duration_since(self.opened).as_micros() as u64
                 });
+                self.last = Some((t_us, at.host));
                 Ok(Poll::Frame(LogFrame::from_can(t_us, 0, &frame)))
             }
             Ok(None) => Ok(Poll::Idle),
@@ -106,6 +138,11 @@ impl FrameSource for TransportSource {
 
     fn describe(&self) -> String {
         self.transport.describe()
+    }
+
+    fn clock_us(&self) -> Option<u64> {
+        self.last
+            .map(|(t_us, at)| t_us + at.elapsed().as_micros() as u64)
     }
 
     fn transmit(&mut self, frame: &Frame) -> Result<bool, SourceError> {
@@ -161,11 +198,21 @@ impl FrameSource for Transmitting {
     fn transmit(&mut self, frame: &Frame) -> Result<bool, SourceError> {
         self.inner.transmit(frame)
     }
+
+    fn clock_us(&self) -> Option<u64> {
+        self.inner.clock_us()
+    }
 }
+
+/// The dashboard's car: it stands until a person drives it.
+pub const DASHBOARD_SCENARIO: &str = include_str!("../../scenarios/dashboard.toml");
 
 /// The `--bus` URL of `autoplug gateway`: the in-process virtual car, or a transport.
 #[derive(Debug, Clone, PartialEq)]
 pub enum BusUrl {
+    /// `virtual`: the virtual car in this process, standing until a person drives it from
+    /// the dashboard (`scenarios/dashboard.toml`, built into the program).
+    Dashboard,
     /// `virtual:SCENARIO.toml`: the virtual car in this process, driven by a scenario file.
     Virtual(PathBuf),
     /// `socketcand://HOST:PORT/BUS` or `socketcan://IFACE`.
@@ -176,6 +223,9 @@ impl FromStr for BusUrl {
     type Err = String;
 
     fn from_str(url: &str) -> Result<Self, String> {
+        if url == "virtual" {
+            return Ok(BusUrl::Dashboard);
+        }
         if let Some(path) = url.strip_prefix("virtual:") {
             if path.is_empty() {
                 return Err(format!(
@@ -193,11 +243,24 @@ impl FromStr for BusUrl {
 impl BusUrl {
     /// Opens the bus as a frame source; `speed` paces the virtual car (1 = real time,
     /// `None` = as fast as the machine goes).
-    pub fn open(&self, speed: Option<f64>) -> Result<Box<dyn FrameSource>, String> {
+    /// `desk`: a person may drive the virtual car (ignored for a real bus).
+    pub fn open(
+        &self,
+        speed: Option<f64>,
+        desk: Option<Rc<RefCell<crate::driving::DriverDesk>>>,
+    ) -> Result<Box<dyn FrameSource>, String> {
         match self {
-            BusUrl::Virtual(path) => {
-                let scenario = Scenario::load(path).map_err(|e| e.to_string())?;
-                let source = VirtualCarSource::new(VirtualCar::new(&scenario));
+            BusUrl::Virtual(_) | BusUrl::Dashboard => {
+                let scenario = match self {
+                    BusUrl::Virtual(path) => Scenario::load(path).map_err(|e| e.to_string())?,
+                    _ => Scenario::parse(DASHBOARD_SCENARIO, "scenarios/dashboard.toml")
+                        .map_err(|e| e.to_string())?,
+                };
+                let car = VirtualCar::new(&scenario);
+                let source = match desk {
+                    Some(desk) => VirtualCarSource::with_desk(car, desk),
+                    None => VirtualCarSource::new(car),
+                };
                 Ok(match speed {
                     Some(speed) => Box::new(Paced::new(source, speed)),
                     None => Box::new(source),

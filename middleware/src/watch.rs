@@ -313,6 +313,17 @@ impl<'a> Watch<'a> {
         }
     }
 
+    /// The identification the tester read (again, after a flash), into the inventory.
+    fn take_identities(&mut self) {
+        let Some(rows) = self.tester.as_mut().and_then(|t| t.take_identities()) else {
+            return;
+        };
+        if let Some(log) = self.trip_log.as_mut() {
+            log.record_inventory(&identities(&rows));
+        }
+        self.identification = Some(rows);
+    }
+
     fn maybe_print_status(&mut self, state: &CarState) {
         let Some(status) = self.status.as_mut() else {
             return;
@@ -378,12 +389,7 @@ impl Observer for Watch<'_> {
         self.dtcs.on_frame(frame, update, state);
         if let Some(tester) = self.tester.as_mut() {
             tester.on_frame(frame, update, state);
-            if let Some(rows) = tester.take_identities() {
-                if let Some(log) = self.trip_log.as_mut() {
-                    log.record_inventory(&identities(&rows));
-                }
-                self.identification = Some(rows);
-            }
+            self.take_identities();
         }
         self.trips.on_frame(frame, update, state);
         self.sync(state);
@@ -391,6 +397,10 @@ impl Observer for Watch<'_> {
     }
 
     fn on_idle(&mut self, state: &CarState) {
+        if let Some(tester) = self.tester.as_mut() {
+            tester.on_idle(state);
+            self.take_identities();
+        }
         let Some(silent_after) = self.silent_after else {
             return self.maybe_print_status(state);
         };

@@ -103,7 +103,10 @@ fn clearing_removes_the_codes_of_a_fault_that_has_gone_and_each_ecu_answers() {
             .collect()
     };
     // The console is back, but the codes stay stored until a tester clears them.
-    assert_eq!(with_lost(&read(&mut car)), [Node::Engine, Node::Transmission]);
+    assert_eq!(
+        with_lost(&read(&mut car)),
+        [Node::Engine, Node::Transmission]
+    );
 
     let mut clear = OnCar::new(ClearDtcsJob::new(&ECUS, TesterConfig::DEFAULT), &mut car);
     let cleared = clear

@@ -252,9 +252,7 @@ impl ManualDriver {
     /// The person moves the controls (values clamped to each control's range; a value
     /// that is not a number leaves the controls as they were and is refused).
     pub fn hold(&mut self, held: HeldControls) -> Result<(), &'static str> {
-        self.held = held
-            .clamped()
-            .ok_or("a driver control is not a number")?;
+        self.held = held.clamped().ok_or("a driver control is not a number")?;
         Ok(())
     }
 

@@ -445,8 +445,18 @@ impl Scenario {
         }
         // An hour of trace stays around 30 MB in memory; longer runs belong in pieces.
         range("duration_s", self.duration_s, 0.001, MAX_DURATION_S)?;
-        range("road.mu_left", self.road.mu_left, *FRICTION_RANGE.start(), *FRICTION_RANGE.end())?;
-        range("road.mu_right", self.road.mu_right, *FRICTION_RANGE.start(), *FRICTION_RANGE.end())?;
+        range(
+            "road.mu_left",
+            self.road.mu_left,
+            *FRICTION_RANGE.start(),
+            *FRICTION_RANGE.end(),
+        )?;
+        range(
+            "road.mu_right",
+            self.road.mu_right,
+            *FRICTION_RANGE.start(),
+            *FRICTION_RANGE.end(),
+        )?;
         range("road.grade_percent", self.road.grade_percent, -30.0, 30.0)?;
         range("road.ambient_c", self.road.ambient_c, -40.0, 50.0)?;
         range("road.sun_load_w", self.road.sun_load_w, 0.0, 2000.0)?;
@@ -483,10 +493,20 @@ impl Scenario {
                 range(&format!("{at}grade_percent"), v, -30.0, 30.0)?;
             }
             if let Some(v) = c.mu_left {
-                range(&format!("{at}mu_left"), v, *FRICTION_RANGE.start(), *FRICTION_RANGE.end())?;
+                range(
+                    &format!("{at}mu_left"),
+                    v,
+                    *FRICTION_RANGE.start(),
+                    *FRICTION_RANGE.end(),
+                )?;
             }
             if let Some(v) = c.mu_right {
-                range(&format!("{at}mu_right"), v, *FRICTION_RANGE.start(), *FRICTION_RANGE.end())?;
+                range(
+                    &format!("{at}mu_right"),
+                    v,
+                    *FRICTION_RANGE.start(),
+                    *FRICTION_RANGE.end(),
+                )?;
             }
             if let Some(fault) = &c.fault {
                 for name in fault.silence.iter().chain(fault.restore.iter()) {

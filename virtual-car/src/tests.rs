@@ -563,7 +563,11 @@ fn a_person_at_the_wheel_drives_the_car_through_its_sensors() {
     };
     person.hold(release).unwrap();
     run(&mut car, 3.0);
-    assert_eq!(car.controls().accelerator, 0.0, "the timeline no longer drives");
+    assert_eq!(
+        car.controls().accelerator,
+        0.0,
+        "the timeline no longer drives"
+    );
     assert!(car.vehicle().speed_kmh() < 1.0);
     assert!(!car.trace_row().brake_lights);
 
@@ -584,7 +588,10 @@ fn a_person_at_the_wheel_drives_the_car_through_its_sensors() {
         })
         .unwrap();
     run(&mut car, 0.3);
-    assert!(car.trace_row().brake_lights, "the console lights the brake lights");
+    assert!(
+        car.trace_row().brake_lights,
+        "the console lights the brake lights"
+    );
     run(&mut car, 5.0);
     assert!(car.vehicle().speed_kmh() < fast - 20.0);
 
@@ -598,10 +605,7 @@ fn a_person_at_the_wheel_drives_the_car_through_its_sensors() {
         })
         .unwrap();
     assert_eq!(person.held().accelerator, 100.0);
-    assert_eq!(
-        person.held().steering_deg,
-        -crate::driver::MAX_STEERING_DEG
-    );
+    assert_eq!(person.held().steering_deg, -crate::driver::MAX_STEERING_DEG);
     assert!(person
         .hold(HeldControls {
             brake: f64::NAN,

@@ -122,6 +122,9 @@ impl Pipeline {
                     }
                 },
                 Poll::Idle => {
+                    if let Some(t_us) = source.clock_us() {
+                        self.state.advance_clock(t_us);
+                    }
                     for observer in observers.iter_mut() {
                         observer.on_idle(&self.state);
                     }

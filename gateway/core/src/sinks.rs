@@ -32,6 +32,17 @@ impl RecordingSink {
         self.recorder.is_some()
     }
 
+    /// What it has written so far, and the file it writes now (none once stopped).
+    pub fn written(&self) -> (RecordSummary, Option<std::path::PathBuf>) {
+        match &self.recorder {
+            Some(recorder) => (
+                recorder.summary().clone(),
+                recorder.current_file().map(|p| p.to_path_buf()),
+            ),
+            None => (self.summary.clone(), None),
+        }
+    }
+
     /// Why the recording stopped early, if it did.
     pub fn failure(&self) -> Option<&RecordError> {
         self.failure.as_ref()

@@ -55,6 +55,14 @@ pub trait FrameSource {
             message: "cannot transmit: not a live bus".into(),
         })
     }
+
+    /// The bus time now, on the frames' time scale, for a source that knows it while the
+    /// bus is silent (the virtual car's clock; a live bus's last timestamp plus the time
+    /// since). The pipeline moves the car state's clock with it when the source is idle,
+    /// so timers (a tester's timeouts, staleness) run on through a silence.
+    fn clock_us(&self) -> Option<u64> {
+        None
+    }
 }
 
 /// Frames a log's reading thread hands over at a time.
@@ -206,8 +214,12 @@ impl<S: FrameSource> Paced<S> {
     }
 
     fn due(&mut self, frame: &LogFrame) -> Instant {
-        let (wall, t0) = *self.start.get_or_insert((Instant::now(), frame.t_us));
-        let offset_us = frame.t_us.saturating_sub(t0) as f64 / self.speed;
+        self.due_at(frame.t_us)
+    }
+
+    fn due_at(&mut self, t_us: u64) -> Instant {
+        let (wall, t0) = *self.start.get_or_insert((Instant::now(), t_us));
+        let offset_us = t_us.saturating_sub(t0) as f64 / self.speed;
         wall + Duration::from_micros(offset_us as u64)
     }
 }
@@ -218,6 +230,18 @@ impl<S: FrameSource> FrameSource for Paced<S> {
             Some(frame) => frame,
             None => match self.inner.poll(max_wait)? {
                 Poll::Frame(frame) => frame,
+                Poll::Idle => {
+                    // A source with a clock (the virtual car) went on through a silence:
+                    // its time is paced like its frames', or it would race ahead.
+                    if let Some(t_us) = self.inner.clock_us() {
+                        let due = self.due_at(t_us);
+                        let now = Instant::now();
+                        if due > now {
+                            std::thread::sleep((due - now).min(max_wait));
+                        }
+                    }
+                    return Ok(Poll::Idle);
+                }
                 other => return Ok(other),
             },
         };
@@ -243,5 +267,9 @@ impl<S: FrameSource> FrameSource for Paced<S> {
 
     fn transmit(&mut self, frame: &autoplug_can::Frame) -> Result<bool, SourceError> {
         self.inner.transmit(frame)
+    }
+
+    fn clock_us(&self) -> Option<u64> {
+        self.inner.clock_us()
     }
 }

@@ -282,6 +282,15 @@ impl CarState {
         }
     }
 
+    /// Bus time passed without a frame (the source's clock: see
+    /// `FrameSource::clock_us`): signals age, timers run. Only forward, and only once a
+    /// frame has set the time scale.
+    pub fn advance_clock(&mut self, t_us: u64) {
+        if self.started && t_us > self.now_us {
+            self.now_us = t_us;
+        }
+    }
+
     /// Takes one frame in. Never fails: whatever the frame, it is counted somewhere.
     pub fn update(&mut self, frame: &LogFrame) -> Update {
         let t_us = frame.t_us;

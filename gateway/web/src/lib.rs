@@ -28,8 +28,12 @@
 //! `GET /api/state` give the first two messages over plain HTTP.
 #![deny(missing_docs)]
 
+pub mod api;
+pub mod assets;
+pub mod control;
 pub mod live;
 pub mod server;
 
+pub use control::{Action, Answer, Command, Commands, Control, DriveInput, Press, ReplayAction};
 pub use live::{LiveTable, Publisher};
 pub use server::{WebConfig, WebServer};

@@ -61,6 +61,10 @@ struct Table {
     messages: Vec<MessageEntry>,
     bus: BusFigures,
     bus_changed: u64,
+    /// The session's own state (verdicts, codes, jobs, recording...) as a JSON object,
+    /// written by the session whole; empty until it first does.
+    session: String,
+    session_changed: u64,
 }
 
 /// The live table (see the module docs).
@@ -190,6 +194,21 @@ impl LiveTable {
         table.version
     }
 
+    /// Replaces the session's state (a JSON object: see the crate docs). Streamed only
+    /// when its text changed; returns the version.
+    pub fn set_session(&self, session: &serde_json::Value) -> u64 {
+        let text = session.to_string();
+        let mut table = self.lock();
+        if table.session != text {
+            table.version += 1;
+            table.session = text;
+            table.session_changed = table.version;
+            let version = table.version;
+            self.version.send_replace(version);
+        }
+        table.version
+    }
+
     /// The latest version.
     pub fn version(&self) -> u64 {
         self.lock().version
@@ -267,6 +286,10 @@ impl LiveTable {
                 ",\"bus\":{}",
                 serde_json::to_string(&table.bus).unwrap_or_else(|_| "null".into())
             );
+        }
+        if !table.session.is_empty() && (since == 0 || table.session_changed > since) {
+            json.push_str(",\"session\":");
+            json.push_str(&table.session);
         }
         json.push('}');
         (json, table.version)

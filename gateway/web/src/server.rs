@@ -9,6 +9,7 @@
 //! [`crate::live`]). Every error is a JSON body `{"error": "..."}` that says what was wrong.
 
 use std::net::{SocketAddr, TcpListener};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -23,6 +24,7 @@ use axum::{Json, Router};
 use serde::Deserialize;
 use tokio::sync::oneshot;
 
+use crate::control::{Command, Control, DriveInput, Press, SendError};
 use crate::live::LiveTable;
 
 /// How often a client gets an update at most (20 Hz, the dashboard's rate).
@@ -44,6 +46,15 @@ pub struct WebConfig {
     pub allowed_origins: Vec<String>,
     /// Streams at once.
     pub max_clients: usize,
+    /// The token write actions need (`Authorization: Bearer TOKEN`, or the stream's
+    /// `auth` message); `None`: the dashboard only shows, and every write is refused.
+    pub token: Option<String>,
+    /// The trip database the Trips view reads (SQLite), if any.
+    pub trips_db: Option<PathBuf>,
+    /// Where the recordings are, for their list and download.
+    pub recordings_dir: Option<PathBuf>,
+    /// The firmware library: signed images the ECUs view offers to flash.
+    pub images_dir: Option<PathBuf>,
 }
 
 impl WebConfig {
@@ -53,14 +64,19 @@ impl WebConfig {
             addr: SocketAddr::from(([127, 0, 0, 1], port)),
             allowed_origins: Vec::new(),
             max_clients: DEFAULT_MAX_CLIENTS,
+            token: None,
+            trips_db: None,
+            recordings_dir: None,
+            images_dir: None,
         }
     }
 }
 
-struct Shared {
-    table: Arc<LiveTable>,
-    config: WebConfig,
+pub(crate) struct Shared {
+    pub(crate) table: Arc<LiveTable>,
+    pub(crate) config: WebConfig,
     clients: AtomicUsize,
+    pub(crate) control: Option<Control>,
 }
 
 /// The running server; dropping it stops it.
@@ -71,8 +87,13 @@ pub struct WebServer {
 }
 
 impl WebServer {
-    /// Binds `config.addr` (an error names the address) and serves `table` from a thread.
-    pub fn start(config: WebConfig, table: Arc<LiveTable>) -> std::io::Result<Self> {
+    /// Binds `config.addr` (an error names the address) and serves `table` from a thread;
+    /// write actions go to `control` (without one, the dashboard only shows).
+    pub fn start(
+        config: WebConfig,
+        table: Arc<LiveTable>,
+        control: Option<Control>,
+    ) -> std::io::Result<Self> {
         let listener = TcpListener::bind(config.addr).map_err(|e| {
             std::io::Error::new(e.kind(), format!("cannot listen on {}: {e}", config.addr))
         })?;
@@ -87,6 +108,7 @@ impl WebServer {
             table,
             config,
             clients: AtomicUsize::new(0),
+            control,
         });
         let thread = std::thread::Builder::new()
             .name("web server".into())
@@ -134,18 +156,34 @@ fn router(shared: Arc<Shared>) -> Router {
         .route("/api/catalog", get(catalog))
         .route("/api/state", get(state))
         .route("/api/stream", get(stream))
-        .fallback(not_found)
+        .merge(crate::api::routes())
+        .fallback(crate::assets::serve)
         .with_state(shared)
 }
 
 /// An error answer: the status and a JSON body naming what was wrong.
-fn error(status: StatusCode, message: impl Into<String>) -> Response {
+pub(crate) fn error(status: StatusCode, message: impl Into<String>) -> Response {
     (status, Json(serde_json::json!({ "error": message.into() }))).into_response()
 }
 
-async fn not_found(uri: Uri) -> Response {
+/// The 404 of an unknown path.
+pub(crate) fn not_found(uri: &Uri) -> Response {
     let path: String = uri.path().chars().take(200).collect();
     error(StatusCode::NOT_FOUND, format!("no such path: {path}"))
+}
+
+/// Whether `given` is the configured token: compared in time independent of where they
+/// differ, so the answer's timing does not give the token away a byte at a time.
+pub(crate) fn token_matches(config: &WebConfig, given: &str) -> bool {
+    let Some(token) = config.token.as_deref() else {
+        return false;
+    };
+    let (a, b) = (token.as_bytes(), given.as_bytes());
+    let mut diff = a.len() ^ b.len();
+    for (i, x) in a.iter().enumerate() {
+        diff |= usize::from(x ^ b.get(i).copied().unwrap_or(!x));
+    }
+    diff == 0
 }
 
 async fn catalog() -> Response {
@@ -220,9 +258,86 @@ async fn stream(
 /// What a client may send.
 #[derive(Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
-enum Command {
+enum ClientMessage {
     /// Answered with `{"type":"pong"}`.
     Ping,
+    /// The write token: this stream may drive from now on (answered `auth`, `ok`).
+    Auth { token: String },
+    /// The person at the wheel (after `auth`).
+    Drive(DriveInput),
+    /// A steering-wheel button (after `auth`).
+    Press { button: Press },
+}
+
+/// A stream's client, as far as driving goes.
+#[derive(Default)]
+struct Driver {
+    authenticated: bool,
+    drove: bool,
+}
+
+impl Driver {
+    /// What to answer to a client's message (`None`: nothing).
+    fn on_message(&mut self, text: &str, shared: &Shared) -> Option<serde_json::Value> {
+        let message = match serde_json::from_str::<ClientMessage>(text) {
+            Ok(message) => message,
+            Err(e) => {
+                return Some(serde_json::json!({
+                    "type": "error",
+                    "error": format!("not a command: {}", cut(&e.to_string(), 200)),
+                }))
+            }
+        };
+        let command = match message {
+            ClientMessage::Ping => return Some(serde_json::json!({ "type": "pong" })),
+            ClientMessage::Auth { token } => {
+                self.authenticated = token_matches(&shared.config, &token);
+                return Some(serde_json::json!({ "type": "auth", "ok": self.authenticated }));
+            }
+            ClientMessage::Drive(_) | ClientMessage::Press { .. } if !self.authenticated => {
+                return Some(serde_json::json!({
+                    "type": "error",
+                    "error": "driving needs the token: send {\"type\":\"auth\",\"token\":\"...\"} first",
+                }))
+            }
+            ClientMessage::Drive(input) => Command::Drive(input),
+            ClientMessage::Press { button } => Command::Press(button),
+        };
+        let Some(control) = shared.control.as_ref() else {
+            return Some(serde_json::json!({
+                "type": "error",
+                "error": "this gateway takes no commands (it only shows the bus)",
+            }));
+        };
+        match control.send(command) {
+            Ok(()) => {
+                self.drove = true;
+                None
+            }
+            Err(SendError::Busy) => Some(serde_json::json!({
+                "type": "error", "error": "the session is busy: input dropped",
+            })),
+            Err(SendError::Gone) => Some(serde_json::json!({
+                "type": "error", "error": "the session has ended",
+            })),
+        }
+    }
+}
+
+/// Releases the pedals when the stream of a client that drove ends, whatever ended it.
+struct DriverGuard {
+    driver: Driver,
+    control: Option<Control>,
+}
+
+impl Drop for DriverGuard {
+    fn drop(&mut self) {
+        if let (true, Some(control)) = (self.driver.drove, self.control.as_ref()) {
+            // The fast way; if the queue is full, the session's own dead-man timer
+            // releases the pedals when the inputs stop coming.
+            let _ = control.send(Command::DriverLeft);
+        }
+    }
 }
 
 async fn send(socket: &mut WebSocket, text: String) -> bool {
@@ -245,6 +360,11 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
     if !send(&mut socket, first).await {
         return;
     }
+    let mut driver = DriverGuard {
+        driver: Driver::default(),
+        control: slot.0.control.clone(),
+    };
+    let driver = &mut driver.driver;
     let mut ticker = tokio::time::interval(UPDATE_PERIOD);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
@@ -266,12 +386,9 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
             incoming = socket.recv() => {
                 let reply = match incoming {
                     None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
-                    Some(Ok(Message::Text(text))) => match serde_json::from_str::<Command>(&text) {
-                        Ok(Command::Ping) => serde_json::json!({ "type": "pong" }),
-                        Err(e) => serde_json::json!({
-                            "type": "error",
-                            "error": format!("not a command: {}", cut(&e.to_string(), 200)),
-                        }),
+                    Some(Ok(Message::Text(text))) => match driver.on_message(&text, &slot.0) {
+                        Some(reply) => reply,
+                        None => continue,
                     },
                     Some(Ok(Message::Binary(_))) => serde_json::json!({
                         "type": "error",

@@ -28,7 +28,7 @@ fn server(max_clients: usize) -> (Arc<LiveTable>, WebServer) {
     let table = Arc::new(LiveTable::new());
     let mut config = WebConfig::loopback(0);
     config.max_clients = max_clients;
-    let server = WebServer::start(config, table.clone()).expect("server");
+    let server = WebServer::start(config, table.clone(), None).expect("server");
     (table, server)
 }
 
@@ -246,9 +246,29 @@ fn http_errors_say_what_was_wrong() {
         stream.read_to_string(&mut response).expect("response");
         response
     };
-    let missing = get("/nothing/here");
+    let missing = get("/api/nothing/here");
     assert!(missing.starts_with("HTTP/1.1 404"), "{missing}");
-    assert!(missing.contains("no such path: /nothing/here"), "{missing}");
+    assert!(missing.contains("no such path: /api/nothing/here"), "{missing}");
+    let missing_asset = get("/assets/none.js");
+    assert!(missing_asset.starts_with("HTTP/1.1 404"), "{missing_asset}");
+    // Any other path is one of the page's views: the page itself.
+    let view = get("/ecus");
+    assert!(view.starts_with("HTTP/1.1 200"), "{view}");
+    assert!(view.contains("text/html"), "{view}");
+    let post = {
+        use std::io::{Read, Write};
+        let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
+        write!(
+            stream,
+            "POST /ecus HTTP/1.1\r\nHost: {}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+            server.addr()
+        )
+        .expect("request");
+        let mut response = String::new();
+        stream.read_to_string(&mut response).expect("response");
+        response
+    };
+    assert!(post.starts_with("HTTP/1.1 405"), "{post}");
     let not_ws = get("/api/stream");
     assert!(not_ws.starts_with("HTTP/1.1 400"), "{not_ws}");
     assert!(not_ws.contains("WebSocket"), "{not_ws}");

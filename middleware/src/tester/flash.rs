@@ -428,6 +428,11 @@ impl FlashJob {
         self.observer = Some(Box::new(observer));
     }
 
+    /// The ECU it flashes.
+    pub fn ecu(&self) -> Node {
+        self.config.ecu
+    }
+
     /// Where the job is now.
     pub fn progress(&self) -> Progress {
         Progress {

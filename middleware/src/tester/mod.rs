@@ -43,7 +43,9 @@ pub use dtcs::{dtc_table, parse_report, DtcJob, EcuDtcReport, REPORT_ALL_DTCS};
 pub use flash::{
     FlashConfig, FlashError, FlashFailure, FlashJob, FlashReport, Phase, PhaseTiming, Progress,
 };
-pub use ident::{identification_table, EcuIdentification, IdentJob, IDENTIFICATION_DIDS};
+pub use ident::{
+    identification_table, value_text, EcuIdentification, IdentJob, IDENTIFICATION_DIDS,
+};
 pub use job::Job;
 
 use std::collections::VecDeque;

@@ -1,0 +1,168 @@
+//! The write side of the dashboard: what a browser (with the token) asks of the session
+//! that runs the gateway, and how it gets there.
+//!
+//! The server never touches the bus, the car or the files itself: it checks the token and
+//! the request's form, and hands a [`Command`] to the session's thread through a bounded
+//! queue ([`CONTROL_QUEUE`] commands). The session takes them between two frames, acts,
+//! and answers each [`Action`] (accepted, with a JSON body, or refused, with the reason);
+//! what follows (a flash's progress, the recording's size) appears in the stream's
+//! `session` object. A full queue is answered 503 at once: a flood of requests never
+//! blocks the server or the car.
+
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
+
+use serde::Deserialize;
+use tokio::sync::oneshot;
+
+/// Commands waiting for the session at most.
+pub const CONTROL_QUEUE: usize = 256;
+
+/// Something that changes the car or the session, answered once.
+#[derive(Debug)]
+pub enum Action {
+    /// Flash a signed image to one ECU (by its command-line name, e.g. `cruise`).
+    Flash {
+        /// The ECU.
+        ecu: String,
+        /// The image, as a file holds it.
+        image: Vec<u8>,
+        /// Where it came from (a library name or "upload"), for the report.
+        origin: String,
+    },
+    /// Clear the trouble codes of one ECU, or of all nine (`None`).
+    ClearDtcs {
+        /// The ECU, or all.
+        ecu: Option<String>,
+    },
+    /// Start (`true`) or stop the recording of all traffic.
+    Record(bool),
+    /// Change the road's friction (virtual car only), left and right wheels.
+    Road {
+        /// Left wheels.
+        mu_left: f64,
+        /// Right wheels.
+        mu_right: f64,
+    },
+    /// Control a replay.
+    Replay(ReplayAction),
+}
+
+/// What a replay does next.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(tag = "action", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ReplayAction {
+    /// Go on at the set speed.
+    Play,
+    /// Stop the clock.
+    Pause,
+    /// Play at this multiple of the log's own time.
+    Speed {
+        /// The multiple (0.1..=100).
+        speed: f64,
+    },
+    /// Jump to this time from the log's start, s.
+    Seek {
+        /// Seconds from the start.
+        t: f64,
+    },
+}
+
+/// What a person at the wheel holds (the Drive view sends it while it drives).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveInput {
+    /// Accelerator pedal, %.
+    pub accelerator: f64,
+    /// Brake pedal, %.
+    pub brake: f64,
+    /// Steering wheel, degrees, positive to the left.
+    pub steering_deg: f64,
+    /// Headlight switch.
+    pub headlights: bool,
+    /// Engine-mode switch (economy).
+    pub economy_mode: bool,
+    /// Transmission-mode switch (manual).
+    pub manual_mode: bool,
+    /// Cabin set temperature, °F.
+    pub set_temp_f: f64,
+}
+
+/// A steering-wheel button.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Press {
+    /// Cruise on / set.
+    CruiseOn,
+    /// Cruise off.
+    CruiseOff,
+    /// Shift up.
+    ShiftUp,
+    /// Shift down.
+    ShiftDown,
+}
+
+/// The session's answer to an [`Action`]: a JSON value, or why it was refused.
+pub type Answer = Result<serde_json::Value, String>;
+
+/// A command for the session.
+#[derive(Debug)]
+pub enum Command {
+    /// An action, to be answered.
+    Act {
+        /// What to do.
+        action: Action,
+        /// Where the answer goes.
+        reply: oneshot::Sender<Answer>,
+    },
+    /// The person at the wheel moved the controls.
+    Drive(DriveInput),
+    /// The person pressed a button.
+    Press(Press),
+    /// The page that drove went away: pedals released.
+    DriverLeft,
+}
+
+/// The server's end of the queue.
+#[derive(Clone, Debug)]
+pub struct Control {
+    sender: SyncSender<Command>,
+}
+
+/// The session's end of the queue.
+#[derive(Debug)]
+pub struct Commands {
+    receiver: Receiver<Command>,
+}
+
+/// A queue between the server and the session.
+pub fn channel() -> (Control, Commands) {
+    let (sender, receiver) = std::sync::mpsc::sync_channel(CONTROL_QUEUE);
+    (Control { sender }, Commands { receiver })
+}
+
+/// Why a command did not reach the session.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SendError {
+    /// The queue is full.
+    Busy,
+    /// The session has ended.
+    Gone,
+}
+
+impl Control {
+    /// Queues a command without waiting.
+    pub fn send(&self, command: Command) -> Result<(), SendError> {
+        self.sender.try_send(command).map_err(|e| match e {
+            TrySendError::Full(_) => SendError::Busy,
+            TrySendError::Disconnected(_) => SendError::Gone,
+        })
+    }
+}
+
+impl Commands {
+    /// The next command, if one waits.
+    pub fn next(&self) -> Option<Command> {
+        // Empty or disconnected: nothing to do either way.
+        self.receiver.try_recv().ok()
+    }
+}

@@ -1,0 +1,115 @@
+//! `autoplug dashboard`, the main command: the virtual car in real time (or a live bus),
+//! the gateway on its bus with its tester, the trips and recordings in a data folder, and
+//! the web dashboard on loopback, with a write token printed at the start.
+//!
+//! The data folder holds `trips.db` (SQLite), `recordings/` (candump files) and `images/`
+//! (the firmware library the ECUs view offers). For the virtual car, the library gets the
+//! report's demonstration images at the first start: the faulty cruise control and ABS
+//! software (version 1.1.0) and their fixes (1.2.0), signed with the development key.
+
+use std::path::{Path, PathBuf};
+
+use autoplug_can::Node;
+use autoplug_image::{SigningKey, SoftwareVariant, Version};
+use autoplug_virtual_car::diag::{build_image, FACTORY_PAYLOAD_LEN};
+
+use crate::names::ecu_name;
+
+/// The data folder's layout.
+#[derive(Clone, Debug)]
+pub struct DataFolder {
+    /// The folder.
+    pub root: PathBuf,
+}
+
+impl DataFolder {
+    /// Creates the folder and its subfolders if missing (an error names the one that failed).
+    pub fn prepare(root: &Path) -> Result<Self, String> {
+        let folder = Self {
+            root: root.to_path_buf(),
+        };
+        for dir in [folder.root.clone(), folder.recordings(), folder.images()] {
+            std::fs::create_dir_all(&dir)
+                .map_err(|e| format!("cannot create the folder '{}': {e}", dir.display()))?;
+        }
+        Ok(folder)
+    }
+
+    /// The trip database.
+    pub fn trips_db(&self) -> PathBuf {
+        self.root.join("trips.db")
+    }
+
+    /// The recordings.
+    pub fn recordings(&self) -> PathBuf {
+        self.root.join("recordings")
+    }
+
+    /// The firmware library.
+    pub fn images(&self) -> PathBuf {
+        self.root.join("images")
+    }
+
+    /// Writes the demonstration images the library lacks; returns the names written.
+    pub fn add_demo_images(&self) -> Result<Vec<String>, String> {
+        let key = SigningKey::from_seed(autoplug_image::dev::SIGNING_SEED);
+        let mut written = Vec::new();
+        for (ecu, variant, version) in DEMO_IMAGES {
+            let name = demo_image_name(ecu, variant, version);
+            let path = self.images().join(&name);
+            if path.exists() {
+                continue;
+            }
+            let image = build_image(ecu, version, variant, FACTORY_PAYLOAD_LEN, &key);
+            // Written under another name and renamed: never a half image in the library.
+            let partial = self.images().join(format!(".{name}.partial"));
+            std::fs::write(&partial, &image)
+                .and_then(|()| std::fs::rename(&partial, &path))
+                .map_err(|e| format!("cannot write '{}': {e}", path.display()))?;
+            written.push(name);
+        }
+        Ok(written)
+    }
+}
+
+/// The report's demonstrations: the faulty software, then the fix (a newer version: the
+/// ECUs refuse to go back).
+pub const DEMO_IMAGES: [(Node, SoftwareVariant, Version); 4] = [
+    (Node::Cruise, SoftwareVariant::Faulty, Version::new(1, 1, 0)),
+    (
+        Node::Cruise,
+        SoftwareVariant::Standard,
+        Version::new(1, 2, 0),
+    ),
+    (Node::ABS, SoftwareVariant::Faulty, Version::new(1, 1, 0)),
+    (Node::ABS, SoftwareVariant::Standard, Version::new(1, 2, 0)),
+];
+
+/// `cruise-1.1.0-faulty.img`, `abs-1.2.0.img`.
+pub fn demo_image_name(ecu: Node, variant: SoftwareVariant, version: Version) -> String {
+    let suffix = match variant {
+        SoftwareVariant::Faulty => "-faulty",
+        SoftwareVariant::Standard => "",
+    };
+    format!("{}-{version}{suffix}.img", ecu_name(ecu))
+}
+
+/// A fresh write token: 128 random bits from the operating system, in hex.
+pub fn new_token() -> Result<String, String> {
+    let mut bytes = [0u8; 16];
+    getrandom::fill(&mut bytes).map_err(|e| format!("no randomness for the token: {e}"))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// A token given by the user: 16 to 128 characters, letters, digits, `-` and `_` (it
+/// travels in a URL fragment and a header).
+pub fn check_token(token: &str) -> Result<(), String> {
+    let ok_chars = token
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if (16..=128).contains(&token.len()) && ok_chars {
+        Ok(())
+    } else {
+        Err("a token has 16 to 128 characters: letters, digits, - and _".into())
+    }
+}
