@@ -12,7 +12,7 @@ use rust_embed::Embed;
 use crate::server::{error, not_found};
 
 #[derive(Embed)]
-#[folder = "$CARGO_MANIFEST_DIR/ui/dist/"]
+#[folder = "ui/dist/"]
 #[allow_missing = true]
 struct Ui;
 

@@ -1,0 +1,103 @@
+import './style.css';
+import { tokenFromAddress } from './api';
+import { Live } from './live';
+import { h, num, setText } from './util';
+import type { Ctx, View } from './view';
+import { carView } from './views/car';
+import { plotsView } from './views/plots';
+import { busView } from './views/bus';
+import { diagnosticsView } from './views/diagnostics';
+import { ecusView } from './views/ecus';
+import { tripsView } from './views/trips';
+import { recordingsView } from './views/recordings';
+import { driveView } from './views/drive';
+
+const VIEWS: [string, string, (ctx: Ctx) => View][] = [
+  ['car', 'Car', carView],
+  ['plots', 'Plots', plotsView],
+  ['bus', 'Bus', busView],
+  ['diagnostics', 'Diagnostics', diagnosticsView],
+  ['ecus', 'ECUs', ecusView],
+  ['trips', 'Trips', tripsView],
+  ['recordings', 'Recordings', recordingsView],
+  ['drive', 'Drive', driveView],
+];
+
+tokenFromAddress();
+
+const theme = localStorage.getItem('autoplug-theme');
+if (theme) document.documentElement.dataset.theme = theme;
+document.getElementById('theme')!.addEventListener('click', () => {
+  const dark = document.documentElement.dataset.theme
+    ? document.documentElement.dataset.theme === 'dark'
+    : matchMedia('(prefers-color-scheme: dark)').matches;
+  const next = dark ? 'light' : 'dark';
+  document.documentElement.dataset.theme = next;
+  localStorage.setItem('autoplug-theme', next);
+});
+
+const live = new Live();
+const events = document.getElementById('events')!;
+const ctx: Ctx = {
+  live,
+  toast(text, kind = 'ok') {
+    const t = h('div', { class: `toast ${kind}`, role: kind === 'error' ? 'alert' : 'status', text });
+    events.append(t);
+    setTimeout(() => t.remove(), kind === 'error' ? 8000 : 4000);
+  },
+};
+
+const nav = document.getElementById('nav')!;
+for (const [path, label] of VIEWS) {
+  nav.append(h('a', { href: `/${path}`, 'data-link': true, 'data-view': path, text: label }));
+}
+const main = document.getElementById('view')!;
+let current: View | null = null;
+
+function route(): void {
+  const name = location.pathname.replace(/^\//, '') || 'car';
+  const found = VIEWS.find(([path]) => path === name) ?? VIEWS[0];
+  current?.destroy?.();
+  current = found[2](ctx);
+  main.replaceChildren(current.el);
+  main.dataset.view = found[0];
+  for (const a of nav.querySelectorAll('a')) a.classList.toggle('active', a.dataset.view === found[0]);
+  document.title = `AutoPlug · ${found[1]}`;
+  current.update();
+}
+
+document.addEventListener('click', (e) => {
+  const a = (e.target as HTMLElement).closest('a[data-link]') as HTMLAnchorElement | null;
+  if (!a || e.ctrlKey || e.metaKey || e.shiftKey) return;
+  e.preventDefault();
+  history.pushState(null, '', a.getAttribute('href')!);
+  route();
+});
+window.addEventListener('popstate', route);
+
+const conn = document.getElementById('conn')!;
+const busTime = document.getElementById('bustime')!;
+// Events already shown (the page shows only those that happen while it is open).
+let seenEvents: number | null = null;
+let scheduled = false;
+live.subscribe(() => {
+  if (scheduled) return;
+  scheduled = true;
+  requestAnimationFrame(() => {
+    scheduled = false;
+    setText(conn, live.connected ? (live.session?.source.name ?? 'live') : 'offline');
+    conn.className = `pill ${live.connected ? 'on' : 'off'}`;
+    setText(busTime, live.connected ? `t = ${num(live.t, 1)} s` : '');
+    const list = live.session?.events ?? [];
+    const last = list.length ? list[list.length - 1].t : 0;
+    if (live.session && seenEvents === null) seenEvents = last;
+    if (seenEvents !== null && last > seenEvents) {
+      for (const ev of list) if (ev.t > seenEvents) ctx.toast(ev.text, /fail|refus/i.test(ev.text) ? 'error' : 'ok');
+      seenEvents = last;
+    }
+    current?.update();
+  });
+});
+
+route();
+live.connect();

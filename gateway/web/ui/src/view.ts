@@ -1,0 +1,14 @@
+import type { Live } from './live';
+
+export interface Ctx {
+  live: Live;
+  /** A short message at the bottom of the page. */
+  toast(text: string, kind?: 'ok' | 'error'): void;
+}
+
+export interface View {
+  el: HTMLElement;
+  /** Called when the live data changed (at most once per animation frame). */
+  update(): void;
+  destroy?(): void;
+}
