@@ -248,7 +248,10 @@ fn http_errors_say_what_was_wrong() {
     };
     let missing = get("/api/nothing/here");
     assert!(missing.starts_with("HTTP/1.1 404"), "{missing}");
-    assert!(missing.contains("no such path: /api/nothing/here"), "{missing}");
+    assert!(
+        missing.contains("no such path: /api/nothing/here"),
+        "{missing}"
+    );
     let missing_asset = get("/assets/none.js");
     assert!(missing_asset.starts_with("HTTP/1.1 404"), "{missing_asset}");
     // Any other path is one of the page's views: the page itself.
@@ -309,4 +312,73 @@ fn stopping_the_server_closes_open_streams_at_once() {
         .await;
         assert!(end.is_ok(), "the stream ended");
     });
+}
+
+#[test]
+fn driving_over_the_stream_needs_the_token_and_reaches_the_session() {
+    let table = Arc::new(LiveTable::new());
+    let mut config = WebConfig::loopback(0);
+    config.token = Some("stream-token-0123456789".into());
+    let (control, commands) = autoplug_web::control::channel();
+    let server = WebServer::start(config, table, Some(control)).expect("server");
+    let drive = r#"{"type":"drive","accelerator":40,"brake":0,"steering_deg":5,"headlights":true,"economy_mode":false,"manual_mode":false,"set_temp_f":70}"#;
+    runtime().block_on(async {
+        let mut client = connect(&server).await;
+        assert_eq!(next_json(&mut client).await["type"], "catalog");
+        assert_eq!(next_json(&mut client).await["type"], "update");
+        // Not yet authenticated: refused, nothing reaches the session.
+        client.send(Message::Text(drive.into())).await.unwrap();
+        let refused = next_json(&mut client).await;
+        assert_eq!(refused["type"], "error");
+        assert!(
+            refused["error"].as_str().unwrap().contains("token"),
+            "{refused}"
+        );
+        client
+            .send(Message::Text(r#"{"type":"auth","token":"guess"}"#.into()))
+            .await
+            .unwrap();
+        assert_eq!(next_json(&mut client).await["ok"], false);
+        client
+            .send(Message::Text(
+                r#"{"type":"drive","accelerator":"full"}"#.into(),
+            ))
+            .await
+            .unwrap();
+        assert_eq!(next_json(&mut client).await["type"], "error");
+        client
+            .send(Message::Text(
+                r#"{"type":"auth","token":"stream-token-0123456789"}"#.into(),
+            ))
+            .await
+            .unwrap();
+        assert_eq!(next_json(&mut client).await["ok"], true);
+        client.send(Message::Text(drive.into())).await.unwrap();
+        client
+            .send(Message::Text(
+                r#"{"type":"press","button":"cruise_on"}"#.into(),
+            ))
+            .await
+            .unwrap();
+        client
+            .send(Message::Text(r#"{"type":"press","button":"horn"}"#.into()))
+            .await
+            .unwrap();
+        let unknown = next_json(&mut client).await;
+        assert_eq!(unknown["type"], "error", "{unknown}");
+        client.send(Message::Close(None)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    });
+    let mut got = Vec::new();
+    while let Some(command) = commands.next() {
+        got.push(format!("{command:?}"));
+    }
+    assert_eq!(got.len(), 3, "{got:?}");
+    assert!(
+        got[0].starts_with("Drive(DriveInput { accelerator: 40.0"),
+        "{got:?}"
+    );
+    assert_eq!(got[1], "Press(CruiseOn)");
+    // The page that drove left: the session releases the pedals.
+    assert_eq!(got[2], "DriverLeft");
 }

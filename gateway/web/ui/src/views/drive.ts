@@ -59,7 +59,7 @@ export function driveView(ctx: Ctx): View {
   const knobText = h('span');
   knob.addEventListener('input', () => { state.set_temp_f = Number(knob.value); engaged = true; });
 
-  const road = (label: string, left: number, right: number) => h('button', { class: 'btn', 'data-testid': `road-${label.toLowerCase().replace(/\W+/g, '-')}`, onclick: async () => {
+  const road = (label: string, id: string, left: number, right: number) => h('button', { class: 'btn', 'data-testid': `road-${id}`, onclick: async () => {
     try { await post('/api/road', { mu_left: left, mu_right: right }); ctx.toast(`Road: ${label}`); } catch (e: any) { ctx.toast(e.message, 'error'); }
   } }, label);
 
@@ -75,7 +75,7 @@ export function driveView(ctx: Ctx): View {
         h('div', { class: 'buttons' }, btn('Cruise on / set', 'cruise_on', 'C'), btn('Cruise off', 'cruise_off', 'X'), btn('Shift down', 'shift_down', 'Q'), btn('Shift up', 'shift_up', 'E')),
         h('div', { class: 'buttons' }, ...switches),
         h('label', { class: 'knob' }, 'Cabin set point ', knob, knobText))),
-    h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 1.0, 1.0), road('Wet', 0.5, 0.5), road('Split µ (right icy)', 1.0, 0.2))),
+    h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2))),
   );
 
   function authorize(): void {

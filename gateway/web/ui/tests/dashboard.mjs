@@ -1,0 +1,293 @@
+// The dashboard in a real Chromium (Debian's, driven headless by playwright-core) against a
+// running `autoplug dashboard` on the virtual car: every view renders without a console
+// error, the Car view follows the bus, the report's two scenarios are done from the page
+// (flash the faulty software, see the symptom, see the verdict, flash the fix, see it
+// pass), driving from the page moves the car, the phone layout fits, and screenshots of
+// every view at desktop and phone size are written for a person to look at.
+//
+// node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR
+
+import assert from 'node:assert/strict';
+import { mkdirSync } from 'node:fs';
+import { chromium } from 'playwright-core';
+
+const [base, token, shots] = process.argv.slice(2);
+if (!base || !token || !shots) {
+  console.error('usage: node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR');
+  process.exit(2);
+}
+mkdirSync(shots, { recursive: true });
+
+const VIEWS = {
+  car: '[data-testid=speed]',
+  plots: '.uplot',
+  bus: '[data-testid=msg-VehicleSpeedMsg]',
+  diagnostics: '[data-testid=verdict-cruise]',
+  ecus: '[data-testid=inventory-cruise]',
+  trips: '[data-testid=trip-current]',
+  recordings: '[data-testid=record]',
+  drive: '[data-testid=drive-speed]',
+};
+
+let step = 0;
+const started = Date.now();
+function ok(what) {
+  step += 1;
+  console.log(`ok ${step} - ${what} [${((Date.now() - started) / 1000).toFixed(1)} s]`);
+}
+
+const browser = await chromium.launch({
+  executablePath: '/usr/bin/chromium',
+  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync'],
+});
+const problems = [];
+function watch(page) {
+  page.on('console', (m) => {
+    if (m.type() === 'error') problems.push(`console error: ${m.text()}`);
+  });
+  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
+}
+
+async function state() {
+  const response = await fetch(`${base}/api/state`);
+  return response.json();
+}
+
+async function view(page, name) {
+  await page.click(`nav a[data-view=${name}]`);
+  await page.waitForSelector(VIEWS[name], { timeout: 10_000 });
+}
+
+async function shownSpeed(page) {
+  return Number(await page.getAttribute('[data-testid=speed]', 'data-value'));
+}
+
+async function until(what, check, timeoutMs) {
+  const deadline = Date.now() + timeoutMs;
+  for (;;) {
+    const value = await check();
+    if (value) return value;
+    if (Date.now() > deadline) throw new Error(`timed out after ${timeoutMs / 1000} s waiting for ${what}`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+}
+
+async function speedNow() {
+  return (await state()).signals['Vehicle.Speed'] ?? 0;
+}
+
+/** Holds the accelerator (keyboard, Drive view) until the bus shows `kmh`. */
+async function accelerateTo(page, kmh) {
+  await page.keyboard.up('ArrowDown');
+  await page.keyboard.down('ArrowUp');
+  await until(`${kmh} km/h`, async () => (await speedNow()) >= kmh, 60_000);
+  await page.keyboard.up('ArrowUp');
+  // The pedal springs back (the page ramps it down): a pedal still pressed would cancel
+  // a cruise switched on now.
+  await page.waitForTimeout(700);
+}
+
+/** Brakes to a stop and keeps the brake pressed (in gear at idle, the car creeps): the
+ *  ECUs take a programming session only once the bus has shown standstill for 0.5 s. */
+async function brakeToStop(page) {
+  await page.keyboard.down('ArrowDown');
+  await until('the car to stop', async () => (await speedNow()) < 0.5, 60_000);
+  await page.waitForTimeout(1000);
+}
+
+async function verdict(page, ecu) {
+  const cell = page.locator(`[data-testid=verdict-${ecu}] td`).nth(1);
+  return cell.getAttribute('data-verdict');
+}
+
+async function flash(page, ecu, image) {
+  await view(page, 'ecus');
+  await page.selectOption('[data-testid=flash-image]', image);
+  await page.selectOption('[data-testid=flash-ecu]', ecu);
+  await page.click('[data-testid=flash-start]');
+  // The bar moves while the image goes over the bus.
+  const midway = await until('the progress bar to move', async () => {
+    if ((await page.getAttribute('[data-testid=flash-status]', 'data-state')) === 'failed') {
+      throw new Error(await page.textContent('[data-testid=flash-status]'));
+    }
+    const v = Number(await page.getAttribute('[data-testid=flash-progress]', 'value'));
+    return v > 0 && v < 100 && (await page.isVisible('[data-testid=flash-progress]')) ? v : null;
+  }, 60_000);
+  await until(`${image} flashed`, async () => {
+    const s = await page.getAttribute('[data-testid=flash-status]', 'data-state');
+    if (s === 'failed') throw new Error(await page.textContent('[data-testid=flash-status]'));
+    return s === 'done';
+  }, 120_000);
+  const version = /-(\d+\.\d+\.\d+)/.exec(image)[1];
+  const inventory = await until(`the inventory to show ${ecu} ${version}`, async () => {
+    const shown = await page.textContent(`[data-testid=inventory-${ecu}] .sw`);
+    return shown === version ? shown : null;
+  }, 15_000);
+  ok(`flashed ${image} into ${ecu} from the ECUs view (bar seen at ${midway.toFixed(0)} %), inventory shows ${inventory}`);
+}
+
+try {
+  // Without the token, a write is refused.
+  const refused = await fetch(`${base}/api/recording`, { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: '{"on":true}' });
+  assert.equal(refused.status, 401);
+  const wrong = await fetch(`${base}/api/recording`, { method: 'POST', headers: { 'Content-Type': 'application/json', Authorization: 'Bearer wrong-token-wrong-token' }, body: '{"on":true}' });
+  assert.equal(wrong.status, 401);
+  const malformed = await fetch(`${base}/api/recording`, { method: 'POST', headers: { 'Content-Type': 'application/json', Authorization: `Bearer ${token}` }, body: '{"on":' });
+  assert.equal(malformed.status, 400);
+  assert.match((await malformed.json()).error, /body/);
+  ok('writes without the token are refused (401), a malformed body gets 400 with the reason');
+
+  const desktop = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+  watch(desktop);
+  await desktop.goto(`${base}/car#token=${token}`);
+  await desktop.waitForSelector('[data-testid=speed][data-value]', { timeout: 15_000 });
+  for (const name of Object.keys(VIEWS)) {
+    await view(desktop, name);
+    await desktop.waitForTimeout(500);
+    await desktop.screenshot({ path: `${shots}/desktop-${name}.png` });
+  }
+  ok('every view renders (desktop screenshots written)');
+
+  // Driving: the accelerator raises the speed, the brake lights follow the brake.
+  await view(desktop, 'drive');
+  await until('the wheel to be ours', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  const before = await speedNow();
+  await accelerateTo(desktop, 30);
+  ok(`the accelerator on the page raised the speed from ${before} to ${await speedNow()} km/h`);
+
+  // The Car view follows the bus: within 1 km/h of the last VehicleSpeedMsg, within 200 ms.
+  const drivingTab = desktop;
+  const watcher = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+  watch(watcher);
+  await watcher.goto(`${base}/car`);
+  await watcher.waitForSelector('[data-testid=speed][data-value]');
+  await drivingTab.bringToFront();
+  await drivingTab.keyboard.down('ArrowUp');
+  const lags = [];
+  for (let i = 0; i < 15; i++) {
+    const sent = Date.now();
+    const onBus = (await state()).signals['Vehicle.Speed'];
+    await until('the page to show the bus speed', async () => {
+      const shown = await shownSpeed(watcher);
+      return Math.abs(shown - onBus) <= 1 || shown > onBus;
+    }, 2_000);
+    lags.push(Date.now() - sent);
+    await new Promise((r) => setTimeout(r, 150));
+  }
+  await drivingTab.keyboard.up('ArrowUp');
+  const worst = Math.max(...lags);
+  assert.ok(worst <= 200, `the Car view took ${worst} ms to show the speed on the bus (lags ${lags.join(', ')} ms)`);
+  ok(`the Car view follows the bus: the shown speed reached the bus's within ${worst} ms (15 samples while accelerating: ${lags.join(', ')} ms)`);
+
+  await drivingTab.keyboard.down('ArrowDown');
+  await until('the brake lights on the Car view', async () => (await watcher.getAttribute('[data-testid=brake-lights]', 'data-on')) === 'true', 3_000);
+  await until('the car to stop', async () => (await speedNow()) < 0.5, 60_000);
+  await drivingTab.keyboard.up('ArrowDown');
+  await watcher.waitForTimeout(300);
+  const standing = (await state()).signals['Vehicle.Speed'];
+  assert.ok(Math.abs((await shownSpeed(watcher)) - standing) <= 1, 'the Car view shows the speed on the bus');
+  await until('the brake lights off', async () => (await watcher.getAttribute('[data-testid=brake-lights]', 'data-on')) === 'false', 3_000);
+  ok('the brake lights on the Car view follow the brake pressed on the page');
+  await watcher.close();
+  await brakeToStop(desktop);
+
+  // Report scenario 1: the cruise control.
+  await flash(desktop, 'cruise', 'cruise-1.1.0-faulty.img');
+  await view(desktop, 'drive');
+  await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  await accelerateTo(desktop, 90);
+  await desktop.keyboard.press('c');
+  await until('cruise on', async () => (await state()).signals['Vehicle.ADAS.CruiseControl.IsActive'] === 1, 5_000);
+  const speeds = [];
+  const watchUntil = Date.now() + 20_000;
+  while (Date.now() < watchUntil) {
+    speeds.push((await state()).signals['Vehicle.Speed']);
+    await new Promise((r) => setTimeout(r, 200));
+  }
+  const swing = Math.max(...speeds.slice(40)) - Math.min(...speeds.slice(40));
+  assert.ok(swing >= 3, `the faulty cruise should oscillate (swing ${swing} km/h)`);
+  await view(desktop, 'diagnostics');
+  const faulty = await until('the cruise ECU flagged', async () => {
+    const v = await verdict(desktop, 'cruise');
+    return v === 'faulty' ? v : null;
+  }, 30_000);
+  const number = await desktop.getAttribute('[data-testid=verdict-cruise] td:nth-child(3)', 'data-number');
+  await desktop.screenshot({ path: `${shots}/desktop-diagnostics-cruise-faulty.png` });
+  ok(`scenario 1: the faulty cruise oscillates (${swing} km/h peak to peak), Diagnostics flags cruise ${faulty} with ${Number(number).toFixed(2)} km/h rms`);
+  await view(desktop, 'drive');
+  await desktop.keyboard.press('x');
+  await brakeToStop(desktop);
+  await flash(desktop, 'cruise', 'cruise-1.2.0.img');
+  await view(desktop, 'drive');
+  await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  await accelerateTo(desktop, 90);
+  await desktop.keyboard.press('c');
+  await desktop.waitForTimeout(16_000);
+  await view(desktop, 'diagnostics');
+  const fixed = await until('the cruise verdict back to ok', async () => {
+    const v = await verdict(desktop, 'cruise');
+    const n = await desktop.getAttribute('[data-testid=verdict-cruise] td:nth-child(3)', 'data-number');
+    return v === 'ok' && n ? n : null;
+  }, 30_000);
+  const routine = await desktop.textContent('[data-testid=verdict-cruise] td:nth-child(5)');
+  ok(`scenario 1: with the fix flashed the cruise verdict is ok again (${routine}: ${Number(fixed).toFixed(2)} km/h rms)`);
+  await view(desktop, 'drive');
+  await desktop.keyboard.press('x');
+  await brakeToStop(desktop);
+
+  // Report scenario 2: the ABS, braking hard on split friction.
+  await flash(desktop, 'abs', 'abs-1.1.0-faulty.img');
+  async function hardStopOnSplit() {
+    await view(desktop, 'drive');
+    await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+    await desktop.click('[data-testid=road-split]');
+    await accelerateTo(desktop, 100);
+    await brakeToStop(desktop);
+    await desktop.click('[data-testid=road-dry]');
+  }
+  await hardStopOnSplit();
+  await view(desktop, 'diagnostics');
+  const absFaulty = await until('the ABS ECU flagged', async () => ((await verdict(desktop, 'abs')) === 'faulty' ? 'faulty' : null), 10_000);
+  const absNumber = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
+  ok(`scenario 2: the faulty ABS locks a wheel braking on split friction, Diagnostics flags abs ${absFaulty} with ${Number(absNumber).toFixed(2)} s`);
+  await flash(desktop, 'abs', 'abs-1.2.0.img');
+  await hardStopOnSplit();
+  await view(desktop, 'diagnostics');
+  const absFixed = await until('the ABS verdict back to ok', async () => {
+    const v = await verdict(desktop, 'abs');
+    const n = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
+    return v === 'ok' && n ? n : null;
+  }, 10_000);
+  ok(`scenario 2: with the fix flashed the same stop is ok (${Number(absFixed).toFixed(2)} s locked)`);
+
+  // A phone: the Car view fits without horizontal scrolling; every view renders.
+  const phone = await browser.newPage({ viewport: { width: 390, height: 844 }, deviceScaleFactor: 2, isMobile: true, hasTouch: true });
+  watch(phone);
+  await phone.goto(`${base}/car`);
+  await phone.waitForSelector('[data-testid=speed][data-value]');
+  const width = await phone.evaluate(() => document.documentElement.scrollWidth);
+  assert.ok(width <= 390, `the Car view is ${width} px wide on a 390 px phone`);
+  for (const name of Object.keys(VIEWS)) {
+    await view(phone, name);
+    await phone.waitForTimeout(400);
+    await phone.screenshot({ path: `${shots}/phone-${name}.png` });
+  }
+  ok(`on a phone (390 × 844) the Car view fits (${width} px), every view renders (phone screenshots written)`);
+
+  // Dark mode.
+  await desktop.emulateMedia({ colorScheme: 'dark' });
+  await view(desktop, 'car');
+  await desktop.waitForTimeout(300);
+  await desktop.screenshot({ path: `${shots}/desktop-car-dark.png` });
+  ok('dark mode screenshot written');
+
+  assert.deepEqual(problems, [], `the pages logged errors:\n${problems.join('\n')}`);
+  ok('no console errors on any page');
+} catch (error) {
+  console.error(`not ok ${step + 1} - ${error.message}`);
+  if (problems.length) console.error(problems.join('\n'));
+  await browser.close();
+  process.exit(1);
+}
+await browser.close();
+console.log(`dashboard: ${step} checks passed`);

@@ -1,0 +1,242 @@
+//! `autoplug dashboard` as a user starts it: the data folder with its firmware library, the
+//! page, the write token, and what the API answers to good and bad requests. (The page
+//! itself is driven in a real browser by scripts/dashboard-test.)
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+const TOKEN: &str = "dashboard-test-token-0001";
+
+struct Dashboard {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Dashboard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start(data: &std::path::Path) -> Dashboard {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .args(["dashboard", "--listen", "127.0.0.1:0", "--duration", "120"])
+        .arg("--data")
+        .arg(data)
+        .arg("--token")
+        .arg(TOKEN)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("autoplug runs");
+    let stdout = child.stdout.take().expect("stdout");
+    let addr = BufReader::new(stdout)
+        .lines()
+        .map_while(Result::ok)
+        .find_map(|line| {
+            line.strip_prefix("dashboard on http://")
+                .and_then(|rest| rest.strip_suffix(&format!("/#token={TOKEN}")))
+                .map(str::to_string)
+        })
+        .expect("the page's address, with the token, is printed");
+    Dashboard { child, addr }
+}
+
+/// One HTTP request: the status and the body.
+fn request(
+    addr: &str,
+    method: &str,
+    path: &str,
+    token: Option<&str>,
+    body: &[u8],
+) -> (u16, String) {
+    let mut stream = std::net::TcpStream::connect(addr).expect("connect");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let auth = token.map_or(String::new(), |t| format!("Authorization: Bearer {t}\r\n"));
+    write!(
+        stream,
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\n{auth}Content-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    )
+    .unwrap();
+    stream.write_all(body).unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).expect("response");
+    let status = response[9..12].parse().expect("status");
+    let body = response
+        .split_once("\r\n\r\n")
+        .map_or(String::new(), |(_, b)| b.to_string());
+    (status, body)
+}
+
+fn json(body: &str) -> serde_json::Value {
+    // A chunked body (a download) is not asked for here: the answers are small JSON.
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("JSON ({e}): {body}"))
+}
+
+#[test]
+fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_was_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let dash = start(dir.path());
+    let addr = dash.addr.as_str();
+
+    // The data folder: the database, the recordings, the library with the demo images.
+    for name in [
+        "cruise-1.1.0-faulty.img",
+        "cruise-1.2.0.img",
+        "abs-1.1.0-faulty.img",
+        "abs-1.2.0.img",
+    ] {
+        assert!(dir.path().join("images").join(name).is_file(), "{name}");
+    }
+    let (status, page) = request(addr, "GET", "/car", None, b"");
+    assert_eq!(status, 200);
+    assert!(
+        page.contains("<html") || page.contains("<!doctype html>"),
+        "{page}"
+    );
+    let (_, info) = request(addr, "GET", "/api/info", None, b"");
+    assert_eq!(json(&info)["write"], true);
+    let (_, images) = request(addr, "GET", "/api/images", None, b"");
+    let images = json(&images);
+    assert_eq!(images.as_array().unwrap().len(), 4);
+    assert!(images
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|i| i["name"] == "cruise-1.1.0-faulty.img"
+            && i["variant"] == "faulty"
+            && i["node"] == 13));
+
+    // Writes: refused without the token or with a wrong one.
+    let (status, body) = request(addr, "POST", "/api/recording", None, br#"{"on":true}"#);
+    assert_eq!(status, 401, "{body}");
+    assert!(json(&body)["error"].as_str().unwrap().contains("token"));
+    let (status, _) = request(
+        addr,
+        "POST",
+        "/api/recording",
+        Some("not-the-token-at-all"),
+        br#"{"on":true}"#,
+    );
+    assert_eq!(status, 401);
+
+    // Bad requests get the reason, and the server goes on.
+    let bad: [(&str, &[u8], u16, &str); 6] = [
+        ("/api/recording", b"{\"on\":", 400, "body"),
+        ("/api/ecus/wiper/clear-dtcs", b"", 409, "wiper"),
+        (
+            "/api/ecus/cruise/flash",
+            b"this is not an image",
+            409,
+            "not a firmware image",
+        ),
+        (
+            "/api/ecus/cruise/flash?image=..%2Fsecret.img",
+            b"",
+            400,
+            "file name",
+        ),
+        (
+            "/api/ecus/cruise/flash?image=nothing.img",
+            b"",
+            404,
+            "no file",
+        ),
+        (
+            "/api/ecus/abs/flash?image=cruise-1.2.0.img",
+            b"",
+            409,
+            "not for abs",
+        ),
+    ];
+    for (path, body, expected, says) in bad {
+        let (status, answer) = request(addr, "POST", path, Some(TOKEN), body);
+        assert_eq!(status, expected, "{path}: {answer}");
+        let error = json(&answer)["error"].as_str().unwrap().to_string();
+        assert!(error.contains(says), "{path}: {error}");
+    }
+    let (status, answer) = request(
+        addr,
+        "POST",
+        "/api/road",
+        Some(TOKEN),
+        br#"{"mu_left":0.0,"mu_right":1.0}"#,
+    );
+    assert_eq!(status, 409, "{answer}");
+    assert!(answer.contains("outside"), "{answer}");
+
+    // With the token: record, clear the codes, change the road.
+    let (status, answer) = request(
+        addr,
+        "POST",
+        "/api/recording",
+        Some(TOKEN),
+        br#"{"on":true}"#,
+    );
+    assert_eq!(status, 200, "{answer}");
+    let (status, answer) = request(addr, "POST", "/api/ecus/all/clear-dtcs", Some(TOKEN), b"");
+    assert_eq!(status, 200, "{answer}");
+    assert_eq!(json(&answer)["ecus"].as_array().unwrap().len(), 9);
+    let (status, _) = request(
+        addr,
+        "POST",
+        "/api/road",
+        Some(TOKEN),
+        br#"{"mu_left":1.0,"mu_right":0.2}"#,
+    );
+    assert_eq!(status, 200);
+    // The session shows them: the recording grows, the clear is reported, the road changed.
+    let mut session = serde_json::Value::Null;
+    for _ in 0..100 {
+        std::thread::sleep(Duration::from_millis(100));
+        let (_, state) = request(addr, "GET", "/api/state", None, b"");
+        session = json(&state)["session"].clone();
+        let cleared = session["events"].as_array().is_some_and(|e| {
+            e.iter()
+                .any(|e| e["text"].as_str().unwrap().contains("cleared"))
+        });
+        if cleared && session["recording"]["frames"].as_u64().unwrap_or(0) > 1000 {
+            break;
+        }
+    }
+    assert!(
+        session["recording"]["frames"].as_u64().unwrap() > 1000,
+        "{session}"
+    );
+    assert_eq!(session["driver"]["mu_right"], 0.2, "{session}");
+    assert_eq!(session["source"]["drive"], true);
+    assert_eq!(
+        session["inventory"].as_array().unwrap().len(),
+        9,
+        "{session}"
+    );
+    let (status, answer) = request(
+        addr,
+        "POST",
+        "/api/recording",
+        Some(TOKEN),
+        br#"{"on":false}"#,
+    );
+    assert_eq!(status, 200, "{answer}");
+    let stopped = json(&answer);
+    let file = stopped["files"][0].as_str().unwrap().to_string();
+    assert!(stopped["frames"].as_u64().unwrap() > 1000);
+    let (status, list) = request(addr, "GET", "/api/recordings", None, b"");
+    assert_eq!(status, 200);
+    assert!(list.contains(&file), "{list}");
+    let (status, _) = request(addr, "GET", &format!("/api/recordings/{file}"), None, b"");
+    assert_eq!(status, 200);
+    let recorded = autoplug_logs::open(&dir.path().join("recordings").join(&file))
+        .unwrap()
+        .count();
+    assert!(recorded as u64 >= stopped["frames"].as_u64().unwrap());
+
+    // The server went on through all of it.
+    let (status, _) = request(addr, "GET", "/api/info", None, b"");
+    assert_eq!(status, 200);
+}
