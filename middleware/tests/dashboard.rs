@@ -231,7 +231,7 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
     assert!(list.contains(&file), "{list}");
     let (status, _) = request(addr, "GET", &format!("/api/recordings/{file}"), None, b"");
     assert_eq!(status, 200);
-    let recorded = autoplug_logs::open(&dir.path().join("recordings").join(&file))
+    let recorded = autoplug_logs::open(dir.path().join("recordings").join(&file))
         .unwrap()
         .count();
     assert!(recorded as u64 >= stopped["frames"].as_u64().unwrap());
