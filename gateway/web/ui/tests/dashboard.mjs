@@ -204,6 +204,9 @@ try {
     speeds.push((await state()).signals['Vehicle.Speed']);
     await new Promise((r) => setTimeout(r, 200));
   }
+  await view(desktop, 'car');
+  await desktop.waitForTimeout(500);
+  await desktop.screenshot({ path: `${shots}/desktop-car-cruising.png` });
   const swing = Math.max(...speeds.slice(40)) - Math.min(...speeds.slice(40));
   assert.ok(swing >= 3, `the faulty cruise should oscillate (swing ${swing} km/h)`);
   await view(desktop, 'diagnostics');
