@@ -181,6 +181,10 @@ pub enum Command {
         /// virtual:SCENARIO.toml, socketcand://HOST:PORT/BUS or socketcan://IFACE.
         #[arg(long, value_name = "URL", default_value = "virtual", value_parser = parse_bus)]
         bus: BusUrl,
+        /// Replay this log instead of a bus (candump, ASC, BLF), with play, pause, speed
+        /// and seek on the page.
+        #[arg(long, value_name = "LOG", conflicts_with = "bus")]
+        log: Option<PathBuf>,
         /// The data folder: trips.db, recordings/, images/ (created if missing).
         #[arg(long, value_name = "DIR", default_value = "autoplug-data")]
         data: PathBuf,
@@ -775,6 +779,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         }
         Command::Dashboard {
             bus,
+            log,
             data,
             listen,
             token,
@@ -786,7 +791,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             status,
         } => {
             let folder = crate::dashboard::DataFolder::prepare(&data).map_err(CliError::Log)?;
-            let virtual_car = !matches!(bus, BusUrl::Transport(_));
+            let bus = log.map_or(bus, BusUrl::Replay);
+            let virtual_car = matches!(bus, BusUrl::Virtual(_) | BusUrl::Dashboard);
             if virtual_car {
                 for name in folder.add_demo_images().map_err(CliError::Log)? {
                     writeln!(out, "firmware library: added {name}")?;
@@ -801,7 +807,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 (None, false) => Some(crate::dashboard::new_token().map_err(CliError::Log)?),
             };
             let options = GatewayOptions {
-                transmit: (virtual_car || transmit).then_some(60_000_000),
+                transmit: (virtual_car || (transmit && matches!(bus, BusUrl::Transport(_))))
+                    .then_some(60_000_000),
                 record: None,
                 rotate: autoplug_logs::RotatePolicy::default(),
                 db: Some(folder.trips_db()),
@@ -964,6 +971,10 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
             ))
         }
         BusUrl::Transport(_) => None,
+        // The dashboard's player paces itself (--speed sets where it starts).
+        BusUrl::Replay(_) if options.web.is_some() => None,
+        BusUrl::Replay(_) if options.fast => None,
+        BusUrl::Replay(_) => Some(options.speed.unwrap_or(1.0)),
     };
     // With the dashboard, a person may drive the virtual car.
     let desk = match (bus, &options.web) {
@@ -972,7 +983,26 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         }
         _ => None,
     };
-    let mut source = bus.open(pace, desk.clone()).map_err(CliError::Log)?;
+    let mut replay_desk = None;
+    let mut source = match (bus, &options.web) {
+        (BusUrl::Replay(path), Some(_)) => {
+            let (first_us, last_us) = crate::replay::log_span(path).map_err(CliError::Log)?;
+            let mut player = crate::replay::ReplayDesk::new((last_us - first_us) as f64 * 1e-6);
+            player.speed = options.speed.unwrap_or(1.0);
+            let player = Rc::new(RefCell::new(player));
+            replay_desk = Some(player.clone());
+            let source = crate::replay::ControlledReplay::open(path, first_us, player)
+                .map_err(|e| CliError::Log(e.to_string()))?;
+            Box::new(source) as Box<dyn autoplug_gateway::FrameSource>
+        }
+        _ => bus.open(pace, desk.clone()).map_err(CliError::Log)?,
+    };
+    let replaying = matches!(bus, BusUrl::Replay(_));
+    if replaying && options.transmit.is_some() {
+        return Err(CliError::Log(
+            "a recorded log cannot be transmitted to: --transmit is for a live bus".into(),
+        ));
+    }
     let mut tester = None;
     if let Some(dtc_interval_us) = options.transmit {
         let outbox: Outbox = Rc::new(RefCell::new(VecDeque::new()));
@@ -985,6 +1015,8 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         ));
     }
     let trip_log = match &options.db {
+        // A replay in the dashboard jumps about: its trips are not the drive's.
+        Some(_) if replaying && options.web.is_some() => None,
         Some(db) => Some(open_trip_log(db, &options.vehicle, &source.describe())?),
         None => None,
     };
@@ -1008,15 +1040,21 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
             ", recording into {}",
             d.display()
         )),
-        options
-            .db
-            .as_ref()
-            .map_or(String::new(), |d| format!(", trips into {}", d.display()))
+        match (&trip_log, &options.db) {
+            (Some(_), Some(d)) => format!(", trips into {}", d.display()),
+            _ => String::new(),
+        }
     )?;
     let deadline = options
         .duration
         .map(|s| Instant::now() + Duration::from_secs_f64(s));
-    let mut pipeline = Pipeline::new(Strictness::Strict);
+    // A viewer goes on past a bad line of a recording (and counts it); a live bus has none.
+    let strictness = if replaying && options.web.is_some() {
+        Strictness::Lenient
+    } else {
+        Strictness::Strict
+    };
+    let mut pipeline = Pipeline::new(strictness);
     let mut status_out = io::stderr();
     let mut watch = Watch::new(trip_log);
     watch.tester = tester;
@@ -1045,10 +1083,14 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
             let kind = match bus {
                 BusUrl::Virtual(_) | BusUrl::Dashboard => SourceKind::Virtual,
                 BusUrl::Transport(_) => SourceKind::Bus,
+                BusUrl::Replay(_) => SourceKind::Replay,
             };
             let mut session = Session::new(watch, table, commands, kind, source.describe());
             if let Some(desk) = desk {
                 session = session.with_desk(desk);
+            }
+            if let Some(player) = &replay_desk {
+                session = session.with_replay(player.clone());
             }
             if let Some(dir) = options.recordings_dir.clone().or(options.record.clone()) {
                 session = session.with_recordings(dir, options.rotate);
@@ -1056,7 +1098,20 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
             if options.record.is_some() {
                 session.start_recording().map_err(CliError::Log)?;
             }
-            let result = pipeline.run(source.as_mut(), &mut [&mut session], &mut stop);
+            let seeks = || replay_desk.as_ref().map_or(0, |d| d.borrow().seeks);
+            let mut handled = seeks();
+            let result = loop {
+                let result = pipeline.run(source.as_mut(), &mut [&mut session], &mut || {
+                    stop() || seeks() != handled
+                });
+                if result.is_err() || seeks() == handled || stop() {
+                    break result;
+                }
+                // The player jumps at its next poll: the analysis starts over from there.
+                handled = seeks();
+                pipeline = Pipeline::new(strictness);
+                session.restart_analysis();
+            };
             let recorded = session.stop_recording();
             drop(server);
             (result, session.watch, recorded)

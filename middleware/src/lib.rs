@@ -49,6 +49,7 @@ pub mod image_tool;
 pub mod live;
 pub mod names;
 pub mod on_car;
+pub mod replay;
 pub mod session;
 pub mod tester;
 pub mod transport;

@@ -217,6 +217,8 @@ pub enum BusUrl {
     Virtual(PathBuf),
     /// `socketcand://HOST:PORT/BUS` or `socketcan://IFACE`.
     Transport(Via),
+    /// `log:FILE`: a recorded log, played with the dashboard's play, pause, speed and seek.
+    Replay(PathBuf),
 }
 
 impl FromStr for BusUrl {
@@ -225,6 +227,14 @@ impl FromStr for BusUrl {
     fn from_str(url: &str) -> Result<Self, String> {
         if url == "virtual" {
             return Ok(BusUrl::Dashboard);
+        }
+        if let Some(path) = url.strip_prefix("log:") {
+            if path.is_empty() {
+                return Err(format!(
+                    "invalid bus URL '{url}': name a log file, e.g. log:rec/drive.log"
+                ));
+            }
+            return Ok(BusUrl::Replay(PathBuf::from(path)));
         }
         if let Some(path) = url.strip_prefix("virtual:") {
             if path.is_empty() {
@@ -269,6 +279,13 @@ impl BusUrl {
             BusUrl::Transport(via) => {
                 let transport = crate::transport::open(via).map_err(|e| e.to_string())?;
                 Ok(Box::new(TransportSource::new(transport)))
+            }
+            BusUrl::Replay(path) => {
+                let source = autoplug_gateway::LogSource::open(path).map_err(|e| e.to_string())?;
+                Ok(match speed {
+                    Some(speed) => Box::new(Paced::new(source, speed)),
+                    None => Box::new(source),
+                })
             }
         }
     }

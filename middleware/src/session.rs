@@ -22,12 +22,13 @@ use autoplug_image::ImageHeader;
 use autoplug_logs::{LogFrame, RotatePolicy};
 use autoplug_virtual_car::driver::HeldControls;
 use autoplug_virtual_car::scenario::{Button, FRICTION_RANGE};
-use autoplug_web::{Action, Answer, Command, Commands, LiveTable, Press, Publisher};
+use autoplug_web::{Action, Answer, Command, Commands, LiveTable, Press, Publisher, ReplayAction};
 use serde_json::{json, Value};
 
 use crate::bus_tester::{JobOutcome, UserJob};
 use crate::driving::{DeskInput, DriverDesk};
 use crate::names::{ecu_label, ecu_name, parse_ecu, ECUS};
+use crate::replay::{ReplayDesk, SPEED_RANGE};
 use crate::tester::{value_text, ClearDtcsJob, FlashConfig, FlashJob, Phase, TesterConfig};
 use crate::watch::Watch;
 
@@ -43,6 +44,8 @@ pub enum SourceKind {
     Virtual,
     /// A live bus (socketcand, SocketCAN).
     Bus,
+    /// A recorded log, played with play, pause, speed and seek.
+    Replay,
 }
 
 /// A flash as the page shows it.
@@ -67,6 +70,7 @@ pub struct Session<'a> {
     kind: SourceKind,
     source_name: String,
     desk: Option<Rc<RefCell<DriverDesk>>>,
+    replay: Option<Rc<RefCell<ReplayDesk>>>,
     security_secret: Vec<u8>,
     recordings_dir: Option<PathBuf>,
     rotate: RotatePolicy,
@@ -94,6 +98,7 @@ impl<'a> Session<'a> {
             kind,
             source_name,
             desk: None,
+            replay: None,
             security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
             recordings_dir: None,
             rotate: RotatePolicy::default(),
@@ -109,6 +114,27 @@ impl<'a> Session<'a> {
     pub fn with_desk(mut self, desk: Rc<RefCell<DriverDesk>>) -> Self {
         self.desk = Some(desk);
         self
+    }
+
+    /// The replay's controls: the page may play, pause, change speed and seek.
+    pub fn with_replay(mut self, desk: Rc<RefCell<ReplayDesk>>) -> Self {
+        self.replay = Some(desk);
+        self
+    }
+
+    /// The replay jumped: what was judged so far belongs to another moment of the drive,
+    /// so the diagnostics, the trouble codes and the trip start over from here.
+    pub fn restart_analysis(&mut self) {
+        self.watch.diagnostics = autoplug_diagnostics::Diagnostics::new();
+        self.watch.dtcs = autoplug_diagnostics::DtcMonitor::new();
+        self.watch.trips = autoplug_trips::TripTracker::without_series();
+        self.watch.ended.clear();
+        if let Some(desk) = &self.replay {
+            let to = desk.borrow().seek_to.unwrap_or(0.0);
+            self.event(format!(
+                "replay: jumped to {to:.1} s, the analysis starts over"
+            ));
+        }
     }
 
     /// Where recordings go (without a directory, recording is refused).
@@ -220,11 +246,47 @@ impl<'a> Session<'a> {
                     .map_err(str::to_string)?;
                 Ok(json!({ "mu_left": mu_left, "mu_right": mu_right }))
             }
-            Action::Replay(_) => Err(format!(
+            Action::Replay(action) => self.control_replay(action),
+        }
+    }
+
+    fn control_replay(&mut self, action: ReplayAction) -> Answer {
+        let Some(desk) = &self.replay else {
+            return Err(format!(
                 "{} is a live bus, not a replay: it has no play, pause or seek",
                 self.source_name
-            )),
+            ));
+        };
+        let mut desk = desk.borrow_mut();
+        match action {
+            ReplayAction::Play => {
+                if desk.at_end {
+                    desk.seek(0.0);
+                }
+                desk.playing = true;
+            }
+            ReplayAction::Pause => desk.playing = false,
+            ReplayAction::Speed { speed } => {
+                if !SPEED_RANGE.contains(&speed) {
+                    return Err(format!(
+                        "speed {speed} is outside {}..={}",
+                        SPEED_RANGE.start(),
+                        SPEED_RANGE.end()
+                    ));
+                }
+                desk.speed = speed;
+            }
+            ReplayAction::Seek { t } => {
+                if !(t.is_finite() && (0.0..=desk.duration_s).contains(&t)) {
+                    return Err(format!(
+                        "{t} s is outside the log (0 to {:.1} s)",
+                        desk.duration_s
+                    ));
+                }
+                desk.seek(t);
+            }
         }
+        Ok(replay_state(&desk))
     }
 
     fn tester(&mut self) -> Result<&mut crate::bus_tester::BusTester, String> {
@@ -468,11 +530,16 @@ impl<'a> Session<'a> {
         json!({
             "source": {
                 "name": self.source_name,
-                "kind": match self.kind { SourceKind::Virtual => "virtual", SourceKind::Bus => "bus" },
+                "kind": match self.kind {
+                    SourceKind::Virtual => "virtual",
+                    SourceKind::Bus => "bus",
+                    SourceKind::Replay => "replay",
+                },
                 "transmit": tester.is_some(),
                 "drive": self.desk.is_some(),
-                "replay": false,
+                "replay": self.replay.is_some(),
             },
+            "replay": self.replay.as_ref().map(|d| replay_state(&d.borrow())),
             "tester": tester.map(|t| t.activity()),
             "diagnostics": diagnostics,
             "dtcs": dtcs,
@@ -498,6 +565,16 @@ impl<'a> Session<'a> {
             self.table.set_session(&value);
         }
     }
+}
+
+fn replay_state(desk: &ReplayDesk) -> Value {
+    json!({
+        "playing": desk.playing,
+        "speed": desk.speed,
+        "position_s": desk.position_s,
+        "duration_s": desk.duration_s,
+        "at_end": desk.at_end,
+    })
 }
 
 fn phases(phases: &[crate::tester::PhaseTiming]) -> Vec<Value> {

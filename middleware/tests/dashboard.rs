@@ -21,8 +21,13 @@ impl Drop for Dashboard {
 }
 
 fn start(data: &std::path::Path) -> Dashboard {
+    start_with(data, &[])
+}
+
+fn start_with(data: &std::path::Path, extra: &[&str]) -> Dashboard {
     let mut child = Command::new(env!("CARGO_BIN_EXE_autoplug"))
         .args(["dashboard", "--listen", "127.0.0.1:0", "--duration", "120"])
+        .args(extra)
         .arg("--data")
         .arg(data)
         .arg("--token")
@@ -32,8 +37,9 @@ fn start(data: &std::path::Path) -> Dashboard {
         .spawn()
         .expect("autoplug runs");
     let stdout = child.stdout.take().expect("stdout");
-    let addr = BufReader::new(stdout)
-        .lines()
+    let mut lines = BufReader::new(stdout).lines();
+    let addr = lines
+        .by_ref()
         .map_while(Result::ok)
         .find_map(|line| {
             line.strip_prefix("dashboard on http://")
@@ -41,6 +47,8 @@ fn start(data: &std::path::Path) -> Dashboard {
                 .map(str::to_string)
         })
         .expect("the page's address, with the token, is printed");
+    // Keep reading: a closed pipe would end the program at its next line of output.
+    std::thread::spawn(move || lines.for_each(drop));
     Dashboard { child, addr }
 }
 
@@ -65,7 +73,9 @@ fn request(
     .unwrap();
     stream.write_all(body).unwrap();
     let mut response = String::new();
-    stream.read_to_string(&mut response).expect("response");
+    stream
+        .read_to_string(&mut response)
+        .unwrap_or_else(|e| panic!("{method} {path}: {e}"));
     let status = response[9..12].parse().expect("status");
     let body = response
         .split_once("\r\n\r\n")
@@ -239,4 +249,105 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
     // The server went on through all of it.
     let (status, _) = request(addr, "GET", "/api/info", None, b"");
     assert_eq!(status, 200);
+}
+
+#[test]
+fn a_recorded_log_plays_pauses_changes_speed_and_seeks_from_the_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec");
+    let recorded = Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .args([
+            "gateway",
+            "--bus",
+            "virtual:../scenarios/stop-100-dry.toml",
+            "--fast",
+            "--quiet",
+            "--no-db",
+            "--record",
+        ])
+        .arg(&rec)
+        .output()
+        .unwrap();
+    assert!(recorded.status.success(), "{recorded:?}");
+    let log = std::fs::read_dir(&rec)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let dash = start_with(&dir.path().join("data"), &["--log", log.to_str().unwrap()]);
+    let addr = dash.addr.as_str();
+    let replay = |body: &str| request(addr, "POST", "/api/replay", Some(TOKEN), body.as_bytes());
+    let session = || json(&request(addr, "GET", "/api/state", None, b"").1)["session"].clone();
+
+    let (status, answer) = replay(r#"{"action":"speed","speed":4}"#);
+    assert_eq!(status, 200, "{answer}");
+    let duration = json(&answer)["duration_s"].as_f64().unwrap();
+    assert!(duration > 5.0, "{answer}");
+    std::thread::sleep(Duration::from_millis(500));
+    let moving = session()["replay"]["position_s"].as_f64().unwrap();
+    assert!(
+        moving > 2.0,
+        "at 20x, 0.5 s of wall time is seconds of the log: {moving}"
+    );
+
+    let (status, _) = replay(r#"{"action":"pause"}"#);
+    assert_eq!(status, 200);
+    std::thread::sleep(Duration::from_millis(300));
+    let paused = session()["replay"]["position_s"].as_f64().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(
+        session()["replay"]["position_s"].as_f64().unwrap(),
+        paused,
+        "paused: the log's clock stands"
+    );
+
+    let (status, answer) = replay(r#"{"action":"seek","t":2.5}"#);
+    assert_eq!(status, 200, "{answer}");
+    let (status, _) = replay(r#"{"action":"play"}"#);
+    assert_eq!(status, 200);
+    let mut after = serde_json::Value::Null;
+    for _ in 0..50 {
+        std::thread::sleep(Duration::from_millis(50));
+        after = session();
+        if after["replay"]["position_s"].as_f64().unwrap() > 2.5 {
+            break;
+        }
+    }
+    let position = after["replay"]["position_s"].as_f64().unwrap();
+    assert!(
+        position > 2.5 && position < paused.max(3.0) + 2.0,
+        "{after}"
+    );
+    assert!(
+        after["events"].to_string().contains("jumped to 2.5 s"),
+        "{after}"
+    );
+
+    // Bad controls get the reason; a replay cannot be flashed or driven.
+    for (body, says) in [
+        (r#"{"action":"seek","t":-1}"#, "outside the log"),
+        (r#"{"action":"speed","speed":1000}"#, "outside"),
+        (r#"{"action":"rewind"}"#, "body"),
+    ] {
+        let (status, answer) = replay(body);
+        assert!(
+            status == 409 || status == 400 || status == 422,
+            "{body}: {status} {answer}"
+        );
+        assert!(
+            json(&answer)["error"].as_str().unwrap().contains(says),
+            "{body}: {answer}"
+        );
+    }
+    let (status, answer) = request(
+        addr,
+        "POST",
+        "/api/ecus/cruise/clear-dtcs",
+        Some(TOKEN),
+        b"",
+    );
+    assert_eq!(status, 409);
+    assert!(answer.contains("only listens"), "{answer}");
+    assert_eq!(session()["source"]["kind"], "replay");
 }

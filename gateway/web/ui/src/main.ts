@@ -1,7 +1,7 @@
 import './style.css';
-import { tokenFromAddress } from './api';
+import { post, tokenFromAddress } from './api';
 import { Live } from './live';
-import { h, num, setText } from './util';
+import { h, num, seconds, setText } from './util';
 import type { Ctx, View } from './view';
 import { carView } from './views/car';
 import { plotsView } from './views/plots';
@@ -75,6 +75,38 @@ document.addEventListener('click', (e) => {
 });
 window.addEventListener('popstate', route);
 
+// The replay's controls, shown on every view when the bus is a recorded log.
+const player = document.getElementById('player')!;
+const playButton = h('button', { class: 'btn', 'data-testid': 'replay-play' }, 'Pause');
+const speedSelect = h('select', { 'aria-label': 'replay speed', 'data-testid': 'replay-speed' },
+  ...[0.25, 0.5, 1, 2, 4, 10, 50].map((x) => h('option', { value: x, text: `${x}×` })));
+const seek = h('input', { type: 'range', min: 0, max: 1, step: 0.1, value: 0, class: 'seek', 'aria-label': 'position in the log', 'data-testid': 'replay-seek' });
+const where = h('span', { class: 'muted small', 'data-testid': 'replay-position' });
+let seeking = false;
+async function replay(body: object): Promise<void> {
+  try {
+    await post('/api/replay', body);
+  } catch (e: any) {
+    ctx.toast(e.message, 'error');
+  }
+}
+playButton.addEventListener('click', () => void replay({ action: live.session?.replay?.playing ? 'pause' : 'play' }));
+speedSelect.addEventListener('change', () => void replay({ action: 'speed', speed: Number(speedSelect.value) }));
+seek.addEventListener('input', () => { seeking = true; });
+seek.addEventListener('change', () => { seeking = false; void replay({ action: 'seek', t: Number(seek.value) }); });
+player.append(h('strong', { text: 'Replay' }), playButton, speedSelect, seek, where);
+
+function updatePlayer(): void {
+  const r = live.session?.replay;
+  player.hidden = !r;
+  if (!r) return;
+  setText(playButton, r.playing ? 'Pause' : 'Play');
+  if (document.activeElement !== speedSelect) speedSelect.value = String(r.speed);
+  seek.max = String(r.duration_s);
+  if (!seeking) seek.value = String(r.position_s);
+  setText(where, `${seconds(r.position_s)} / ${seconds(r.duration_s)}${r.at_end ? ' (end)' : ''}`);
+}
+
 const conn = document.getElementById('conn')!;
 const busTime = document.getElementById('bustime')!;
 // Events already shown (the page shows only those that happen while it is open).
@@ -95,6 +127,7 @@ live.subscribe(() => {
       for (const ev of list) if (ev.t > seenEvents) ctx.toast(ev.text, /fail|refus/i.test(ev.text) ? 'error' : 'ok');
       seenEvents = last;
     }
+    updatePlayer();
     current?.update();
   });
 });

@@ -1,0 +1,199 @@
+//! A recorded log as the dashboard's bus, with the controls of a player: play, pause,
+//! speed and seek. The frames go through the same pipeline as a live bus's; the clock is
+//! the log's own, paced on the wall clock at the chosen speed.
+//!
+//! Seeking reads the log again from its start up to the new position (logs are text or
+//! BLF, read forward), and the gateway starts its analysis over from there: a verdict or a
+//! trip across a jump would mix two moments of the drive.
+
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+use std::time::{Duration, Instant};
+
+use autoplug_gateway::{FrameSource, LogSource, Poll, SourceError};
+use autoplug_logs::LogFrame;
+
+/// The slowest and fastest replay, × the log's own time.
+pub const SPEED_RANGE: std::ops::RangeInclusive<f64> = 0.1..=100.0;
+
+/// The player's controls and position, shared by the session (which takes the page's
+/// commands) and the source (which plays). Both live on the gateway's thread.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReplayDesk {
+    /// Playing (else paused).
+    pub playing: bool,
+    /// × the log's own time.
+    pub speed: f64,
+    /// A seek asked for and not yet done, s from the log's start.
+    pub seek_to: Option<f64>,
+    /// Where the replay is, s from the log's start.
+    pub position_s: f64,
+    /// The log's length, s (first to last frame).
+    pub duration_s: f64,
+    /// The replay reached the end of the log (and paused there).
+    pub at_end: bool,
+    /// Seeks asked for so far: the gateway starts its analysis over once per seek.
+    pub seeks: u64,
+}
+
+impl ReplayDesk {
+    /// A player at the start of a log of `duration_s`, playing at 1×.
+    pub fn new(duration_s: f64) -> Self {
+        Self {
+            playing: true,
+            speed: 1.0,
+            seek_to: None,
+            position_s: 0.0,
+            duration_s,
+            at_end: false,
+            seeks: 0,
+        }
+    }
+
+    /// Asks for a jump to `to_s` from the log's start.
+    pub fn seek(&mut self, to_s: f64) {
+        self.seek_to = Some(to_s);
+        self.at_end = false;
+        self.seeks += 1;
+    }
+}
+
+/// The log's first and last frame times, µs (reads it through once).
+pub fn log_span(path: &Path) -> Result<(u64, u64), String> {
+    let reader = autoplug_logs::open(path).map_err(|e| e.to_string())?;
+    let mut span: Option<(u64, u64)> = None;
+    for item in reader {
+        match item {
+            Ok(frame) => {
+                let (first, last) = span.get_or_insert((frame.t_us, frame.t_us));
+                *first = (*first).min(frame.t_us);
+                *last = (*last).max(frame.t_us);
+            }
+            Err(e) if e.is_fatal() => return Err(e.to_string()),
+            // A malformed line is the pipeline's to report (strict: it stops there).
+            Err(_) => {}
+        }
+    }
+    span.ok_or_else(|| format!("'{}' holds no frame", path.display()))
+}
+
+/// The player (see the module docs).
+pub struct ControlledReplay {
+    path: PathBuf,
+    source: LogSource,
+    desk: Rc<RefCell<ReplayDesk>>,
+    first_us: u64,
+    /// Wall time and log time the pacing counts from (set again at every speed change,
+    /// pause and seek).
+    anchor: Option<(Instant, u64, f64)>,
+    held: Option<LogFrame>,
+    /// The log time reached, µs.
+    now_us: u64,
+}
+
+impl ControlledReplay {
+    /// Opens `path` (its span already measured by [`log_span`]) under `desk`'s control.
+    pub fn open(
+        path: &Path,
+        first_us: u64,
+        desk: Rc<RefCell<ReplayDesk>>,
+    ) -> Result<Self, SourceError> {
+        Ok(Self {
+            path: path.to_path_buf(),
+            source: LogSource::open(path)?,
+            desk,
+            first_us,
+            anchor: None,
+            held: None,
+            now_us: first_us,
+        })
+    }
+
+    fn seek(&mut self, to_s: f64) -> Result<(), SourceError> {
+        let target = self.first_us + (to_s.max(0.0) * 1e6) as u64;
+        self.source = LogSource::open(&self.path)?;
+        self.held = None;
+        loop {
+            match self.source.poll(Duration::ZERO)? {
+                Poll::Frame(frame) if frame.t_us >= target => {
+                    self.held = Some(frame);
+                    break;
+                }
+                Poll::Frame(_) | Poll::Malformed(_) | Poll::Idle => {}
+                Poll::End => break,
+            }
+        }
+        self.now_us = target;
+        self.anchor = None;
+        let mut desk = self.desk.borrow_mut();
+        desk.position_s = to_s;
+        desk.at_end = self.held.is_none();
+        Ok(())
+    }
+}
+
+impl FrameSource for ControlledReplay {
+    fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
+        let (playing, speed, seek) = {
+            let mut desk = self.desk.borrow_mut();
+            (desk.playing, desk.speed, desk.seek_to.take())
+        };
+        if let Some(to_s) = seek {
+            self.seek(to_s)?;
+            return Ok(Poll::Idle);
+        }
+        if !playing {
+            // Paused: the log's clock stands; the session still takes commands.
+            self.anchor = None;
+            std::thread::sleep(max_wait.min(Duration::from_millis(20)));
+            return Ok(Poll::Idle);
+        }
+        let frame = match self.held.take() {
+            Some(frame) => frame,
+            None => match self.source.poll(max_wait)? {
+                Poll::Frame(frame) => frame,
+                Poll::End => {
+                    // Stay at the end, paused, so the page can seek back.
+                    let mut desk = self.desk.borrow_mut();
+                    desk.playing = false;
+                    desk.at_end = true;
+                    return Ok(Poll::Idle);
+                }
+                other => return Ok(other),
+            },
+        };
+        let (wall, t0, anchored_speed) =
+            *self
+                .anchor
+                .get_or_insert((Instant::now(), self.now_us.min(frame.t_us), speed));
+        if anchored_speed != speed {
+            self.anchor = Some((Instant::now(), self.now_us, speed));
+            self.held = Some(frame);
+            return Ok(Poll::Idle);
+        }
+        let due =
+            wall + Duration::from_secs_f64(frame.t_us.saturating_sub(t0) as f64 * 1e-6 / speed);
+        let now = Instant::now();
+        if due > now {
+            let wait = due - now;
+            if wait > max_wait {
+                std::thread::sleep(max_wait);
+                self.held = Some(frame);
+                return Ok(Poll::Idle);
+            }
+            std::thread::sleep(wait);
+        }
+        self.now_us = self.now_us.max(frame.t_us);
+        self.desk.borrow_mut().position_s = self.now_us.saturating_sub(self.first_us) as f64 * 1e-6;
+        Ok(Poll::Frame(frame))
+    }
+
+    fn describe(&self) -> String {
+        format!("replay of {}", self.path.display())
+    }
+
+    fn clock_us(&self) -> Option<u64> {
+        Some(self.now_us)
+    }
+}
