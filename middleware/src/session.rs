@@ -5,7 +5,7 @@
 //! Between two frames (and while the bus is idle) it takes the commands the web server
 //! queued: flashing and clearing go to the gateway's tester as jobs on the bus; recording
 //! starts and stops a recorder; the person's driving goes to the virtual car's
-//! [`DriverDesk`]. Ten times a second it writes its own state (verdicts, codes, inventory,
+//! [`DriverDesk`]. Twice a second (ten times during a flash) it writes its own state (verdicts, codes, inventory,
 //! the job under way, the recording, the driver) into the live table's `session` object,
 //! which the stream sends when it changed.
 
@@ -32,8 +32,12 @@ use crate::replay::{ReplayDesk, SPEED_RANGE};
 use crate::tester::{value_text, ClearDtcsJob, FlashConfig, FlashJob, Phase, TesterConfig};
 use crate::watch::Watch;
 
-/// How often the session's state is written into the live table (wall time).
-pub const SESSION_PERIOD: Duration = Duration::from_millis(100);
+/// How often the session's state is written into the live table (wall time) while a job
+/// runs (a flash's progress bar moves smoothly)...
+pub const SESSION_PERIOD_BUSY: Duration = Duration::from_millis(100);
+/// ...and otherwise: verdicts and trip figures need no more, and each change is resent
+/// whole to every page.
+pub const SESSION_PERIOD: Duration = Duration::from_millis(500);
 /// Events the session keeps for the page (flash results, recordings...).
 const MAX_EVENTS: usize = 20;
 
@@ -556,10 +560,18 @@ impl<'a> Session<'a> {
         self.now_us = state.now_us();
         self.take_commands();
         self.take_outcomes();
-        if self
-            .last_written
-            .is_none_or(|t| t.elapsed() >= SESSION_PERIOD)
-        {
+        let busy = self
+            .watch
+            .tester
+            .as_ref()
+            .is_some_and(|t| t.flash_progress().is_some())
+            || self.flash.as_ref().is_some_and(|f| f.result.is_none());
+        let period = if busy {
+            SESSION_PERIOD_BUSY
+        } else {
+            SESSION_PERIOD
+        };
+        if self.last_written.is_none_or(|t| t.elapsed() >= period) {
             self.last_written = Some(Instant::now());
             let value = self.state(state);
             self.table.set_session(&value);

@@ -8,7 +8,7 @@
 //! the bus. `< echo >` is answered with `< echo >`. What python-can needs, as checked in
 //! `shared/spec/tool-interop.md`: each handshake reply is a write of its own, no frame is
 //! sent before raw mode is acknowledged, Nagle is off, identifiers are exactly 3 hex digits
-//! and a frame without data keeps its empty field. A client never receives its own frames.
+//! and a frame without data keeps its empty field. A client never receives its own frames; the other clients get them once they are on the bus, as sockets on one SocketCAN interface do.
 //! Frames start [`RAW_MODE_GRACE`] after the rawmode `< ok >` is written: python-can reads
 //! that reply with a single `recv()`, and a frame that reaches its socket first is glued to
 //! the reply and fails its connect.

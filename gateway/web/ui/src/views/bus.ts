@@ -16,7 +16,7 @@ export function busView(ctx: Ctx): View {
   const load = h('div', { class: 'figure', 'data-testid': 'bus-load' });
   const frames = h('div', { class: 'figure' });
   const errors = h('div', { class: 'figure', 'data-testid': 'error-frames' });
-  const unknown = h('div', { class: 'figure' });
+  const unknown = h('div', { class: 'figure', 'data-testid': 'unknown-frames' });
   const diag = h('div', { class: 'figure' });
   const body = h('tbody');
   const el = h('section', { class: 'bus' },
