@@ -287,8 +287,8 @@ fn a_recorded_log_plays_pauses_changes_speed_and_seeks_from_the_page() {
     std::thread::sleep(Duration::from_millis(500));
     let moving = session()["replay"]["position_s"].as_f64().unwrap();
     assert!(
-        moving > 2.0,
-        "at 20x, 0.5 s of wall time is seconds of the log: {moving}"
+        moving > 1.0,
+        "at 4x, 0.5 s of wall time is about 2 s of the log: {moving}"
     );
 
     let (status, _) = replay(r#"{"action":"pause"}"#);

@@ -266,7 +266,7 @@ try {
   // A phone: the Car view fits without horizontal scrolling; every view renders.
   const phone = await browser.newPage({ viewport: { width: 390, height: 844 }, deviceScaleFactor: 2, isMobile: true, hasTouch: true });
   watch(phone);
-  await phone.goto(`${base}/car`);
+  await phone.goto(`${base}/car#token=${token}`);
   await phone.waitForSelector('[data-testid=speed][data-value]');
   const width = await phone.evaluate(() => document.documentElement.scrollWidth);
   assert.ok(width <= 390, `the Car view is ${width} px wide on a 390 px phone`);

@@ -69,7 +69,8 @@ export function busView(ctx: Ctx): View {
         .map((s) => {
           const label = live.label(s.path);
           const v = live.value(s.path);
-          return `${s.name.slice(name.length + 1)} ${label ?? num(v, Math.abs(v ?? 0) < 10 ? 2 : 0)}${label ? '' : s.unit ? ` ${s.unit}` : ''}`;
+          const figure = v !== null && Number.isInteger(v) ? String(v) : num(v, Math.abs(v ?? 0) < 10 ? 2 : 0);
+          return `${s.name.slice(name.length + 1)} ${label ?? figure}${label ? '' : s.unit ? ` ${s.unit}` : ''}`;
         })
         .join(' · ');
       setText(row.signals, decoded);
