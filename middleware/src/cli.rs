@@ -219,6 +219,10 @@ pub enum Command {
         /// Also print the status line every second.
         #[arg(long)]
         status: bool,
+        /// Stop when standard input closes (a replay dashboard started by another one
+        /// ends with it).
+        #[arg(long, hide = true)]
+        exit_with_input: bool,
     },
     /// The trips in the database.
     #[command(subcommand)]
@@ -774,6 +778,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                     ..autoplug_web::WebConfig::loopback(0)
                 }),
                 recordings_dir: None,
+                replay_pages: None,
             };
             gateway(&bus, options, out)
         }
@@ -789,7 +794,15 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             vehicle,
             duration,
             status,
+            exit_with_input,
         } => {
+            if exit_with_input {
+                // Reads until the other end closes (the parent ended, however it ended).
+                std::thread::spawn(|| {
+                    let _ = io::copy(&mut io::stdin().lock(), &mut io::sink());
+                    EXIT_WITH_INPUT.store(true, Ordering::SeqCst);
+                });
+            }
             let folder = crate::dashboard::DataFolder::prepare(&data).map_err(CliError::Log)?;
             let bus = log.map_or(bus, BusUrl::Replay);
             let virtual_car = matches!(bus, BusUrl::Virtual(_) | BusUrl::Dashboard);
@@ -817,6 +830,9 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 fast: false,
                 duration,
                 quiet: !status,
+                replay_pages: (!matches!(bus, BusUrl::Replay(_))).then(|| {
+                    crate::dashboard::ReplayPages::new(listen.ip(), data.clone(), token.clone())
+                }),
                 web: Some(autoplug_web::WebConfig {
                     addr: listen,
                     allowed_origins: web_origins,
@@ -955,10 +971,14 @@ struct GatewayOptions {
     web: Option<autoplug_web::WebConfig>,
     /// Where the dashboard's recordings go (`record` starts one at once).
     recordings_dir: Option<PathBuf>,
+    /// Recordings may be opened in replay dashboards of their own.
+    replay_pages: Option<crate::dashboard::ReplayPages>,
 }
 
 /// Set by Ctrl-C: the live gateway stops at the next frame or idle moment.
 static STOP: AtomicBool = AtomicBool::new(false);
+/// Set when standard input closes, for `dashboard --exit-with-input`.
+static EXIT_WITH_INPUT: AtomicBool = AtomicBool::new(false);
 
 fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result<(), CliError> {
     let pace = match bus {
@@ -1064,7 +1084,11 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     if !options.quiet {
         watch.status = Some(StatusLine::new(&mut status_out, Duration::from_secs(1)));
     }
-    let mut stop = || STOP.load(Ordering::SeqCst) || deadline.is_some_and(|d| Instant::now() >= d);
+    let mut stop = || {
+        STOP.load(Ordering::SeqCst)
+            || EXIT_WITH_INPUT.load(Ordering::SeqCst)
+            || deadline.is_some_and(|d| Instant::now() >= d)
+    };
     let (result, mut watch, recorded) = match options.web {
         Some(config) => {
             // The dashboard: the session takes the watch, the recording and the commands.
@@ -1091,6 +1115,9 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
             }
             if let Some(player) = &replay_desk {
                 session = session.with_replay(player.clone());
+            }
+            if let Some(pages) = options.replay_pages {
+                session = session.with_replay_pages(pages);
             }
             if let Some(dir) = options.recordings_dir.clone().or(options.record.clone()) {
                 session = session.with_recordings(dir, options.rotate);

@@ -8,6 +8,7 @@
 //! software (version 1.1.0) and their fixes (1.2.0), signed with the development key.
 
 use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
 
 use autoplug_can::Node;
 use autoplug_image::{SigningKey, SoftwareVariant, Version};
@@ -111,5 +112,91 @@ pub fn check_token(token: &str) -> Result<(), String> {
         Ok(())
     } else {
         Err("a token has 16 to 128 characters: letters, digits, - and _".into())
+    }
+}
+
+/// Recordings opened for replay from the dashboard: each in a dashboard of its own (this
+/// program again, `--log FILE`, on another loopback port of the same address), so the live
+/// car and its page go on beside it. One at a time: opening another closes the previous.
+/// The child ends with this program: it stops when its standard input closes, which happens
+/// however this program ends, and it is killed when the session ends.
+pub struct ReplayPages {
+    listen: std::net::IpAddr,
+    data: PathBuf,
+    token: Option<String>,
+    child: Option<(Child, String)>,
+}
+
+impl ReplayPages {
+    /// Replay dashboards on `listen`'s address, with the data folder and token of this one.
+    pub fn new(listen: std::net::IpAddr, data: PathBuf, token: Option<String>) -> Self {
+        Self {
+            listen,
+            data,
+            token,
+            child: None,
+        }
+    }
+
+    /// Starts a replay dashboard on `log`; returns its port.
+    pub fn open(&mut self, log: &Path) -> Result<u16, String> {
+        self.close();
+        let exe = std::env::current_exe().map_err(|e| format!("cannot find this program: {e}"))?;
+        // A free port of the same address (asked of the OS, then handed to the child).
+        let port = std::net::TcpListener::bind((self.listen, 0))
+            .and_then(|l| l.local_addr())
+            .map_err(|e| format!("no free port on {}: {e}", self.listen))?
+            .port();
+        let mut command = Command::new(exe);
+        command
+            .arg("dashboard")
+            .arg("--log")
+            .arg(log)
+            .arg("--listen")
+            .arg(std::net::SocketAddr::new(self.listen, port).to_string())
+            .arg("--data")
+            .arg(&self.data)
+            .arg("--exit-with-input")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null());
+        match &self.token {
+            Some(token) => command.arg("--token").arg(token),
+            None => command.arg("--read-only"),
+        };
+        let child = command
+            .spawn()
+            .map_err(|e| format!("cannot start the replay dashboard: {e}"))?;
+        let name = log
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        self.child = Some((child, name));
+        Ok(port)
+    }
+
+    /// The replay dashboard running: its recording's name, if one runs.
+    pub fn running(&mut self) -> Option<&str> {
+        let exited = match &mut self.child {
+            Some((child, _)) => !matches!(child.try_wait(), Ok(None)),
+            None => return None,
+        };
+        if exited {
+            self.child = None;
+            return None;
+        }
+        self.child.as_ref().map(|(_, name)| name.as_str())
+    }
+
+    fn close(&mut self) {
+        if let Some((mut child, _)) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+impl Drop for ReplayPages {
+    fn drop(&mut self) {
+        self.close();
     }
 }

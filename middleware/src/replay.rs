@@ -90,7 +90,14 @@ pub struct ControlledReplay {
     held: Option<LogFrame>,
     /// The log time reached, µs.
     now_us: u64,
+    /// After a seek, the frames before this time are played at once (even while paused),
+    /// so the car state at the new position is whole.
+    prime_until: Option<u64>,
 }
+
+/// How much of the log before a seek's target is played at once: every message of the
+/// catalogue comes at least every 100 ms, and a value is fresh for 3 of its periods.
+const PRIME_US: u64 = 1_000_000;
 
 impl ControlledReplay {
     /// Opens `path` (its span already measured by [`log_span`]) under `desk`'s control.
@@ -107,16 +114,19 @@ impl ControlledReplay {
             anchor: None,
             held: None,
             now_us: first_us,
+            prime_until: None,
         })
     }
 
     fn seek(&mut self, to_s: f64) -> Result<(), SourceError> {
         let target = self.first_us + (to_s.max(0.0) * 1e6) as u64;
+        let primed_from = target.saturating_sub(PRIME_US).max(self.first_us);
         self.source = LogSource::open(&self.path)?;
         self.held = None;
+        self.prime_until = Some(target);
         loop {
             match self.source.poll(Duration::ZERO)? {
-                Poll::Frame(frame) if frame.t_us >= target => {
+                Poll::Frame(frame) if frame.t_us >= primed_from => {
                     self.held = Some(frame);
                     break;
                 }
@@ -124,7 +134,7 @@ impl ControlledReplay {
                 Poll::End => break,
             }
         }
-        self.now_us = target;
+        self.now_us = primed_from;
         self.anchor = None;
         let mut desk = self.desk.borrow_mut();
         desk.position_s = to_s;
@@ -142,6 +152,29 @@ impl FrameSource for ControlledReplay {
         if let Some(to_s) = seek {
             self.seek(to_s)?;
             return Ok(Poll::Idle);
+        }
+        if let Some(until) = self.prime_until {
+            let frame = match self.held.take() {
+                Some(frame) => Some(frame),
+                None => match self.source.poll(max_wait)? {
+                    Poll::Frame(frame) => Some(frame),
+                    Poll::Malformed(e) => return Ok(Poll::Malformed(e)),
+                    _ => None,
+                },
+            };
+            match frame {
+                Some(frame) if frame.t_us < until => {
+                    self.now_us = self.now_us.max(frame.t_us);
+                    return Ok(Poll::Frame(frame));
+                }
+                other => {
+                    // Primed: the replay goes on from the target at its pace, or stays paused.
+                    self.held = other;
+                    self.prime_until = None;
+                    self.now_us = until;
+                    self.anchor = None;
+                }
+            }
         }
         if !playing {
             // Paused: the log's clock stands; the session still takes commands.

@@ -75,6 +75,8 @@ pub struct Session<'a> {
     source_name: String,
     desk: Option<Rc<RefCell<DriverDesk>>>,
     replay: Option<Rc<RefCell<ReplayDesk>>>,
+    replay_pages: Option<crate::dashboard::ReplayPages>,
+    replay_port: Option<u16>,
     security_secret: Vec<u8>,
     recordings_dir: Option<PathBuf>,
     rotate: RotatePolicy,
@@ -103,6 +105,8 @@ impl<'a> Session<'a> {
             source_name,
             desk: None,
             replay: None,
+            replay_pages: None,
+            replay_port: None,
             security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
             recordings_dir: None,
             rotate: RotatePolicy::default(),
@@ -123,6 +127,12 @@ impl<'a> Session<'a> {
     /// The replay's controls: the page may play, pause, change speed and seek.
     pub fn with_replay(mut self, desk: Rc<RefCell<ReplayDesk>>) -> Self {
         self.replay = Some(desk);
+        self
+    }
+
+    /// Recordings may be opened in replay dashboards of their own.
+    pub fn with_replay_pages(mut self, pages: crate::dashboard::ReplayPages) -> Self {
+        self.replay_pages = Some(pages);
         self
     }
 
@@ -251,6 +261,18 @@ impl<'a> Session<'a> {
                 Ok(json!({ "mu_left": mu_left, "mu_right": mu_right }))
             }
             Action::Replay(action) => self.control_replay(action),
+            Action::ReplayRecording { path } => {
+                let Some(pages) = self.replay_pages.as_mut() else {
+                    return Err("this dashboard cannot open replays".into());
+                };
+                let port = pages.open(&path)?;
+                self.replay_port = Some(port);
+                let name = path
+                    .file_name()
+                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+                self.event(format!("replay of {name} opened on port {port}"));
+                Ok(json!({ "port": port, "file": name }))
+            }
         }
     }
 
@@ -426,7 +448,11 @@ impl<'a> Session<'a> {
     }
 
     /// The session's state as the page reads it (see the module docs).
-    fn state(&self, state: &CarState) -> Value {
+    fn state(&mut self, state: &CarState) -> Value {
+        let replay_page = match self.replay_pages.as_mut().and_then(|p| p.running()) {
+            Some(file) => json!({ "file": file, "port": self.replay_port }),
+            None => Value::Null,
+        };
         let diagnostics: Vec<Value> = self
             .watch
             .diagnostics
@@ -544,6 +570,7 @@ impl<'a> Session<'a> {
                 "replay": self.replay.is_some(),
             },
             "replay": self.replay.as_ref().map(|d| replay_state(&d.borrow())),
+            "replay_page": replay_page,
             "tester": tester.map(|t| t.activity()),
             "diagnostics": diagnostics,
             "dtcs": dtcs,

@@ -293,7 +293,9 @@ fn a_recorded_log_plays_pauses_changes_speed_and_seeks_from_the_page() {
 
     let (status, _) = replay(r#"{"action":"pause"}"#);
     assert_eq!(status, 200);
-    std::thread::sleep(Duration::from_millis(300));
+    // The session's state is written twice a second: read it after a write that came
+    // after the pause.
+    std::thread::sleep(Duration::from_millis(1100));
     let paused = session()["replay"]["position_s"].as_f64().unwrap();
     std::thread::sleep(Duration::from_millis(500));
     assert_eq!(

@@ -12,6 +12,7 @@
 //! | `POST /api/replay` | `{"action": "play"}`, `pause`, `{"action":"speed","speed":4}`, `{"action":"seek","t":30}` | yes |
 //! | `GET /api/images` | the firmware library: name, bytes, ECU, version of each image | — |
 //! | `GET /api/recordings`, `GET /api/recordings/{name}` | the recordings, and one to download | — |
+//! | `POST /api/recordings/{name}/replay` | open it in a replay dashboard of its own: `{"port": N}` | yes |
 //! | `GET /api/trips`, `GET /api/trips/{id}`, `GET /api/trips/{id}/series?signal=PATH` | the stored trips | — |
 //!
 //! Every answer is JSON (a download aside); every error is `{"error": "..."}` with the
@@ -74,6 +75,7 @@ pub(crate) fn routes() -> Router<Arc<Shared>> {
         .route("/api/images", get(images))
         .route("/api/recordings", get(recordings))
         .route("/api/recordings/{name}", get(download))
+        .route("/api/recordings/{name}/replay", post(replay_recording))
         .route("/api/trips", get(trips))
         .route("/api/trips/{id}", get(trip))
         .route("/api/trips/{id}/series", get(series))
@@ -463,6 +465,23 @@ async fn download(State(shared): State<Arc<Shared>>, UrlPath(name): UrlPath<Stri
                 .into_response()
         }
         Err(e) => error(StatusCode::NOT_FOUND, format!("cannot open '{name}': {e}")),
+    }
+}
+
+async fn replay_recording(
+    State(shared): State<Arc<Shared>>,
+    headers: HeaderMap,
+    UrlPath(name): UrlPath<String>,
+) -> Response {
+    if let Err(e) = authorize(&shared, &headers) {
+        return e.into_response();
+    }
+    let Some(dir) = shared.config.recordings_dir.as_deref() else {
+        return error(StatusCode::NOT_FOUND, "this gateway keeps no recordings");
+    };
+    match file_in(dir, &name, &["log"]) {
+        Ok(path) => act(&shared, Action::ReplayRecording { path }).await,
+        Err(e) => e.into_response(),
     }
 }
 

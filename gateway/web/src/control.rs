@@ -45,6 +45,12 @@ pub enum Action {
     },
     /// Control a replay.
     Replay(ReplayAction),
+    /// Open a recording in a replay dashboard of its own (a second page, beside the live
+    /// one).
+    ReplayRecording {
+        /// The recording (already checked to be a file in the recordings directory).
+        path: std::path::PathBuf,
+    },
 }
 
 /// What a replay does next.

@@ -148,6 +148,11 @@ try {
   }
   ok('every view renders (desktop screenshots written)');
 
+  // Record what follows, from the page.
+  await view(desktop, 'recordings');
+  await desktop.click('[data-testid=record]');
+  await until('the recording to run', async () => (await desktop.textContent('[data-testid=recording-state]')).startsWith('●'), 5_000);
+
   // Driving: the accelerator raises the speed, the brake lights follow the brake.
   await view(desktop, 'drive');
   await until('the wheel to be ours', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
@@ -190,6 +195,39 @@ try {
   ok('the brake lights on the Car view follow the brake pressed on the page');
   await watcher.close();
   await brakeToStop(desktop);
+
+  // The recording replays in a dashboard of its own: play, pause, seek.
+  await view(desktop, 'recordings');
+  await desktop.click('[data-testid=record]');
+  const replayId = await until('the recording listed', async () => {
+    const button = await desktop.$('button[data-testid^="open-replay-"]');
+    return button ? button.getAttribute('data-testid') : null;
+  }, 5_000);
+  const [replayPage] = await Promise.all([
+    desktop.waitForEvent('popup', { timeout: 15_000 }),
+    desktop.click(`[data-testid="${replayId}"]`),
+  ]);
+  watch(replayPage);
+  await replayPage.waitForSelector('[data-testid=replay-play]', { state: 'visible', timeout: 15_000 });
+  // Where the replay's gateway says it is (the page's position text, from its session).
+  const position = async () => parseFloat(await replayPage.textContent('[data-testid=replay-position]'));
+  const p1 = await position();
+  await replayPage.waitForTimeout(1500);
+  const p2 = await position();
+  assert.ok(p2 > p1, `the replay plays (${p1} -> ${p2} s)`);
+  await replayPage.click('[data-testid=replay-play]');
+  // The session's state comes twice a second: read it after one written after the pause.
+  await replayPage.waitForTimeout(1200);
+  const p3 = await position();
+  await replayPage.waitForTimeout(1000);
+  assert.equal(await position(), p3, 'paused, the position stands');
+  await replayPage.$eval('[data-testid=replay-seek]', (e) => { e.value = '1'; e.dispatchEvent(new Event('change')); });
+  await until('the seek', async () => Math.abs((await position()) - 1) < 0.2, 5_000);
+  // Paused after the jump, the page shows the car as it was there.
+  await until('the speed at the new position', async () => (await replayPage.getAttribute('[data-testid=speed]', 'data-value')) !== '', 5_000);
+  await replayPage.screenshot({ path: `${shots}/desktop-replay.png` });
+  await replayPage.close();
+  ok(`the recording made from the page replays in a dashboard of its own: it played (${p1.toFixed(1)} -> ${p2.toFixed(1)} s), paused at ${p3.toFixed(1)} s, jumped to 1 s`);
 
   // Report scenario 1: the cruise control.
   await flash(desktop, 'cruise', 'cruise-1.1.0-faulty.img');

@@ -1,6 +1,6 @@
 // Recordings: start and stop recording all traffic (candump .log files in the data
 // folder), and download them.
-import { get, post } from '../api';
+import { get, post, token } from '../api';
 import type { Ctx, View } from '../view';
 import { bytes, h, setText, utc } from '../util';
 
@@ -25,12 +25,46 @@ export function recordingsView(ctx: Ctx): View {
       ctx.toast(e.message, 'error');
     }
   });
+  const replayLink = h('div', { class: 'small', 'data-testid': 'replay-link' });
+  function pageUrl(port: number): string {
+    const t = token();
+    return `${location.protocol}//${location.hostname}:${port}/car${t ? `#token=${t}` : ''}`;
+  }
+  async function openReplay(name: string): Promise<void> {
+    // The tab opens now, while the click counts (a browser blocks one opened later).
+    const tab = window.open('about:blank', '_blank');
+    try {
+      const answer = await post(`/api/recordings/${encodeURIComponent(name)}/replay`);
+      const url = pageUrl(answer.port);
+      ctx.toast(`Replay of ${name} opening in a new tab`);
+      // Its own dashboard, beside this one: wait until it reads the log and listens.
+      for (let i = 0; i < 40; i++) {
+        try {
+          await fetch(`${location.protocol}//${location.hostname}:${answer.port}/api/info`, { mode: 'no-cors' });
+          break;
+        } catch {
+          await new Promise((r) => setTimeout(r, 250));
+        }
+      }
+      if (tab) tab.location.href = url;
+    } catch (e: any) {
+      tab?.close();
+      ctx.toast(e.message, 'error');
+    }
+  }
+  el.append(h('div', { class: 'card' }, h('h3', { text: 'Replay' }),
+    h('p', { class: 'muted small', text: 'A recording replays in a dashboard of its own (play, pause, speed, seek), beside the live car.' }), replayLink));
+
   async function load(): Promise<void> {
     try {
       const files: any[] = await get('/api/recordings');
-      list.replaceChildren(...files.map((f) => h('tr', {},
-        h('td', { class: 'mono', text: f.name }), h('td', { text: bytes(f.bytes) }), h('td', { text: utc(f.modified_ms) }),
-        h('td', {}, h('a', { href: `/api/recordings/${encodeURIComponent(f.name)}`, download: f.name, text: 'Download' })))));
+      list.replaceChildren(...files.map((f) => {
+        const replay = h('button', { class: 'btn small', 'data-testid': `open-replay-${f.name}`, text: 'Replay' });
+        replay.addEventListener('click', () => void openReplay(f.name));
+        return h('tr', {},
+          h('td', { class: 'mono', text: f.name }), h('td', { text: bytes(f.bytes) }), h('td', { text: utc(f.modified_ms) }),
+          h('td', {}, h('a', { href: `/api/recordings/${encodeURIComponent(f.name)}`, download: f.name, text: 'Download' }), ' ', replay));
+      }));
       if (files.length === 0) list.append(h('tr', {}, h('td', { colspan: 4, class: 'muted', text: 'No recordings yet.' })));
     } catch (e: any) {
       ctx.toast(e.message, 'error');
@@ -45,6 +79,11 @@ export function recordingsView(ctx: Ctx): View {
     state.classList.toggle('rec', !!r);
     if (wasOn && !r) void load();
     wasOn = !!r;
+    const page = live.session?.replay_page;
+    const text = page ? `${page.file} replays on port ${page.port}` : 'No replay open.';
+    if (replayLink.textContent !== text + (page ? 'Open' : '')) {
+      replayLink.replaceChildren(text, page ? ' ' : '', page ? h('a', { href: pageUrl(page.port), target: '_blank', text: 'Open' }) : '');
+    }
   }
   void load();
   return { el, update };
