@@ -27,6 +27,7 @@ impl Backend for Ecu {
             software_version: b"1.0.0",
             serial_number: b"0001",
             hardware_version: b"NUCLEO-F446RE",
+            vin: b"1AP0FUZZ3XX000001",
         }
     }
     fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {

@@ -25,7 +25,7 @@ use crate::live::{BusUrl, Outbox, Transmitting};
 use crate::names::{ecu_label, parse_ecu, ECUS, ECU_NAME_LIST};
 use crate::session::{Session, SourceKind};
 use crate::tester::{
-    dtc_table, identification_table, DtcJob, FlashConfig, FlashError, FlashJob, IdentJob,
+    dtc_table, identification_table, vin_line, DtcJob, FlashConfig, FlashError, FlashJob, IdentJob,
     TesterConfig,
 };
 use crate::transport::{self, Transport, TransportError, Via};
@@ -140,9 +140,10 @@ pub enum Command {
         /// Keep no trips.
         #[arg(long, conflicts_with = "db")]
         no_db: bool,
-        /// The vehicle's name (a VIN) in the trip database.
-        #[arg(long, value_name = "NAME", default_value = "local")]
-        vehicle: String,
+        /// The vehicle's name in the trip database (default: the VIN its ECUs answer,
+        /// F190, else `local`).
+        #[arg(long, value_name = "NAME")]
+        vehicle: Option<String>,
         /// Pace the virtual car at this multiple of real time (default 1).
         #[arg(long, value_name = "X", value_parser = parse_speed, conflicts_with = "fast")]
         speed: Option<f64>,
@@ -210,9 +211,10 @@ pub enum Command {
         /// flashing). The virtual car's gateway always may.
         #[arg(long)]
         transmit: bool,
-        /// The vehicle's name (a VIN) in the trip database.
-        #[arg(long, value_name = "NAME", default_value = "local")]
-        vehicle: String,
+        /// The vehicle's name in the trip database (default: the VIN its ECUs answer,
+        /// F190, else `local`).
+        #[arg(long, value_name = "NAME")]
+        vehicle: Option<String>,
         /// Stop after this many seconds (at most 30 days).
         #[arg(long, value_name = "SECONDS", value_parser = parse_duration)]
         duration: Option<f64>,
@@ -681,6 +683,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             let (rows, transport) =
                 run_reading(&via, IdentJob::new(&ecu.ecus(), timing.tester_config()))?;
             write!(out, "{}", identification_table(&rows))?;
+            writeln!(out, "{}", vin_line(&rows))?;
             let silent: Vec<String> = rows
                 .iter()
                 .filter(|r| !r.answered())
@@ -962,7 +965,8 @@ struct GatewayOptions {
     record: Option<PathBuf>,
     rotate: autoplug_logs::RotatePolicy,
     db: Option<PathBuf>,
-    vehicle: String,
+    /// `None`: the VIN the ECUs answer, else `local`.
+    vehicle: Option<String>,
     speed: Option<f64>,
     fast: bool,
     duration: Option<f64>,
@@ -1037,7 +1041,13 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     let trip_log = match &options.db {
         // A replay in the dashboard jumps about: its trips are not the drive's.
         Some(_) if replaying && options.web.is_some() => None,
-        Some(db) => Some(open_trip_log(db, &options.vehicle, &source.describe())?),
+        Some(db) => Some(match &options.vehicle {
+            Some(vehicle) => open_trip_log(db, vehicle, &source.describe())?,
+            None if options.transmit.is_some() => {
+                open_trip_log(db, "local", &source.describe())?.following_vin()
+            }
+            None => open_trip_log(db, "local", &source.describe())?,
+        }),
         None => None,
     };
     if let Some(dir) = &options.record {
@@ -1199,6 +1209,7 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     crate::gateway::verdict_table(&watch.diagnostics.report(state), out)?;
     if let Some(rows) = &watch.identification {
         write!(out, "{}", identification_table(rows))?;
+        writeln!(out, "{}", vin_line(rows))?;
     }
     crate::gateway::heard_dtcs(&watch.dtcs, out)?;
     result.map_err(|e| CliError::Log(e.to_string()))

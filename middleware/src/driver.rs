@@ -179,8 +179,8 @@ mod tests {
         let mut job = IdentJob::new(&[Node::Cruise, Node::ABS], TesterConfig::default());
         let rows = run(&mut link, &mut job).unwrap();
         assert_eq!(
-            link.sent, 5,
-            "four DIDs of the cruise ECU, one of the silent ABS"
+            link.sent, 6,
+            "five DIDs of the cruise ECU, one of the silent ABS"
         );
         assert_eq!(rows[0].part_number.as_deref(), Ok(&b"AB"[..]));
         assert_eq!(rows[0].hardware_version.as_deref(), Ok(&b"AB"[..]));

@@ -85,38 +85,7 @@ pub fn service_name(service: u8) -> &'static str {
     }
 }
 
-/// The nine ECUs with a diagnostic address, in the DBC's order: the ones `--ecu all`
-/// means and the ones a functional request reaches.
-pub const ECUS: [Node; 9] = [
-    Node::Engine,
-    Node::Pedals,
-    Node::Steering,
-    Node::Transmission,
-    Node::Cabin,
-    Node::Console,
-    Node::Differential,
-    Node::Cruise,
-    Node::ABS,
-];
-
-/// The command-line name of each ECU, and its aliases.
-const ECU_NAMES: [(&str, Node); 11] = [
-    ("engine", Node::Engine),
-    ("pedals", Node::Pedals),
-    ("steering", Node::Steering),
-    ("transmission", Node::Transmission),
-    ("trans", Node::Transmission),
-    ("cabin", Node::Cabin),
-    ("console", Node::Console),
-    ("differential", Node::Differential),
-    ("diff", Node::Differential),
-    ("cruise", Node::Cruise),
-    ("abs", Node::ABS),
-];
-
-/// The names `--ecu` accepts, for help texts and error messages.
-pub const ECU_NAME_LIST: &str =
-    "engine, pedals, steering, transmission (trans), cabin, console, differential (diff), cruise, abs";
+pub use autoplug_can::{ecu_name, ECUS, ECU_NAME_LIST};
 
 /// A name that is not one of the ECUs.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -137,21 +106,7 @@ impl std::error::Error for UnknownEcu {}
 /// The ECU called `name` on the command line (case-insensitive, aliases `trans` and
 /// `diff`).
 pub fn parse_ecu(name: &str) -> Result<Node, UnknownEcu> {
-    let wanted = name.trim().to_ascii_lowercase();
-    ECU_NAMES
-        .iter()
-        .find(|(n, _)| *n == wanted)
-        .map(|(_, node)| *node)
-        .ok_or_else(|| UnknownEcu(name.to_string()))
-}
-
-/// The command-line name of an ECU (`"cruise"`); the DBC name for the gateway.
-pub fn ecu_name(node: Node) -> &'static str {
-    ECU_NAMES
-        .iter()
-        .find(|(_, n)| *n == node)
-        .map(|(name, _)| *name)
-        .unwrap_or_else(|| node.name())
+    autoplug_can::parse_ecu(name).ok_or_else(|| UnknownEcu(name.to_string()))
 }
 
 /// `cruise (0x0D)`: how reports and errors name an ECU.

@@ -16,7 +16,7 @@ use autoplug_trips::{CompletedTrip, TripEnd, TripStats, TripTracker};
 
 use crate::bus_tester::BusTester;
 use crate::names::ecu_name;
-use crate::tester::EcuIdentification;
+use crate::tester::{vehicle_vin, EcuIdentification};
 
 /// How long a real bus may be silent before its trip ends: the trip rule's own.
 pub const LIVE_SILENCE: Duration = Duration::from_micros(autoplug_trips::SILENT_AFTER_US);
@@ -30,6 +30,11 @@ pub struct TripLog {
     store: Box<dyn TripStore>,
     vehicle: String,
     source: String,
+    /// The vehicle is named by the VIN its ECUs answer: no trip is begun in the store
+    /// until the gateway's tester has read the identification (a few hundred ms).
+    awaiting_vin: bool,
+    /// Trips that ended while the VIN was awaited.
+    held: Vec<CompletedTrip>,
     open: Option<TripId>,
     last_checkpoint_us: u64,
     /// Trips written to the store, finished.
@@ -45,11 +50,25 @@ impl TripLog {
             store,
             vehicle: vehicle.to_string(),
             source: source.to_string(),
+            awaiting_vin: false,
+            held: Vec::new(),
             open: None,
             last_checkpoint_us: 0,
             stored: Vec::new(),
             failure: None,
         }
+    }
+
+    /// Names the vehicle by the VIN its ECUs answer (F190), `vehicle` if none does: for a
+    /// gateway whose tester reads the identification (nothing is stored before it has).
+    pub fn following_vin(mut self) -> Self {
+        self.awaiting_vin = true;
+        self
+    }
+
+    /// The vehicle's name in the store: its VIN, or the name given.
+    pub fn vehicle(&self) -> &str {
+        &self.vehicle
     }
 
     /// The store (for reading back what was written).
@@ -81,6 +100,13 @@ impl TripLog {
         if self.failure.is_some() {
             return;
         }
+        if self.awaiting_vin {
+            return self.held.extend(done);
+        }
+        let done: Vec<CompletedTrip> = std::mem::take(&mut self.held)
+            .into_iter()
+            .chain(done)
+            .collect();
         for done in done {
             if let Err(e) = self.finish(done, &report) {
                 return self.fail(e);
@@ -319,6 +345,11 @@ impl<'a> Watch<'a> {
             return;
         };
         if let Some(log) = self.trip_log.as_mut() {
+            if std::mem::take(&mut log.awaiting_vin) {
+                if let Ok(Some(vin)) = vehicle_vin(&rows) {
+                    log.vehicle = vin.to_string();
+                }
+            }
             log.record_inventory(&identities(&rows));
         }
         self.identification = Some(rows);

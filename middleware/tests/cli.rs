@@ -538,7 +538,16 @@ fn ids_and_flash_over_socketcand() {
     let output = autoplug(&args);
     assert!(output.status.success(), "{}", stderr(&output));
     let table = stdout(&output);
-    assert_eq!(table.lines().count(), 10, "{table}");
+    // A header, nine ECUs and the vehicle they all name.
+    assert_eq!(table.lines().count(), 11, "{table}");
+    assert!(
+        table
+            .lines()
+            .last()
+            .unwrap()
+            .contains("vehicle: VIN JA3AP47H0YF000042"),
+        "{table}"
+    );
     assert!(table.contains("AP-CRUISE-0001"), "{table}");
     assert!(table.contains("NUCLEO-F446RE"), "{table}");
 

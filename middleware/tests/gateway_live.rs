@@ -240,7 +240,8 @@ fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_fin
     let scenario = dir.path().join("console-silent.toml");
     std::fs::write(
         &scenario,
-        "name = \"console-silent\"\nduration_s = 20.0\n[[at]]\nt_s = 3.0\nfault = { silence = \"Console\" }\n",
+        "name = \"console-silent\"\nduration_s = 20.0\nvin = \"JA3AP47H3YF000777\"\n\
+         [factory]\ncruise = \"1.1.0\"\n[[at]]\nt_s = 3.0\nfault = { silence = \"Console\" }\n",
     )
     .unwrap();
     let db = dir.path().join("trips.db");
@@ -259,8 +260,6 @@ fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_fin
         rec.to_str().unwrap(),
         "--db",
         db.to_str().unwrap(),
-        "--vehicle",
-        "JA3AP00TEST000002",
     ]);
     let stdout = text(&live.stdout);
     assert!(live.status.success(), "{live:?}");
@@ -271,15 +270,19 @@ fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_fin
     );
 
     let store = SqliteStore::open(&db).unwrap();
-    let inventory = store.inventory("JA3AP00TEST000002").unwrap();
-    assert_eq!(inventory.len(), 9, "{inventory:?}");
+    // The vehicle is known by the VIN its ECUs answer (F190); the cruise left the factory
+    // with other software than the rest.
     assert!(
-        inventory
-            .iter()
-            .all(|(e, _, _)| e.part_number.is_some()
-                && e.software_version.as_deref() == Some("1.0.0"))
+        stdout.contains("vehicle: VIN JA3AP47H3YF000777"),
+        "{stdout}"
     );
+    let inventory = store.inventory("JA3AP47H3YF000777").unwrap();
+    assert_eq!(inventory.len(), 9, "{inventory:?}");
+    assert!(inventory.iter().all(|(e, _, _)| e.part_number.is_some()
+        && e.software_version.as_deref()
+            == Some(if e.ecu == "cruise" { "1.1.0" } else { "1.0.0" })));
     let trip = store.trips(None).unwrap().remove(0);
+    assert_eq!(trip.vehicle, "JA3AP47H3YF000777");
     let detail = store.trip(trip.id).unwrap().unwrap();
     let lost: Vec<&str> = detail
         .dtcs

@@ -57,7 +57,7 @@ where
     fn new(
         make: fn(SoftwareVariant, Instant) -> E,
         variant: SoftwareVariant,
-        seed: u64,
+        scenario: &Scenario,
         bus: &mut VirtualBus,
         phase_us: u64,
     ) -> Self {
@@ -66,7 +66,13 @@ where
         ids.sort_unstable();
         ids.dedup();
         let node = bus.attach(E::NODE.name(), AcceptanceFilter::ids(&ids));
-        let diag = VirtualDiag::new(E::NODE, variant, seed);
+        let diag = VirtualDiag::new(
+            E::NODE,
+            variant,
+            scenario.factory_version(E::NODE),
+            scenario.vin(),
+            scenario.seed,
+        );
         let ecu = make(diag.installed().variant, Instant::ZERO);
         Self {
             ecu,
@@ -382,26 +388,25 @@ impl VirtualCar {
             Software::Faulty => SoftwareVariant::Faulty,
         };
         let standard = SoftwareVariant::Standard;
-        let seed = scenario.seed;
         let ecus = Ecus {
-            pedals: Slot::new(make_pedals, standard, seed, &mut bus, PHASES_US[0]),
-            steering: Slot::new(make_steering, standard, seed, &mut bus, PHASES_US[1]),
-            console: Slot::new(make_console, standard, seed, &mut bus, PHASES_US[2]),
-            engine: Slot::new(make_engine, standard, seed, &mut bus, PHASES_US[3]),
-            trans: Slot::new(make_trans, standard, seed, &mut bus, PHASES_US[4]),
-            cabin: Slot::new(make_cabin, standard, seed, &mut bus, PHASES_US[5]),
-            diff: Slot::new(make_diff, standard, seed, &mut bus, PHASES_US[6]),
+            pedals: Slot::new(make_pedals, standard, scenario, &mut bus, PHASES_US[0]),
+            steering: Slot::new(make_steering, standard, scenario, &mut bus, PHASES_US[1]),
+            console: Slot::new(make_console, standard, scenario, &mut bus, PHASES_US[2]),
+            engine: Slot::new(make_engine, standard, scenario, &mut bus, PHASES_US[3]),
+            trans: Slot::new(make_trans, standard, scenario, &mut bus, PHASES_US[4]),
+            cabin: Slot::new(make_cabin, standard, scenario, &mut bus, PHASES_US[5]),
+            diff: Slot::new(make_diff, standard, scenario, &mut bus, PHASES_US[6]),
             cruise: Slot::new(
                 make_cruise,
                 software(scenario.ecus.cruise),
-                seed,
+                scenario,
                 &mut bus,
                 PHASES_US[7],
             ),
             abs: Slot::new(
                 make_abs,
                 software(scenario.ecus.abs),
-                seed,
+                scenario,
                 &mut bus,
                 PHASES_US[8],
             ),

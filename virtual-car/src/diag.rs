@@ -26,6 +26,7 @@ use autoplug_image::{
 };
 use autoplug_uds::security::SeedSource;
 use autoplug_uds::{Backend, DiagNode, FlashError, Identification, DEV_SECURITY_SECRET};
+use autoplug_vin::Vin;
 use embassy_boot::{AlignedBuffer, BlockingFirmwareState, BootLoader, BootLoaderConfig, State};
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
 
@@ -108,6 +109,8 @@ pub struct VirtualDiag {
     floor: Version,
     serial: String,
     software_version: String,
+    /// The car's VIN, as the end of the line wrote it into every ECU.
+    vin: Vin,
     /// Set after a boot into a swapped image: it confirms itself after its self-test.
     unconfirmed: bool,
     /// The core is stalled (flash busy) or resetting until then, µs.
@@ -128,20 +131,26 @@ pub struct VirtualDiag {
 }
 
 impl VirtualDiag {
-    /// An ECU fresh from the factory: the development-signed `variant` image of version
-    /// [`FACTORY_VERSION`] in its active slot, booted. `seed` is the car's: its serial
+    /// An ECU fresh from the factory: the development-signed `variant` image of `version`
+    /// in its active slot, booted, holding the car's `vin`. `seed` is the car's: its serial
     /// numbers and the secret its security seeds are drawn from (a simulation has no
     /// entropy source, and a run must replay exactly), so two cars with other seeds never
     /// share a seed, and no start of one car repeats an earlier start's seeds.
-    pub fn new(node: Node, variant: SoftwareVariant, seed: u64) -> Self {
+    pub fn new(
+        node: Node,
+        variant: SoftwareVariant,
+        version: Version,
+        vin: Vin,
+        seed: u64,
+    ) -> Self {
         let key = SigningKey::from_seed(dev::SIGNING_SEED);
-        let image = build_image(node, FACTORY_VERSION, variant, FACTORY_PAYLOAD_LEN, &key);
+        let image = build_image(node, version, variant, FACTORY_PAYLOAD_LEN, &key);
         let mut flash = SimFlash::new(seed ^ u64::from(node.diag_node_number().unwrap_or(0)));
         flash
             .program(ACTIVE.start, &pad_to_words(&image))
             .expect("factory programming");
         let flash = RefCell::new(flash);
-        write_floor(&flash, FACTORY_VERSION).expect("factory floor");
+        write_floor(&flash, version).expect("factory floor");
         let number = node.diag_node_number().expect("an ECU");
         let mut car_secret = [0u8; 12];
         car_secret[..8].copy_from_slice(&seed.to_le_bytes());
@@ -155,9 +164,10 @@ impl VirtualDiag {
             stack,
             quiet: true,
             installed: ImageHeader::parse(&image).expect("factory header"),
-            floor: FACTORY_VERSION,
+            floor: version,
             serial: format!("AP{number:02X}{:08X}", (seed as u32) ^ u32::from(number)),
             software_version: String::new(),
+            vin,
             unconfirmed: false,
             stalled_until_us: 0,
             stalled_frames: 0,
@@ -412,6 +422,7 @@ macro_rules! backend {
             installed: &$diag.installed,
             software_version: &$diag.software_version,
             serial: &$diag.serial,
+            vin: &$diag.vin,
             floor: $diag.floor,
             key: $diag.key,
             seeds: &mut $diag.seeds,
@@ -430,6 +441,7 @@ struct EcuBackend<'a> {
     installed: &'a ImageHeader,
     software_version: &'a str,
     serial: &'a str,
+    vin: &'a Vin,
     floor: Version,
     key: [u8; 32],
     seeds: &'a mut SeedSource,
@@ -460,6 +472,7 @@ impl Backend for EcuBackend<'_> {
             software_version: self.software_version.as_bytes(),
             serial_number: self.serial.as_bytes(),
             hardware_version: b"NUCLEO-F446RE",
+            vin: self.vin.as_bytes(),
         }
     }
 
@@ -606,7 +619,13 @@ mod tests {
 
     impl Ecu {
         fn new(car_seed: u64) -> Self {
-            let diag = VirtualDiag::new(NODE, SoftwareVariant::Standard, car_seed);
+            let diag = VirtualDiag::new(
+                NODE,
+                SoftwareVariant::Standard,
+                FACTORY_VERSION,
+                crate::scenario::vin_from_seed(car_seed),
+                car_seed,
+            );
             Self::started(diag, 0)
         }
 

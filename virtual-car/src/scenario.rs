@@ -5,6 +5,7 @@
 //! description = "Cruise engaged at 90 km/h on a level road, then a 6 % grade."
 //! duration_s = 40.0
 //! seed = 1                      # sensor noise and fault injection
+//! vin = "JA3AP47H0YF000042"     # the car's VIN (F190 of every ECU); else one from the seed
 //!
 //! [road]
 //! mu_left = 1.0                 # friction, left wheels
@@ -24,6 +25,9 @@
 //! abs = "correct"               # or "faulty"
 //! differential = "enabled"      # or "disabled" (open differential, for comparisons)
 //!
+//! [factory]                     # the software version each ECU left the factory with
+//! cruise = "1.1.0"              # (any of the nine; 1.0.0 when not given)
+//!
 //! [driver]                      # the driver's controls at t = 0
 //! accelerator = 20.0            # pedal %, 0..100
 //! set_temp_f = 72.0
@@ -41,7 +45,10 @@
 //! Unknown keys are errors (a typo must not silently do nothing), and every value is
 //! checked against its range with an error that names the field.
 
+use autoplug_image::Version;
+use autoplug_vin::Vin;
 use serde::Deserialize;
+use std::collections::BTreeMap;
 use std::fmt;
 use std::path::Path;
 
@@ -65,9 +72,17 @@ pub struct Scenario {
     /// The car at t = 0.
     #[serde(default)]
     pub initial: Initial,
+    /// The vehicle identification number every ECU holds (UDS F190); `None`: one made
+    /// from the seed ([`Scenario::vin`]).
+    #[serde(default, rename = "vin")]
+    pub vin_text: Option<String>,
     /// Which software the ECUs run.
     #[serde(default)]
     pub ecus: EcuVariants,
+    /// The software version each ECU left the factory with, by ECU name (`cruise`,
+    /// `abs`...); [`crate::diag::FACTORY_VERSION`] for the others.
+    #[serde(default)]
+    pub factory: BTreeMap<String, String>,
     /// The driver's controls at t = 0.
     #[serde(default)]
     pub driver: DriverSettings,
@@ -367,6 +382,25 @@ const NODE_NAMES: [&str; 9] = [
 ];
 
 impl Scenario {
+    /// The car's VIN: the scenario's, else one made from the seed (a fixed test-bench
+    /// prefix, the check digit, and the seed's last six decimal digits as the serial), so
+    /// every car has one and cars of other seeds differ.
+    pub fn vin(&self) -> Vin {
+        self.vin_text
+            .as_deref()
+            .and_then(|text| Vin::parse(text).ok())
+            .unwrap_or_else(|| vin_from_seed(self.seed))
+    }
+
+    /// The version `node` left the factory with.
+    pub fn factory_version(&self, node: autoplug_can::Node) -> Version {
+        self.factory
+            .iter()
+            .find(|(name, _)| autoplug_can::parse_ecu(name) == Some(node))
+            .and_then(|(_, version)| version.parse().ok())
+            .unwrap_or(crate::diag::FACTORY_VERSION)
+    }
+
     /// Reads and checks a scenario file.
     pub fn load(path: &Path) -> Result<Self, ScenarioError> {
         let source = path.display().to_string();
@@ -442,6 +476,20 @@ impl Scenario {
                 "name \"{}\": use letters, digits, '-' and '_' (it names the output folder)",
                 self.name
             ));
+        }
+        if let Some(text) = &self.vin_text {
+            Vin::parse(text).map_err(|e| format!("vin \"{text}\": {e}"))?;
+        }
+        for (ecu, version) in &self.factory {
+            if autoplug_can::parse_ecu(ecu).is_none() {
+                return Err(format!(
+                    "factory.{ecu}: no such ECU (one of {})",
+                    autoplug_can::ECU_NAME_LIST
+                ));
+            }
+            version
+                .parse::<Version>()
+                .map_err(|e| format!("factory.{ecu} = \"{version}\": {e}"))?;
         }
         // An hour of trace stays around 30 MB in memory; longer runs belong in pieces.
         range("duration_s", self.duration_s, 0.001, MAX_DURATION_S)?;
@@ -521,4 +569,12 @@ impl Scenario {
         }
         Ok(())
     }
+}
+
+/// The VIN of a car whose scenario names none: WMI `JA3` and the EVO VI's descriptor as on
+/// the report's car, model year 2000 (`Y`), plant `F`, and the seed as the serial.
+pub fn vin_from_seed(seed: u64) -> Vin {
+    let text = format!("JA3AP47H0YF{:06}", seed % 1_000_000);
+    // 17 valid characters by construction; the placeholder check digit is replaced.
+    Vin::with_check_digit(&text).unwrap_or_else(|_| unreachable!("a valid VIN pattern"))
 }

@@ -39,6 +39,32 @@ fn scenarios_parse_with_defaults() {
     assert_eq!(s.road.mu_left, 1.0);
     assert_eq!(s.at.len(), 3);
     assert_eq!(s.at[0].press, vec![Button::CruiseOn]);
+    // No VIN given: one from the seed, valid; every ECU left the factory with 1.0.0.
+    assert_eq!(
+        s.vin().to_string(),
+        crate::scenario::vin_from_seed(1).to_string()
+    );
+    assert_eq!(
+        s.factory_version(autoplug_can::Node::Cruise).to_string(),
+        "1.0.0"
+    );
+    let s = Scenario::parse(
+        &format!("{EXAMPLE}[factory]\ncruise = \"1.1.0\"\n").replace(
+            "duration_s = 40.0",
+            "duration_s = 40.0\nvin = \"JA3AP47H3YF000777\"",
+        ),
+        "example",
+    )
+    .unwrap();
+    assert_eq!(s.vin().as_str(), "JA3AP47H3YF000777");
+    assert_eq!(
+        s.factory_version(autoplug_can::Node::Cruise).to_string(),
+        "1.1.0"
+    );
+    assert_eq!(
+        s.factory_version(autoplug_can::Node::ABS).to_string(),
+        "1.0.0"
+    );
     assert_eq!(
         s.at[2].fault.as_ref().unwrap().silence.as_deref(),
         Some("Steering")
@@ -83,6 +109,21 @@ fn scenario_errors_name_the_field() {
         (
             EXAMPLE.replace("duration_s = 40.0", "duration_s = 3601.0"),
             "duration_s = 3601 is outside",
+        ),
+        (
+            EXAMPLE.replace(
+                "duration_s = 40.0",
+                "duration_s = 40.0\nvin = \"JA3AP47H9YF000042\"",
+            ),
+            "vin \"JA3AP47H9YF000042\": the check digit (character 9) is '9'",
+        ),
+        (
+            format!("{EXAMPLE}[factory]\nwipers = \"1.0.0\"\n"),
+            "factory.wipers: no such ECU",
+        ),
+        (
+            format!("{EXAMPLE}[factory]\ncruise = \"1.x\"\n"),
+            "factory.cruise = \"1.x\"",
         ),
     ];
     for (text, expected) in cases {

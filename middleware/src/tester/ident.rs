@@ -1,5 +1,6 @@
 //! Reading identification: part number (F187), software version (F189), serial number
-//! (F18C) and hardware version (F191) of one ECU or all nine, in the default session.
+//! (F18C), hardware version (F191) and the vehicle's VIN (F190) of one ECU or all nine, in
+//! the default session.
 //!
 //! Each DID is read with a request of its own: the ECUs' identification strings have no
 //! length field, so a response to several DIDs at once could not be split where one
@@ -11,17 +12,19 @@ use std::fmt::Write as _;
 use autoplug_can::Node;
 use autoplug_ecu::Instant;
 use autoplug_uds::server::did;
+use autoplug_vin::Vin;
 
 use super::{Job, Response, Tester, TesterConfig, UdsError};
 use crate::names::ecu_name;
 
 /// The DIDs read, in table order: part number, software version, serial number, hardware
-/// version.
-pub const IDENTIFICATION_DIDS: [u16; 4] = [
+/// version, VIN.
+pub const IDENTIFICATION_DIDS: [u16; 5] = [
     did::PART_NUMBER,
     did::SOFTWARE_VERSION,
     did::SERIAL_NUMBER,
     did::HARDWARE_VERSION,
+    did::VIN,
 ];
 
 /// What one ECU said about itself; each value is the DID's data or why it is missing.
@@ -37,6 +40,8 @@ pub struct EcuIdentification {
     pub serial_number: Result<Vec<u8>, UdsError>,
     /// F191, hardware version.
     pub hardware_version: Result<Vec<u8>, UdsError>,
+    /// F190, the vehicle's VIN as this ECU holds it.
+    pub vin: Result<Vec<u8>, UdsError>,
 }
 
 impl EcuIdentification {
@@ -48,6 +53,7 @@ impl EcuIdentification {
             software_version: missing(),
             serial_number: missing(),
             hardware_version: missing(),
+            vin: missing(),
         }
     }
 
@@ -56,17 +62,19 @@ impl EcuIdentification {
             0 => &mut self.part_number,
             1 => &mut self.software_version,
             2 => &mut self.serial_number,
-            _ => &mut self.hardware_version,
+            3 => &mut self.hardware_version,
+            _ => &mut self.vin,
         }
     }
 
-    /// The four values in [`IDENTIFICATION_DIDS`] order.
-    pub fn values(&self) -> [&Result<Vec<u8>, UdsError>; 4] {
+    /// The five values in [`IDENTIFICATION_DIDS`] order.
+    pub fn values(&self) -> [&Result<Vec<u8>, UdsError>; 5] {
         [
             &self.part_number,
             &self.software_version,
             &self.serial_number,
             &self.hardware_version,
+            &self.vin,
         ]
     }
 
@@ -78,6 +86,50 @@ impl EcuIdentification {
                 Err(UdsError::Timeout { .. } | UdsError::Transport { .. } | UdsError::Busy)
             )
         })
+    }
+}
+
+/// The vehicle's VIN as its ECUs answer it (F190, check digit verified): `Ok(None)` when
+/// none answered one, `Err` with the ECUs and what each said when they disagree or one is
+/// not a VIN (an ECU moved from another car, or never coded).
+pub fn vehicle_vin(rows: &[EcuIdentification]) -> Result<Option<Vin>, String> {
+    let mut found: Vec<(Node, Result<Vin, String>)> = Vec::new();
+    for row in rows {
+        if let Ok(bytes) = &row.vin {
+            let vin = Vin::from_bytes(bytes).map_err(|e| format!("{}: {e}", value_text(&row.vin)));
+            found.push((row.ecu, vin));
+        }
+    }
+    let first = match found.first() {
+        None => return Ok(None),
+        Some((ecu, Err(e))) => return Err(format!("{} holds no valid VIN ({e})", ecu_name(*ecu))),
+        Some((_, Ok(vin))) => *vin,
+    };
+    let odd: Vec<String> = found
+        .iter()
+        .filter(|(_, vin)| vin.as_ref() != Ok(&first))
+        .map(|(ecu, vin)| match vin {
+            Ok(vin) => format!("{} holds {vin}", ecu_name(*ecu)),
+            Err(e) => format!("{} holds no valid VIN ({e})", ecu_name(*ecu)),
+        })
+        .collect();
+    if odd.is_empty() {
+        Ok(Some(first))
+    } else {
+        Err(format!(
+            "the ECUs disagree on the VIN: {} holds {first}; {}",
+            ecu_name(found[0].0),
+            odd.join("; ")
+        ))
+    }
+}
+
+/// The line under the identification table that says which vehicle this is.
+pub fn vin_line(rows: &[EcuIdentification]) -> String {
+    match vehicle_vin(rows) {
+        Ok(Some(vin)) => format!("vehicle: VIN {vin} (F190 of every ECU that answered)"),
+        Ok(None) => "vehicle: no ECU answered a VIN (F190)".to_string(),
+        Err(e) => format!("vehicle: {e}"),
     }
 }
 
@@ -106,16 +158,17 @@ pub fn identification_table(rows: &[EcuIdentification]) -> String {
         "software (F189)",
         "serial (F18C)",
         "hardware (F191)",
+        "VIN (F190)",
     ];
-    let cells: Vec<[String; 6]> = rows
+    let cells: Vec<[String; 7]> = rows
         .iter()
         .map(|row| {
             let number = row
                 .ecu
                 .diag_node_number()
                 .map_or_else(String::new, |n| format!("0x{n:02X}"));
-            let [a, b, c, d] = row.values().map(value_text);
-            [ecu_name(row.ecu).to_string(), number, a, b, c, d]
+            let [a, b, c, d, e] = row.values().map(value_text);
+            [ecu_name(row.ecu).to_string(), number, a, b, c, d, e]
         })
         .collect();
     let mut widths = headers.map(str::len);
@@ -271,6 +324,7 @@ mod tests {
                 software_version: Ok(b"1.2.0".to_vec()),
                 serial_number: Ok(vec![0x0D, 0x00, 0x42]),
                 hardware_version: Err(UdsError::negative(0x22, 0x31)),
+                vin: Ok(b"JA3AP47H0YF000042".to_vec()),
             },
             EcuIdentification {
                 ecu: Node::ABS,
@@ -286,6 +340,7 @@ mod tests {
                 }),
                 serial_number: Err(UdsError::Busy),
                 hardware_version: Err(UdsError::Busy),
+                vin: Err(UdsError::Busy),
             },
         ];
         let table = identification_table(&rows);
@@ -298,7 +353,41 @@ mod tests {
         assert!(lines[1].contains("0x0D0042"), "{table}");
         assert!(lines[1].contains("NRC 0x31 requestOutOfRange"), "{table}");
         assert!(lines[2].contains("no response"), "{table}");
+        assert!(lines[1].contains("JA3AP47H0YF000042"), "{table}");
         assert!(rows[0].answered());
         assert!(!rows[1].answered());
+    }
+
+    fn with_vin(ecu: Node, vin: Result<&[u8], UdsError>) -> EcuIdentification {
+        let mut row = EcuIdentification::new(ecu);
+        row.vin = vin.map(<[u8]>::to_vec);
+        row
+    }
+
+    #[test]
+    fn the_vehicle_vin_is_the_one_all_answering_ecus_hold() {
+        let good: &[u8] = b"JA3AP47H0YF000042";
+        let rows = [
+            with_vin(Node::Engine, Ok(good)),
+            with_vin(Node::Cruise, Err(UdsError::negative(0x22, 0x31))),
+            with_vin(Node::ABS, Ok(good)),
+        ];
+        assert_eq!(
+            vehicle_vin(&rows).unwrap().map(|v| v.to_string()),
+            Some("JA3AP47H0YF000042".into())
+        );
+        assert_eq!(vehicle_vin(&rows[1..2]), Ok(None));
+        // An ECU from another car.
+        let rows = [
+            with_vin(Node::Engine, Ok(good)),
+            with_vin(Node::ABS, Ok(b"JA3AP47H2YF000043")),
+        ];
+        let error = vehicle_vin(&rows).unwrap_err();
+        assert!(error.contains("abs holds JA3AP47H2YF000043"), "{error}");
+        // One that was never coded right.
+        let rows = [with_vin(Node::ABS, Ok(b"JA3AP47H9YF000042"))];
+        let error = vehicle_vin(&rows).unwrap_err();
+        assert!(error.contains("abs holds no valid VIN"), "{error}");
+        assert!(error.contains("check digit"), "{error}");
     }
 }

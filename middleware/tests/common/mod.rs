@@ -88,6 +88,7 @@ impl Backend for MemEcu {
             software_version: b"1.2.0",
             serial_number: &self.serial_number,
             hardware_version: b"NUCLEO-F446RE",
+            vin: b"JA3AP47H0YF000042",
         }
     }
 

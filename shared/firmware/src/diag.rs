@@ -261,6 +261,8 @@ impl Backend for FirmwareBackend<'_> {
             software_version: &self.flash.version_text[..self.flash.version_len],
             serial_number: &self.flash.serial,
             hardware_version: b"NUCLEO-F446RE",
+            // Not yet written at the end of the line: F190 is not answered.
+            vin: b"",
         }
     }
 

@@ -70,6 +70,9 @@ pub struct Identification<'a> {
     pub serial_number: &'a [u8],
     /// F191: hardware version.
     pub hardware_version: &'a [u8],
+    /// F190: the vehicle's VIN (17 characters), as the ECU was told it at the end of the
+    /// line; empty while it has none (F190 is then not answered).
+    pub vin: &'a [u8],
 }
 
 /// A flash operation failed (the backend logs the detail).
@@ -187,6 +190,8 @@ pub mod did {
     pub const SERIAL_NUMBER: u16 = 0xF18C;
     /// Hardware version.
     pub const HARDWARE_VERSION: u16 = 0xF191;
+    /// Vehicle identification number (ISO 3779, 17 characters).
+    pub const VIN: u16 = 0xF190;
 }
 
 /// Bytes of TransferData payload per block a tester may send: the 4095 bytes of an ISO-TP
@@ -697,6 +702,7 @@ impl Server {
                 did::SOFTWARE_VERSION => Some(ident.software_version),
                 did::SERIAL_NUMBER => Some(ident.serial_number),
                 did::HARDWARE_VERSION => Some(ident.hardware_version),
+                did::VIN if !ident.vin.is_empty() => Some(ident.vin),
                 did::ACTIVE_SESSION => Some(match self.session {
                     Session::Default => &[0x01],
                     Session::Programming => &[0x02],

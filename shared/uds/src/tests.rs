@@ -68,6 +68,7 @@ impl Backend for TestEcu {
             software_version: b"1.2.0",
             serial_number: b"0D0000000042",
             hardware_version: b"NUCLEO-F446RE",
+            vin: b"JA3AP47H0YF000042",
         }
     }
     fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
@@ -361,6 +362,10 @@ fn identification_and_live_data() {
     );
     assert_eq!(bench.request(&[0x22, 0x12, 0x34]), [0x7F, 0x22, 0x31]);
     assert_eq!(bench.request(&[0x22, 0xF1]), [0x7F, 0x22, 0x13]);
+    // The VIN, as every ECU of the car holds it.
+    let mut expected = vec![0x62, 0xF1, 0x90];
+    expected.extend_from_slice(b"JA3AP47H0YF000042");
+    assert_eq!(bench.request(&[0x22, 0xF1, 0x90]), expected);
     let _ = did::PART_NUMBER;
 }
 

@@ -4,6 +4,7 @@
 //!     virtual-car run scenarios/cruise-hold.toml --realtime --socketcand 127.0.0.1:29536
 //!     virtual-car list
 
+use autoplug_vin::Vin;
 use autoplug_virtual_car::report::{self, RunRecord};
 use autoplug_virtual_car::scenario::Scenario;
 use autoplug_virtual_car::socketcand::{ClientFrame, SocketcandServer};
@@ -46,6 +47,10 @@ enum Command {
         /// starting.
         #[arg(long, value_name = "SECONDS", default_value_t = 0.0, value_parser = parse_wait)]
         wait_for_client: f64,
+        /// The car's VIN (17 characters, check digit verified), in place of the scenario's:
+        /// every ECU answers it as UDS DID F190.
+        #[arg(long, value_parser = parse_vin)]
+        vin: Option<Vin>,
     },
     /// Lists the scenarios in a folder with their descriptions.
     List {
@@ -67,6 +72,10 @@ fn parse_wait(text: &str) -> Result<f64, String> {
     }
 }
 
+fn parse_vin(text: &str) -> Result<Vin, String> {
+    Vin::parse(text).map_err(|e| e.to_string())
+}
+
 fn main() -> ExitCode {
     match Cli::parse().command {
         Command::Run {
@@ -75,6 +84,7 @@ fn main() -> ExitCode {
             realtime,
             socketcand,
             wait_for_client,
+            vin,
         } => {
             if out.exists() && !out.is_dir() {
                 eprintln!(
@@ -106,7 +116,10 @@ fn main() -> ExitCode {
             let mut failed = false;
             for path in &scenarios {
                 match Scenario::load(path) {
-                    Ok(scenario) => {
+                    Ok(mut scenario) => {
+                        if let Some(vin) = vin {
+                            scenario.vin_text = Some(vin.to_string());
+                        }
                         if let Err(e) = run_one(
                             &scenario,
                             &out,
