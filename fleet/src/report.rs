@@ -1,0 +1,164 @@
+//! What a vehicle's gateway tells the fleet: its inventory when it changes, and each trip
+//! with the verdicts and trouble codes it ended with. JSON, the payload of its MQTT
+//! messages; the same types are what the store takes.
+
+use autoplug_store::{DtcRecord, EcuIdentity, VerdictRecord};
+use autoplug_trips::{TripEnd, TripStats};
+use autoplug_vin::Vin;
+use serde::{Deserialize, Serialize};
+
+/// Largest report a fleet service takes, bytes (an inventory of nine ECUs is under 2 KiB; a
+/// trip with every verdict and a few dozen codes under 16 KiB).
+pub const MAX_REPORT_BYTES: usize = 256 * 1024;
+
+/// A vehicle's inventory: the VIN and what each ECU answered about itself.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InventoryReport {
+    /// The vehicle.
+    pub vin: String,
+    /// When the gateway read it, ms since the Unix epoch (the vehicle's clock).
+    pub read_at_ms: i64,
+    /// Each ECU that answered.
+    pub ecus: Vec<EcuIdentity>,
+}
+
+/// A trip that ended, as its vehicle saw it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TripReport {
+    /// The vehicle.
+    pub vin: String,
+    /// The vehicle's own number for the trip (its gateway's store): a report sent twice is
+    /// stored once.
+    pub trip: i64,
+    /// Wall clock at the start and at the end, ms since the Unix epoch.
+    pub started_at_ms: i64,
+    /// See `started_at_ms`.
+    pub ended_at_ms: i64,
+    /// Its statistics.
+    pub stats: TripStats,
+    /// Why it ended.
+    pub end: TripEnd,
+    /// Every diagnostic routine's verdict at its end.
+    pub verdicts: Vec<VerdictRecord>,
+    /// The trouble codes read from the ECUs during it (latest per ECU).
+    pub dtcs: Vec<DtcRecord>,
+}
+
+/// Why a report was not taken.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ReportError(pub String);
+
+impl std::fmt::Display for ReportError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ReportError {}
+
+/// Longest text field the fleet keeps (part numbers, versions, evidence...), characters.
+pub const MAX_FIELD_CHARS: usize = 2_000;
+
+fn check_vin(vin: &str) -> Result<Vin, ReportError> {
+    Vin::parse(vin).map_err(|e| ReportError(format!("VIN \"{}\": {e}", cut(vin))))
+}
+
+fn cut(text: &str) -> String {
+    text.chars().take(40).collect()
+}
+
+fn check_text(what: &str, text: &str) -> Result<(), ReportError> {
+    if text.chars().count() > MAX_FIELD_CHARS {
+        return Err(ReportError(format!(
+            "{what} is longer than {MAX_FIELD_CHARS} characters"
+        )));
+    }
+    if text.chars().any(char::is_control) {
+        return Err(ReportError(format!(
+            "{what} \"{}\" holds control characters",
+            cut(&text.escape_default().to_string())
+        )));
+    }
+    Ok(())
+}
+
+impl InventoryReport {
+    /// Checks a report before it is stored: a valid VIN, sane fields, each ECU once.
+    pub fn check(&self) -> Result<Vin, ReportError> {
+        let vin = check_vin(&self.vin)?;
+        if self.ecus.len() > 64 {
+            return Err(ReportError(format!(
+                "{} ECUs in one inventory (at most 64)",
+                self.ecus.len()
+            )));
+        }
+        for (i, ecu) in self.ecus.iter().enumerate() {
+            check_text("an ECU name", &ecu.ecu)?;
+            if ecu.ecu.is_empty() {
+                return Err(ReportError(format!("ECU {} has no name", i + 1)));
+            }
+            if self.ecus[..i].iter().any(|e| e.ecu == ecu.ecu) {
+                return Err(ReportError(format!("ECU {} is listed twice", ecu.ecu)));
+            }
+            for (what, value) in [
+                ("part number", &ecu.part_number),
+                ("software version", &ecu.software_version),
+                ("hardware version", &ecu.hardware_version),
+                ("serial number", &ecu.serial_number),
+            ] {
+                if let Some(value) = value {
+                    check_text(&format!("{} {what}", ecu.ecu), value)?;
+                }
+            }
+        }
+        Ok(vin)
+    }
+}
+
+impl TripReport {
+    /// Checks a report before it is stored: a valid VIN, finite figures, sane text.
+    pub fn check(&self) -> Result<Vin, ReportError> {
+        let vin = check_vin(&self.vin)?;
+        let s = &self.stats;
+        for (what, v) in [
+            ("distance", s.distance_m),
+            ("duration", s.duration_s),
+            ("fuel used", s.fuel_used_l),
+            ("maximum speed", s.max_speed_kmh),
+            ("cruise time", s.cruise_time_s),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(ReportError(format!("trip {}: {what} is {v}", self.trip)));
+            }
+        }
+        if self.verdicts.len() > 256 || self.dtcs.len() > 1024 {
+            return Err(ReportError(format!(
+                "trip {}: {} verdicts and {} trouble codes (at most 256 and 1024)",
+                self.trip,
+                self.verdicts.len(),
+                self.dtcs.len()
+            )));
+        }
+        for v in &self.verdicts {
+            for (what, text) in [
+                ("ECU", &v.ecu),
+                ("verdict", &v.verdict),
+                ("routine", &v.routine),
+                ("unit", &v.unit),
+                ("evidence", &v.evidence),
+            ] {
+                check_text(&format!("a verdict's {what}"), text)?;
+            }
+        }
+        for d in &self.dtcs {
+            for (what, text) in [
+                ("ECU", &d.ecu),
+                ("code", &d.code),
+                ("description", &d.description),
+            ] {
+                check_text(&format!("a trouble code's {what}"), text)?;
+            }
+        }
+        Ok(vin)
+    }
+}
