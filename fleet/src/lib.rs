@@ -7,10 +7,13 @@
 //! or, on one machine, in an SQLite file: one schema, one set of statements, versioned
 //! migrations for both ([`migrations`]).
 
+pub mod broker;
 pub mod db;
 pub mod migrations;
+pub mod mqtt;
 pub mod report;
 pub mod store;
+pub mod topics;
 
 pub use report::{InventoryReport, ReportError, TripReport};
 pub use store::{

@@ -90,3 +90,118 @@ pub fn engines() -> [Engine; 2] {
         Engine::Postgres(PgSchema::new()),
     ]
 }
+
+/// The broker the tests use for what needs no private one (ingest, campaigns):
+/// `AUTOPLUG_TEST_MQTT`, default the local Mosquitto.
+pub fn broker_url() -> String {
+    std::env::var("AUTOPLUG_TEST_MQTT").unwrap_or_else(|_| "mqtt://127.0.0.1:1883".to_string())
+}
+
+/// A Mosquitto of the test's own, run from the project's broker configuration (logins,
+/// ACL, persistence) on a free port; killed when dropped. The binary: `$MOSQUITTO`, else
+/// `/usr/sbin/mosquitto`, else `mosquitto` on the PATH.
+pub struct PrivateBroker {
+    pub dir: tempfile::TempDir,
+    pub files: autoplug_fleet::broker::BrokerDir,
+    pub port: u16,
+    child: std::process::Child,
+}
+
+impl PrivateBroker {
+    pub fn start() -> Self {
+        let dir = tempfile::tempdir().unwrap();
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let files =
+            autoplug_fleet::broker::init(&dir.path().join("broker"), "127.0.0.1", port).unwrap();
+        let child = Self::spawn(&files);
+        let broker = Self {
+            dir,
+            files,
+            port,
+            child,
+        };
+        broker.wait_listening();
+        broker
+    }
+
+    fn spawn(files: &autoplug_fleet::broker::BrokerDir) -> std::process::Child {
+        let binary = std::env::var("MOSQUITTO").unwrap_or_else(|_| {
+            if std::path::Path::new("/usr/sbin/mosquitto").exists() {
+                "/usr/sbin/mosquitto".into()
+            } else {
+                "mosquitto".into()
+            }
+        });
+        std::process::Command::new(&binary)
+            .arg("-c")
+            .arg(&files.config)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot run {binary} (scripts/setup installs Mosquitto): {e}")
+            })
+    }
+
+    fn wait_listening(&self) {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "mosquitto did not listen on {}",
+                self.port
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+
+    /// Adds a login and makes the running broker read the password file again.
+    pub fn add_login(&self, user: &str, password: &str) {
+        autoplug_fleet::broker::add_login(&self.files, user, password).unwrap();
+        // SIGHUP: Mosquitto reloads its password and ACL files.
+        let status = std::process::Command::new("kill")
+            .args(["-HUP", &self.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+
+    /// The address for `user` with `password`.
+    pub fn url(&self, user: &str, password: &str) -> autoplug_fleet::mqtt::Broker {
+        format!("mqtt://{user}:{password}@127.0.0.1:{}", self.port)
+            .parse()
+            .unwrap()
+    }
+
+    /// Stops the broker as a restart would (SIGTERM: it saves its persistence) and starts it
+    /// again from the same directory.
+    pub fn restart(&mut self) {
+        let _ = std::process::Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        let _ = self.child.wait();
+        self.child = Self::spawn(&self.files);
+        self.wait_listening();
+    }
+}
+
+impl Drop for PrivateBroker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A runtime for the tests' MQTT connections.
+pub fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap()
+}

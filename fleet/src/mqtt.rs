@@ -1,0 +1,513 @@
+//! One MQTT connection, for code that is not async: a vehicle's gateway (the pipeline's
+//! thread) or a fleet service's loop. The connection's event loop runs as a task on a
+//! tokio runtime the caller shares between connections (a simulated fleet holds a thousand
+//! of them); what arrives waits in a bounded queue, and publishing never blocks: a full
+//! request queue is an error the caller sees.
+//!
+//! rumqttc does the protocol (MQTT 3.1.1, QoS 1, persistent sessions, keep-alive); this
+//! adds what both sides of the fleet need around it: reconnecting with a backoff, the
+//! subscriptions made again when the broker kept no session, a refused login or
+//! subscription reported instead of retried blindly, and the state for the caller to show.
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use rumqttc::{
+    AsyncClient, ConnectReturnCode, ConnectionError, Event, MqttOptions, Packet, Publish, QoS,
+    SubscribeFilter, SubscribeReasonCode,
+};
+use tokio::runtime::Handle;
+use tokio::sync::mpsc;
+
+/// The broker's standard port for MQTT without TLS.
+pub const DEFAULT_PORT: u16 = 1883;
+
+/// The default broker: Mosquitto on this machine.
+pub const DEFAULT_BROKER: &str = "mqtt://127.0.0.1:1883";
+
+/// Largest message either side sends or takes, bytes: a signed image (the ECUs' slot is
+/// 112 KiB) with room to spare. Mosquitto's own limit is larger by default.
+pub const MAX_PACKET_BYTES: usize = 512 * 1024;
+
+/// Messages that may wait for the caller before the connection stops reading (the broker
+/// then holds the rest: nothing is lost, QoS 1 is acknowledged only once queued).
+pub const INCOMING_CAPACITY: usize = 256;
+
+/// Requests (publish, subscribe, acknowledge) that may wait for the connection.
+pub const REQUEST_CAPACITY: usize = 256;
+
+/// A broker's address and the login to use: `mqtt://[USER[:PASSWORD]@]HOST[:PORT]`.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Broker {
+    /// Host name or address.
+    pub host: String,
+    /// TCP port.
+    pub port: u16,
+    /// The login, if the broker wants one.
+    pub username: Option<String>,
+    /// Its password.
+    pub password: Option<String>,
+}
+
+impl std::fmt::Debug for Broker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Broker({self})")
+    }
+}
+
+impl std::fmt::Display for Broker {
+    /// The address without the password.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.username {
+            Some(user) => write!(f, "mqtt://{user}@{}:{}", self.host, self.port),
+            None => write!(f, "mqtt://{}:{}", self.host, self.port),
+        }
+    }
+}
+
+impl std::str::FromStr for Broker {
+    type Err = String;
+
+    fn from_str(url: &str) -> Result<Self, String> {
+        let rest = url.strip_prefix("mqtt://").ok_or_else(|| {
+            format!(
+                "broker address '{}' must start with mqtt:// (e.g. {DEFAULT_BROKER})",
+                redact(url)
+            )
+        })?;
+        let (login, hostport) = match rest.rsplit_once('@') {
+            Some((login, hostport)) => (Some(login), hostport),
+            None => (None, rest),
+        };
+        let (username, password) = match login {
+            None => (None, None),
+            Some(login) => match login.split_once(':') {
+                Some((user, password)) => (Some(user.to_string()), Some(password.to_string())),
+                None => (Some(login.to_string()), None),
+            },
+        };
+        if username.as_deref() == Some("") {
+            return Err(format!(
+                "broker address '{}' has an empty user name",
+                redact(url)
+            ));
+        }
+        let hostport = hostport.trim_end_matches('/');
+        let (host, port) = match hostport.rsplit_once(':') {
+            Some((host, port)) => (
+                host,
+                port.parse::<u16>()
+                    .ok()
+                    .filter(|p| *p != 0)
+                    .ok_or_else(|| {
+                        format!("broker address '{}': '{port}' is not a port", redact(url))
+                    })?,
+            ),
+            None => (hostport, DEFAULT_PORT),
+        };
+        if host.is_empty() || host.contains(['/', ' ']) {
+            return Err(format!("broker address '{}' names no host", redact(url)));
+        }
+        Ok(Broker {
+            host: host.to_string(),
+            port,
+            username,
+            password,
+        })
+    }
+}
+
+/// A URL with any password replaced, for error messages.
+fn redact(url: &str) -> String {
+    match (url.find("://"), url.rfind('@')) {
+        (Some(scheme), Some(at)) if at > scheme => {
+            let login = &url[scheme + 3..at];
+            match login.split_once(':') {
+                Some((user, _)) => format!("{}{user}:***{}", &url[..scheme + 3], &url[at..]),
+                None => url.to_string(),
+            }
+        }
+        _ => url.to_string(),
+    }
+}
+
+/// How a connection is set up.
+#[derive(Clone, Debug)]
+pub struct LinkOptions {
+    /// The MQTT client id (a vehicle: its VIN; the broker's ACL may require it to be the
+    /// user name).
+    pub client_id: String,
+    /// Keep the session while disconnected: subscriptions stay, QoS 1 messages for the
+    /// client are queued by the broker until it comes back.
+    pub persistent_session: bool,
+    /// Topics to subscribe to (QoS 1), again after each connect without a kept session.
+    pub subscriptions: Vec<String>,
+    /// Acknowledge what arrives only when the caller says so ([`MqttLink::ack`]): a
+    /// message is then taken from the broker only once it is handled (stored).
+    pub manual_acks: bool,
+    /// Keep-alive interval.
+    pub keep_alive: Duration,
+    /// First wait before reconnecting; doubled after each failure up to `max_backoff`.
+    pub backoff: Duration,
+    /// Longest wait before reconnecting.
+    pub max_backoff: Duration,
+}
+
+impl LinkOptions {
+    /// A client with the defaults: clean session, no subscriptions, automatic acks.
+    pub fn new(client_id: impl Into<String>) -> Self {
+        Self {
+            client_id: client_id.into(),
+            persistent_session: false,
+            subscriptions: Vec::new(),
+            manual_acks: false,
+            keep_alive: Duration::from_secs(30),
+            backoff: Duration::from_millis(250),
+            max_backoff: Duration::from_secs(30),
+        }
+    }
+}
+
+/// A message that arrived.
+#[derive(Clone, Debug)]
+pub struct Message {
+    /// Its topic.
+    pub topic: String,
+    /// Its payload.
+    pub payload: Vec<u8>,
+    /// Whether the broker delivered it as a retained message.
+    pub retained: bool,
+    publish: Publish,
+}
+
+/// What the connection is doing, for the caller to show.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LinkStatus {
+    /// Connected to the broker now.
+    pub connected: bool,
+    /// Connections made (the first and every reconnect).
+    pub connects: u64,
+    /// The broker refused the login (wrong user or password, not authorized): the
+    /// connection keeps trying at its longest backoff, since credentials may be fixed.
+    pub refused: Option<String>,
+    /// The last error of the connection, if any.
+    pub last_error: Option<String>,
+    /// Subscriptions the broker refused (its ACL), by topic.
+    pub denied: Vec<String>,
+    /// Subscriptions the broker granted since the last connect.
+    pub granted: Vec<String>,
+}
+
+/// Why a request could not be made.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LinkError(pub String);
+
+impl std::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for LinkError {}
+
+/// One connection to the broker (see the module docs). Dropping it disconnects.
+pub struct MqttLink {
+    client: AsyncClient,
+    incoming: mpsc::Receiver<Message>,
+    status: Arc<Mutex<LinkStatus>>,
+    runtime: Handle,
+    task: tokio::task::JoinHandle<()>,
+    broker: String,
+    subscribing: Subscribing,
+}
+
+/// The topics of each SUBSCRIBE not yet answered, in the order sent (a broker answers in
+/// that order), so each SUBACK's codes name their topics.
+type Subscribing = Arc<Mutex<std::collections::VecDeque<Vec<String>>>>;
+
+impl MqttLink {
+    /// Starts connecting to `broker` on `runtime` (returns at once: see [`Self::status`]
+    /// and [`Self::wait_connected`]).
+    pub fn connect(runtime: &Handle, broker: &Broker, options: LinkOptions) -> Self {
+        let mut mqtt =
+            MqttOptions::new(options.client_id.clone(), broker.host.clone(), broker.port);
+        mqtt.set_keep_alive(options.keep_alive)
+            .set_clean_session(!options.persistent_session)
+            .set_max_packet_size(MAX_PACKET_BYTES, MAX_PACKET_BYTES)
+            .set_request_channel_capacity(REQUEST_CAPACITY)
+            .set_manual_acks(options.manual_acks);
+        if let Some(user) = &broker.username {
+            mqtt.set_credentials(user.clone(), broker.password.clone().unwrap_or_default());
+        }
+        let (client, eventloop) = AsyncClient::new(mqtt, REQUEST_CAPACITY);
+        let (tx, incoming) = mpsc::channel(INCOMING_CAPACITY);
+        let status = Arc::new(Mutex::new(LinkStatus::default()));
+        let subscribing = Subscribing::default();
+        let task = runtime.spawn(run(
+            eventloop,
+            client.clone(),
+            tx,
+            status.clone(),
+            subscribing.clone(),
+            options,
+        ));
+        Self {
+            subscribing,
+            client,
+            incoming,
+            status,
+            runtime: runtime.clone(),
+            task,
+            broker: broker.to_string(),
+        }
+    }
+
+    /// The broker, without the password.
+    pub fn broker(&self) -> &str {
+        &self.broker
+    }
+
+    /// What the connection is doing.
+    pub fn status(&self) -> LinkStatus {
+        self.status.lock().map(|s| s.clone()).unwrap_or_default()
+    }
+
+    /// Waits until connected with every subscription answered, at most `timeout`; the
+    /// refusal or the last error if not.
+    pub fn wait_connected(&self, timeout: Duration) -> Result<(), LinkError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let status = self.status();
+            if let Some(refused) = status.refused {
+                return Err(LinkError(format!("{}: {refused}", self.broker)));
+            }
+            if status.connected {
+                return Ok(());
+            }
+            if Instant::now() >= deadline {
+                return Err(LinkError(format!(
+                    "{}: not connected after {:.1} s{}",
+                    self.broker,
+                    timeout.as_secs_f64(),
+                    status
+                        .last_error
+                        .map_or(String::new(), |e| format!(" ({e})"))
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Publishes at QoS 1 (at least once); `retain` keeps it at the broker for later
+    /// subscribers. Never blocks: an error when the request queue is full.
+    pub fn publish(&self, topic: &str, payload: Vec<u8>, retain: bool) -> Result<(), LinkError> {
+        if payload.len() > MAX_PACKET_BYTES - topic.len() - 16 {
+            return Err(LinkError(format!(
+                "a message of {} bytes is larger than the {MAX_PACKET_BYTES} bytes allowed",
+                payload.len()
+            )));
+        }
+        self.client
+            .try_publish(topic, QoS::AtLeastOnce, retain, payload)
+            .map_err(|e| LinkError(format!("cannot publish to {topic}: {e}")))
+    }
+
+    /// Subscribes (QoS 1) to one more topic, now; not made again after a reconnect.
+    pub fn subscribe(&self, topic: &str) -> Result<(), LinkError> {
+        if let Ok(mut pending) = self.subscribing.lock() {
+            pending.push_back(vec![topic.to_string()]);
+        }
+        self.client
+            .try_subscribe(topic, QoS::AtLeastOnce)
+            .map_err(|e| LinkError(format!("cannot subscribe to {topic}: {e}")))
+    }
+
+    /// Ends a subscription made with [`Self::subscribe`].
+    pub fn unsubscribe(&self, topic: &str) -> Result<(), LinkError> {
+        self.client
+            .try_unsubscribe(topic)
+            .map_err(|e| LinkError(format!("cannot unsubscribe from {topic}: {e}")))
+    }
+
+    /// The next message, if one waits.
+    pub fn try_recv(&mut self) -> Option<Message> {
+        self.incoming.try_recv().ok()
+    }
+
+    /// The next message, waiting at most `timeout` (from a thread outside the runtime).
+    pub fn recv_timeout(&mut self, timeout: Duration) -> Option<Message> {
+        let incoming = &mut self.incoming;
+        self.runtime
+            .block_on(async { tokio::time::timeout(timeout, incoming.recv()).await })
+            .ok()
+            .flatten()
+    }
+
+    /// Acknowledges a message (with manual acks): the broker may forget it.
+    pub fn ack(&self, message: &Message) -> Result<(), LinkError> {
+        self.client
+            .try_ack(&message.publish)
+            .map_err(|e| LinkError(format!("cannot acknowledge: {e}")))
+    }
+
+    /// Disconnects cleanly (the broker keeps a persistent session), waiting at most
+    /// `timeout` for what was published to be sent.
+    pub fn close(self, timeout: Duration) {
+        let _ = self.client.try_disconnect();
+        let deadline = Instant::now() + timeout;
+        while !self.task.is_finished() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+}
+
+impl Drop for MqttLink {
+    fn drop(&mut self) {
+        let _ = self.client.try_disconnect();
+        self.task.abort();
+    }
+}
+
+fn set(status: &Mutex<LinkStatus>, change: impl FnOnce(&mut LinkStatus)) {
+    if let Ok(mut s) = status.lock() {
+        change(&mut s);
+    }
+}
+
+/// The connection's event loop: reconnects with a backoff, subscribes after each connect
+/// without a kept session, hands publishes to the caller.
+async fn run(
+    mut eventloop: rumqttc::EventLoop,
+    client: AsyncClient,
+    tx: mpsc::Sender<Message>,
+    status: Arc<Mutex<LinkStatus>>,
+    subscribing: Subscribing,
+    options: LinkOptions,
+) {
+    let mut backoff = options.backoff;
+    loop {
+        match eventloop.poll().await {
+            Ok(Event::Incoming(Packet::ConnAck(ack))) => {
+                backoff = options.backoff;
+                set(&status, |s| {
+                    s.connected = true;
+                    s.connects += 1;
+                    s.refused = None;
+                    s.granted.clear();
+                });
+                // SUBSCRIBEs of the lost connection will not be answered.
+                if let Ok(mut pending) = subscribing.lock() {
+                    pending.clear();
+                }
+                if !ack.session_present && !options.subscriptions.is_empty() {
+                    if let Ok(mut pending) = subscribing.lock() {
+                        pending.push_back(options.subscriptions.clone());
+                    }
+                    let filters = options
+                        .subscriptions
+                        .iter()
+                        .map(|t| SubscribeFilter::new(t.clone(), QoS::AtLeastOnce));
+                    if let Err(e) = client.try_subscribe_many(filters) {
+                        set(&status, |s| s.last_error = Some(format!("subscribe: {e}")));
+                    }
+                } else if ack.session_present {
+                    set(&status, |s| s.granted = options.subscriptions.clone());
+                }
+            }
+            Ok(Event::Incoming(Packet::SubAck(ack))) => {
+                let topics = subscribing
+                    .lock()
+                    .ok()
+                    .and_then(|mut p| p.pop_front())
+                    .unwrap_or_default();
+                set(&status, |s| {
+                    for (i, code) in ack.return_codes.iter().enumerate() {
+                        let topic = topics.get(i).cloned().unwrap_or_else(|| format!("#{i}"));
+                        match code {
+                            SubscribeReasonCode::Success(_) => s.granted.push(topic),
+                            SubscribeReasonCode::Failure => s.denied.push(topic),
+                        }
+                    }
+                });
+            }
+            Ok(Event::Incoming(Packet::Publish(publish))) => {
+                let message = Message {
+                    topic: publish.topic.clone(),
+                    payload: publish.payload.to_vec(),
+                    retained: publish.retain,
+                    publish,
+                };
+                if tx.send(message).await.is_err() {
+                    return; // The link was dropped.
+                }
+            }
+            Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
+                set(&status, |s| s.connected = false);
+                // Let the DISCONNECT go out, then stop.
+                let _ = tokio::time::timeout(Duration::from_millis(200), eventloop.poll()).await;
+                return;
+            }
+            Ok(_) => {}
+            Err(error) => {
+                let refused = match &error {
+                    ConnectionError::ConnectionRefused(
+                        code @ (ConnectReturnCode::BadUserNamePassword
+                        | ConnectReturnCode::NotAuthorized
+                        | ConnectReturnCode::BadClientId),
+                    ) => Some(format!("the broker refused the login ({code:?})")),
+                    _ => None,
+                };
+                let wait = if refused.is_some() {
+                    options.max_backoff
+                } else {
+                    backoff
+                };
+                set(&status, |s| {
+                    s.connected = false;
+                    s.last_error = Some(error.to_string());
+                    if refused.is_some() {
+                        s.refused = refused;
+                    }
+                });
+                if matches!(error, ConnectionError::RequestsDone) {
+                    return;
+                }
+                tokio::time::sleep(wait).await;
+                backoff = (backoff * 2).min(options.max_backoff);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn broker_addresses_parse_and_hide_the_password() {
+        let b: Broker = "mqtt://127.0.0.1:1883".parse().unwrap();
+        assert_eq!(
+            (b.host.as_str(), b.port, b.username.clone()),
+            ("127.0.0.1", 1883, None)
+        );
+        let b: Broker = "mqtt://JA3AP47H0YF000042:s3cret@broker.example:8883"
+            .parse()
+            .unwrap();
+        assert_eq!(b.username.as_deref(), Some("JA3AP47H0YF000042"));
+        assert_eq!(b.password.as_deref(), Some("s3cret"));
+        assert_eq!(
+            b.to_string(),
+            "mqtt://JA3AP47H0YF000042@broker.example:8883"
+        );
+        assert_eq!("mqtt://host".parse::<Broker>().unwrap().port, 1883);
+        let e = "tcp://u:pw@host".parse::<Broker>().unwrap_err();
+        assert!(
+            e.contains("mqtt://") && e.contains("u:***@host") && !e.contains("pw"),
+            "{e}"
+        );
+        let e = "mqtt://u:pw@host:99999".parse::<Broker>().unwrap_err();
+        assert!(e.contains("not a port") && !e.contains("pw@"), "{e}");
+        assert!("mqtt://:pw@host".parse::<Broker>().is_err());
+        assert!("mqtt://".parse::<Broker>().is_err());
+    }
+}
