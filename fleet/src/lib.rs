@@ -8,7 +8,10 @@
 //! migrations for both ([`migrations`]).
 
 pub mod broker;
+pub mod campaign;
+pub mod campaigns;
 pub mod db;
+pub mod ingest;
 pub mod migrations;
 pub mod mqtt;
 pub mod report;

@@ -19,11 +19,18 @@ pub struct Migration {
 }
 
 /// The migrations, in order.
-pub const MIGRATIONS: &[Migration] = &[Migration {
-    version: 1,
-    name: "inventory, trips and evidence",
-    sql: include_str!("../migrations/001_inventory_trips_evidence.sql"),
-}];
+pub const MIGRATIONS: &[Migration] = &[
+    Migration {
+        version: 1,
+        name: "inventory, trips and evidence",
+        sql: include_str!("../migrations/001_inventory_trips_evidence.sql"),
+    },
+    Migration {
+        version: 2,
+        name: "update campaigns",
+        sql: include_str!("../migrations/002_campaigns.sql"),
+    },
+];
 
 /// The newest schema this program knows.
 pub const SCHEMA_VERSION: i64 = MIGRATIONS.len() as i64;

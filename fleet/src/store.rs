@@ -180,19 +180,19 @@ mod version_text {
     }
 }
 
-fn now_ms() -> i64 {
+pub(crate) fn now_ms() -> i64 {
     crate::unix_ms()
 }
 
-fn text(row: &Row, i: usize) -> Option<String> {
+pub(crate) fn text(row: &Row, i: usize) -> Option<String> {
     row.get(i).and_then(Value::text).map(str::to_string)
 }
 
-fn int(row: &Row, i: usize) -> i64 {
+pub(crate) fn int(row: &Row, i: usize) -> i64 {
     row.get(i).and_then(Value::int).unwrap_or(0)
 }
 
-fn float(row: &Row, i: usize) -> Option<f64> {
+pub(crate) fn float(row: &Row, i: usize) -> Option<f64> {
     row.get(i).and_then(Value::float)
 }
 

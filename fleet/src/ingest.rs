@@ -1,0 +1,204 @@
+//! The fleet service's intake: vehicles' reports from the broker into the store.
+//!
+//! Every report is checked before anything is written: its topic names a vehicle and a
+//! kind, the payload is at most [`MAX_REPORT_BYTES`], parses, and names the same VIN as
+//! the topic (the broker's ACL lets a vehicle publish only under its own VIN, so a payload
+//! naming another is refused rather than trusted). A report is acknowledged to the broker
+//! only once it is stored (manual acks): a service that dies mid-way leaves it with the
+//! broker for the next one. A bad report is acknowledged too, counted and kept among the
+//! last rejections, so it cannot come back for ever.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use crate::mqtt::{Message, MqttLink};
+use crate::report::{InventoryReport, TripReport, MAX_REPORT_BYTES};
+use crate::store::{FleetStore, StoreError, Stored};
+use crate::topics::{self, ReportKind};
+
+/// Rejections kept for the report.
+pub const KEPT_REJECTIONS: usize = 20;
+
+/// What the intake did so far.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct IngestStats {
+    /// Inventories stored.
+    pub inventories: u64,
+    /// Trips stored.
+    pub trips: u64,
+    /// Trips that were there already (a redelivery).
+    pub duplicates: u64,
+    /// Campaign reports stored.
+    pub campaign_reports: u64,
+    /// Reports refused.
+    pub rejected: u64,
+    /// The last refusals, newest last.
+    pub last_rejections: VecDeque<String>,
+    /// Database errors retried.
+    pub db_retries: u64,
+}
+
+/// What a report came to.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Handled {
+    /// An inventory; the ECUs whose identity changed.
+    Inventory(Vec<String>),
+    /// A trip, new or a duplicate.
+    Trip(Stored),
+    /// A campaign report.
+    Campaign,
+}
+
+/// Why a report was not stored.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Refused {
+    /// The report is bad: it will never be stored.
+    Invalid(String),
+    /// The database failed: the same report may be stored later.
+    Db(String),
+}
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refused::Invalid(e) | Refused::Db(e) => f.write_str(e),
+        }
+    }
+}
+
+fn from_store(e: StoreError) -> Refused {
+    match e {
+        StoreError::Db(e) => Refused::Db(e.to_string()),
+        StoreError::Invalid(e) => Refused::Invalid(e),
+    }
+}
+
+/// Stores one report (see the module docs for the checks).
+pub fn handle(store: &mut FleetStore, topic: &str, payload: &[u8]) -> Result<Handled, Refused> {
+    let (vin, kind) = topics::parse_report(topic).map_err(Refused::Invalid)?;
+    if payload.len() > MAX_REPORT_BYTES {
+        return Err(Refused::Invalid(format!(
+            "{vin}: a {} report of {} bytes (at most {MAX_REPORT_BYTES})",
+            kind.name(),
+            payload.len()
+        )));
+    }
+    let same_vin = |named: &str| {
+        if named == vin.as_str() {
+            Ok(())
+        } else {
+            Err(Refused::Invalid(format!(
+                "a {} report naming VIN \"{}\" on {vin}'s topic",
+                kind.name(),
+                named.chars().take(40).collect::<String>()
+            )))
+        }
+    };
+    let parse_error = |e: serde_json::Error| {
+        Refused::Invalid(format!(
+            "{vin}: a {} report that is not valid: {e}",
+            kind.name()
+        ))
+    };
+    match kind {
+        ReportKind::Inventory => {
+            let report: InventoryReport = serde_json::from_slice(payload).map_err(parse_error)?;
+            same_vin(&report.vin)?;
+            store
+                .record_inventory(&report)
+                .map(Handled::Inventory)
+                .map_err(from_store)
+        }
+        ReportKind::Trip => {
+            let report: TripReport = serde_json::from_slice(payload).map_err(parse_error)?;
+            same_vin(&report.vin)?;
+            store
+                .record_trip(&report)
+                .map(Handled::Trip)
+                .map_err(from_store)
+        }
+        ReportKind::Campaign => {
+            let report: crate::campaign::CampaignReport =
+                serde_json::from_slice(payload).map_err(parse_error)?;
+            same_vin(&report.vin)?;
+            store
+                .record_campaign_report(&report)
+                .map(|()| Handled::Campaign)
+                .map_err(from_store)
+        }
+    }
+}
+
+/// The intake: reports from `link` (subscribed to [`topics::REPORTS_SHARED`] with manual
+/// acks) into `store`.
+pub struct Ingest {
+    /// The store.
+    pub store: FleetStore,
+    /// The broker.
+    pub link: MqttLink,
+    /// What it did.
+    pub stats: IngestStats,
+}
+
+/// Longest wait between two tries of a database that fails.
+const MAX_DB_BACKOFF: Duration = Duration::from_secs(10);
+
+impl Ingest {
+    /// Reports from `link` into `store`.
+    pub fn new(store: FleetStore, link: MqttLink) -> Self {
+        Self {
+            store,
+            link,
+            stats: IngestStats::default(),
+        }
+    }
+
+    /// Handles one message: stored and acknowledged, or refused and acknowledged; a
+    /// database error is retried (with a backoff) until it stores or `stop` is set, and
+    /// the message is then left unacknowledged for the broker to deliver again.
+    pub fn take(&mut self, message: &Message, stop: &AtomicBool) -> Option<Handled> {
+        let mut backoff = Duration::from_millis(50);
+        loop {
+            match handle(&mut self.store, &message.topic, &message.payload) {
+                Ok(handled) => {
+                    match &handled {
+                        Handled::Inventory(_) => self.stats.inventories += 1,
+                        Handled::Trip(Stored::New) => self.stats.trips += 1,
+                        Handled::Trip(Stored::Duplicate) => self.stats.duplicates += 1,
+                        Handled::Campaign => self.stats.campaign_reports += 1,
+                    }
+                    let _ = self.link.ack(message);
+                    return Some(handled);
+                }
+                Err(Refused::Invalid(reason)) => {
+                    self.stats.rejected += 1;
+                    if self.stats.last_rejections.len() >= KEPT_REJECTIONS {
+                        self.stats.last_rejections.pop_front();
+                    }
+                    self.stats.last_rejections.push_back(reason);
+                    let _ = self.link.ack(message);
+                    return None;
+                }
+                Err(Refused::Db(_)) => {
+                    self.stats.db_retries += 1;
+                    if stop.load(Ordering::Relaxed) {
+                        return None;
+                    }
+                    std::thread::sleep(backoff);
+                    backoff = (backoff * 2).min(MAX_DB_BACKOFF);
+                }
+            }
+        }
+    }
+
+    /// Takes reports until `stop` is set; `wait` is the longest wait for one.
+    pub fn run(&mut self, stop: &AtomicBool, wait: Duration, mut each: impl FnMut(&Self)) {
+        while !stop.load(Ordering::Relaxed) {
+            if let Some(message) = self.link.recv_timeout(wait) {
+                self.take(&message, stop);
+            }
+            each(self);
+        }
+    }
+}

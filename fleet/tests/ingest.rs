@@ -1,0 +1,162 @@
+//! Vehicles' reports through the real broker into the store, on both engines: stored once,
+//! acknowledged only when stored, bad ones refused with the reason.
+
+mod common;
+
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+use autoplug_fleet::ingest::{Handled, Ingest};
+use autoplug_fleet::mqtt::{Broker, LinkOptions, MqttLink};
+use autoplug_fleet::topics::{self, ReportKind};
+use autoplug_fleet::{InventoryReport, Stored, TripReport};
+use autoplug_store::EcuIdentity;
+use autoplug_trips::{TripEnd, TripStats};
+use autoplug_vin::Vin;
+use common::{broker_url, engines, runtime};
+
+fn inventory(vin: &Vin) -> InventoryReport {
+    InventoryReport {
+        vin: vin.to_string(),
+        read_at_ms: 5,
+        ecus: vec![EcuIdentity {
+            ecu: "cruise".into(),
+            node: 0x0D,
+            part_number: Some("AP-CRUISE".into()),
+            software_version: Some("1.1.0".into()),
+            hardware_version: Some("NUCLEO-F446RE".into()),
+            serial_number: Some("SN1".into()),
+        }],
+    }
+}
+
+fn trip(vin: &Vin) -> TripReport {
+    TripReport {
+        vin: vin.to_string(),
+        trip: 1,
+        started_at_ms: 10,
+        ended_at_ms: 20,
+        stats: TripStats::default(),
+        end: TripEnd::Parked,
+        verdicts: Vec::new(),
+        dtcs: Vec::new(),
+    }
+}
+
+#[test]
+fn reports_through_the_broker_are_stored_once_and_bad_ones_refused() {
+    let rt = runtime();
+    let broker: Broker = broker_url().parse().unwrap();
+    for (k, engine) in engines().into_iter().enumerate() {
+        // VINs of this run only: the broker is shared with whatever else runs.
+        let serial = std::process::id() % 100_000 * 10 + k as u32;
+        let vin = Vin::with_check_digit(&format!("JA3AP47H0YF{serial:06}")).unwrap();
+        let other = Vin::with_check_digit(&format!("JA3AP47H0YG{serial:06}")).unwrap();
+        let mut options = LinkOptions::new(format!("ingest-test-{serial}"));
+        options.manual_acks = true;
+        options.subscriptions = vec![
+            format!("autoplug/v1/vehicles/{vin}/report/#"),
+            format!("autoplug/v1/vehicles/{other}/report/#"),
+        ];
+        let link = MqttLink::connect(rt.handle(), &broker, options);
+        link.wait_connected(Duration::from_secs(5))
+            .unwrap_or_else(|e| panic!("{e} (scripts/setup installs and starts Mosquitto)"));
+        while link.status().granted.len() < 2 {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let car = MqttLink::connect(
+            rt.handle(),
+            &broker,
+            LinkOptions::new(format!("car-{serial}")),
+        );
+        car.wait_connected(Duration::from_secs(5)).unwrap();
+
+        let json = |v: &dyn erased::Json| v.json();
+        let sends: Vec<(String, Vec<u8>)> = vec![
+            (
+                topics::report(&vin, ReportKind::Inventory),
+                json(&inventory(&vin)),
+            ),
+            (topics::report(&vin, ReportKind::Trip), json(&trip(&vin))),
+            // The same trip again (a redelivery): stored once.
+            (topics::report(&vin, ReportKind::Trip), json(&trip(&vin))),
+            // Another vehicle's report on this vehicle's topic.
+            (topics::report(&vin, ReportKind::Trip), json(&trip(&other))),
+            // Not JSON.
+            (
+                topics::report(&other, ReportKind::Inventory),
+                b"{oops".to_vec(),
+            ),
+            // A report kind nobody defined.
+            (
+                format!("autoplug/v1/vehicles/{vin}/report/selfie"),
+                b"{}".to_vec(),
+            ),
+        ];
+        for (topic, payload) in &sends {
+            car.publish(topic, payload.clone(), false).unwrap();
+        }
+        let mut ingest = Ingest::new(engine.open(), link);
+        let stop = AtomicBool::new(false);
+        let mut handled = Vec::new();
+        for _ in 0..sends.len() {
+            let message = ingest
+                .link
+                .recv_timeout(Duration::from_secs(5))
+                .expect("every report arrives");
+            handled.push(ingest.take(&message, &stop));
+        }
+        assert_eq!(
+            handled,
+            vec![
+                Some(Handled::Inventory(vec!["cruise".into()])),
+                Some(Handled::Trip(Stored::New)),
+                Some(Handled::Trip(Stored::Duplicate)),
+                None,
+                None,
+                None,
+            ],
+            "{}",
+            engine.label()
+        );
+        let stats = &ingest.stats;
+        assert_eq!(
+            (
+                stats.inventories,
+                stats.trips,
+                stats.duplicates,
+                stats.rejected
+            ),
+            (1, 1, 1, 3)
+        );
+        let reasons: Vec<&String> = stats.last_rejections.iter().collect();
+        assert!(
+            reasons[0].contains(&format!("naming VIN \"{other}\" on {vin}'s topic")),
+            "{reasons:?}"
+        );
+        assert!(reasons[1].contains("not valid"), "{reasons:?}");
+        assert!(
+            reasons[2].contains("no report kind \"selfie\""),
+            "{reasons:?}"
+        );
+        let summary = ingest.store.summary().unwrap();
+        assert_eq!(
+            (summary.vehicles, summary.trips),
+            (1, 1),
+            "{}",
+            engine.label()
+        );
+    }
+}
+
+/// Serialising the two report types through one closure.
+mod erased {
+    pub trait Json {
+        fn json(&self) -> Vec<u8>;
+    }
+    impl<T: serde::Serialize> Json for T {
+        fn json(&self) -> Vec<u8> {
+            serde_json::to_vec(self).unwrap()
+        }
+    }
+}
