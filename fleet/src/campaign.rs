@@ -98,6 +98,11 @@ fn unhex<const N: usize>(text: &str) -> Option<[u8; N]> {
     Some(out)
 }
 
+/// Now, ms since the Unix epoch (the clock instructions and reports are stamped with).
+pub fn now_ms() -> i64 {
+    crate::unix_ms()
+}
+
 /// SHA-256 of `bytes`, lower-case hex (an image's name on the broker).
 pub fn sha256_hex(bytes: &[u8]) -> String {
     use sha2::Digest;

@@ -20,6 +20,12 @@ pub const PREFIX: &str = "autoplug/v1";
 /// reports between them and each report is stored by one.
 pub const REPORTS_SHARED: &str = "$share/autoplug-fleet/autoplug/v1/vehicles/+/report/#";
 
+/// The shared subscription of the fleet services in `group` (services of one group split
+/// the reports; each group gets all of them).
+pub fn reports_shared(group: &str) -> String {
+    format!("$share/{group}/{REPORTS}")
+}
+
 /// The same without sharing (a broker without shared subscriptions, one service).
 pub const REPORTS: &str = "autoplug/v1/vehicles/+/report/#";
 

@@ -229,6 +229,10 @@ pub enum Command {
     /// The trips in the database.
     #[command(subcommand)]
     Trips(TripsCommand),
+    /// The fleet: recall queries, update campaigns, the fleet service and the broker's
+    /// configuration (PostgreSQL or SQLite, MQTT).
+    #[command(subcommand)]
+    Fleet(crate::fleet_cli::FleetCommand),
     /// Log files.
     #[command(subcommand)]
     Log(LogCommand),
@@ -541,6 +545,8 @@ pub enum CliError {
     Demo(String),
     /// A log could not be replayed.
     Log(String),
+    /// A fleet command failed (database, broker, campaign).
+    Fleet(String),
     /// The diagnosis judged at least one ECU faulty (exit status 3; the report was
     /// printed).
     FaultyEcu(String),
@@ -550,7 +556,7 @@ impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             CliError::Demo(why) => write!(f, "demonstration: {why}"),
-            CliError::Log(why) => f.write_str(why),
+            CliError::Log(why) | CliError::Fleet(why) => f.write_str(why),
             CliError::FaultyEcu(which) => write!(f, "faulty: {which}"),
             CliError::Image(error) => error.fmt(f),
             CliError::Transport(error) => error.fmt(f),
@@ -849,6 +855,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             };
             gateway(&bus, options, out)
         }
+        Command::Fleet(command) => crate::fleet_cli::run(command, out).map_err(CliError::Fleet),
         Command::Trips(TripsCommand::List { db, vehicle, json }) => {
             let store = open_existing_store(&db)?;
             let rows = store
@@ -1488,5 +1495,18 @@ pub fn main() -> ExitCode {
             eprintln!("autoplug: error: {error}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// clap's own consistency checks over every subcommand (unique names, valid
+    /// defaults...), which otherwise fire only when that subcommand is used.
+    #[test]
+    fn the_command_line_is_consistent() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
     }
 }

@@ -44,6 +44,7 @@ pub mod dashboard;
 pub mod demo;
 pub mod driver;
 pub mod driving;
+pub mod fleet_cli;
 pub mod gateway;
 pub mod image_tool;
 pub mod live;

@@ -1,0 +1,746 @@
+//! `autoplug fleet …`: the manufacturer's side of recall management. The fleet service
+//! (`serve`: vehicles' reports from the broker into the database, campaign instructions
+//! out), the recall queries, the campaigns, and the broker's configuration.
+//!
+//! The database is PostgreSQL (`postgresql://…`, the server any number of services share)
+//! or an SQLite file (one machine, the default); the broker any MQTT 3.1.1 broker.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use autoplug_fleet::broker;
+use autoplug_fleet::campaigns::{CampaignInfo, CampaignSpec, Target};
+use autoplug_fleet::ingest::Ingest;
+use autoplug_fleet::mqtt::{Broker, LinkOptions, MqttLink};
+use autoplug_fleet::{topics, EvidenceQuery, Finding, FleetStore, InventoryQuery};
+use autoplug_image::{SigningKey, Version};
+use clap::{Args, Subcommand};
+
+/// The database by default: an SQLite file in the working directory.
+pub const DEFAULT_DB: &str = "fleet.db";
+
+/// Where the fleet's data is.
+#[derive(Debug, Args, Clone)]
+pub struct DbArgs {
+    /// The fleet database: postgresql://USER@HOST:PORT/DB (PostgreSQL) or an SQLite file.
+    #[arg(long, value_name = "ADDRESS", env = "AUTOPLUG_FLEET_DB", default_value = DEFAULT_DB)]
+    pub db: String,
+}
+
+/// The broker.
+#[derive(Debug, Args, Clone)]
+pub struct BrokerArgs {
+    /// The MQTT broker: mqtt://[USER[:PASSWORD]@]HOST[:PORT].
+    #[arg(long, value_name = "URL", env = "AUTOPLUG_BROKER", default_value = autoplug_fleet::mqtt::DEFAULT_BROKER, value_parser = parse_broker)]
+    pub broker: Broker,
+    /// Read the broker password from this file (instead of the URL, which others may see).
+    #[arg(long, value_name = "FILE")]
+    pub broker_password_file: Option<PathBuf>,
+}
+
+fn parse_broker(text: &str) -> Result<Broker, String> {
+    text.parse()
+}
+
+impl BrokerArgs {
+    fn broker(&self) -> Result<Broker, String> {
+        let mut broker = self.broker.clone();
+        if let Some(path) = &self.broker_password_file {
+            let password = std::fs::read_to_string(path)
+                .map_err(|e| format!("cannot read '{}': {e}", path.display()))?;
+            broker.password = Some(password.trim_end_matches(['\r', '\n']).to_string());
+        }
+        Ok(broker)
+    }
+}
+
+/// What a recall asks for by inventory.
+#[derive(Debug, Args, Clone, Default)]
+pub struct InventoryArgs {
+    /// The ECU (engine, cruise, abs...).
+    #[arg(long, value_name = "NAME")]
+    pub ecu: Option<String>,
+    /// Its part number, exactly.
+    #[arg(long, value_name = "TEXT")]
+    pub part_number: Option<String>,
+    /// Lowest software version, inclusive (MAJOR.MINOR.PATCH).
+    #[arg(long, value_name = "VERSION")]
+    pub software_from: Option<Version>,
+    /// Highest software version, inclusive.
+    #[arg(long, value_name = "VERSION")]
+    pub software_to: Option<Version>,
+    /// The hardware version, exactly.
+    #[arg(long, value_name = "TEXT")]
+    pub hardware: Option<String>,
+    /// Lowest serial number, inclusive (serials compare as text).
+    #[arg(long, value_name = "TEXT")]
+    pub serial_from: Option<String>,
+    /// Highest serial number, inclusive.
+    #[arg(long, value_name = "TEXT")]
+    pub serial_to: Option<String>,
+}
+
+impl InventoryArgs {
+    fn query(&self) -> InventoryQuery {
+        InventoryQuery {
+            ecu: self.ecu.clone(),
+            part_number: self.part_number.clone(),
+            software_from: self.software_from,
+            software_to: self.software_to,
+            hardware_version: self.hardware.clone(),
+            serial_from: self.serial_from.clone(),
+            serial_to: self.serial_to.clone(),
+        }
+    }
+}
+
+/// What a recall asks for by evidence.
+#[derive(Debug, Args, Clone, Default)]
+pub struct EvidenceArgs {
+    /// Vehicles whose ECU was judged faulty at the end of a trip.
+    #[arg(long, conflicts_with = "dtc")]
+    pub faulty: bool,
+    /// Vehicles whose ECU raised this trouble code (U0140, or U0140-87 for one failure
+    /// type).
+    #[arg(long, value_name = "CODE")]
+    pub dtc: Option<String>,
+    /// Only this ECU's evidence.
+    #[arg(long, value_name = "NAME")]
+    pub evidence_ecu: Option<String>,
+    /// From this time, ms since the Unix epoch (default: the beginning).
+    #[arg(long, value_name = "MS", default_value_t = 0)]
+    pub since_ms: i64,
+    /// Until this time, exclusive (default: no end).
+    #[arg(long, value_name = "MS", default_value_t = i64::MAX)]
+    pub until_ms: i64,
+}
+
+impl EvidenceArgs {
+    fn query(&self) -> Option<EvidenceQuery> {
+        let finding = match (&self.dtc, self.faulty) {
+            (Some(code), _) => Finding::Dtc(code.clone()),
+            (None, true) => Finding::Faulty,
+            (None, false) => return None,
+        };
+        Some(EvidenceQuery {
+            finding,
+            ecu: self.evidence_ecu.clone(),
+            since_ms: self.since_ms,
+            until_ms: self.until_ms,
+        })
+    }
+}
+
+/// `autoplug fleet` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum FleetCommand {
+    /// The fleet service: stores the vehicles' reports from the broker, sends the
+    /// campaigns' instructions (signed with --key). Any number may run on one database
+    /// and broker (they share the reports). Runs until Ctrl-C.
+    Serve {
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+        /// The broker.
+        #[command(flatten)]
+        broker: BrokerArgs,
+        /// The fleet's signing key (from `autoplug keygen`): campaign instructions are
+        /// signed with it. Without one, no instruction is sent.
+        #[arg(long, value_name = "FILE.key")]
+        key: Option<PathBuf>,
+        /// Seconds between two passes over the campaigns.
+        #[arg(long, value_name = "SECONDS", default_value_t = 1.0)]
+        tick: f64,
+        /// Stop after this many seconds.
+        #[arg(long, value_name = "SECONDS")]
+        duration: Option<f64>,
+        /// The service's MQTT client id (unique per service).
+        #[arg(long, value_name = "ID", default_value = "autoplug-fleet")]
+        client_id: String,
+        /// The services that split the reports between them (a shared subscription).
+        #[arg(long, value_name = "NAME", default_value = "autoplug-fleet")]
+        group: String,
+        /// Keep no session at the broker (a one-off run or a test): reports published
+        /// while the service is down are then not kept for it.
+        #[arg(long)]
+        clean_session: bool,
+    },
+    /// Recall by inventory: the vehicles carrying what is described, each with the ECU
+    /// that matched.
+    Recall {
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+        /// What the vehicles carry.
+        #[command(flatten)]
+        query: InventoryArgs,
+        /// JSON for scripts.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Recall by evidence: the vehicles whose ECU was judged faulty, or raised a trouble
+    /// code, in a period, with every piece of evidence.
+    Evidence {
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+        /// What their drives showed.
+        #[command(flatten)]
+        query: EvidenceArgs,
+        /// JSON for scripts.
+        #[arg(long)]
+        json: bool,
+    },
+    /// One vehicle's inventory.
+    Vehicle {
+        /// The VIN.
+        vin: String,
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+    },
+    /// Update campaigns.
+    #[command(subcommand)]
+    Campaign(CampaignCommand),
+    /// The broker's configuration.
+    #[command(subcommand)]
+    Broker(BrokerCommand),
+}
+
+/// `autoplug fleet campaign` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum CampaignCommand {
+    /// Create a campaign: a signed image for one ECU, the vehicles the target finds (by
+    /// inventory, by evidence, or listed), rolled out in stages. Publishes the image to the
+    /// broker; `fleet serve` sends the instructions.
+    Create {
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+        /// The broker.
+        #[command(flatten)]
+        broker: BrokerArgs,
+        /// Its name (unique).
+        #[arg(long)]
+        name: String,
+        /// The ECU it updates.
+        #[arg(long = "for", value_name = "ECU")]
+        for_ecu: String,
+        /// The signed image.
+        #[arg(long, value_name = "FILE")]
+        image: PathBuf,
+        /// What the vehicles carry.
+        #[command(flatten)]
+        inventory: InventoryArgs,
+        /// What their drives showed.
+        #[command(flatten)]
+        evidence: EvidenceArgs,
+        /// These vehicles, by VIN (comma-separated).
+        #[arg(long, value_name = "VIN,...", value_delimiter = ',')]
+        vins: Vec<String>,
+        /// Cumulative shares per stage, percent (e.g. 10,100: a tenth first, then all).
+        #[arg(
+            long,
+            value_name = "PERCENT,...",
+            value_delimiter = ',',
+            default_value = "10,100"
+        )]
+        stages: Vec<f64>,
+        /// Pause when a stage's failures pass this share (0 to 1).
+        #[arg(long, value_name = "SHARE", default_value_t = 0.2)]
+        failure_threshold: f64,
+        /// Instructions per vehicle at most (the first and the retries).
+        #[arg(long, value_name = "N", default_value_t = 3)]
+        max_attempts: u32,
+        /// Seconds a vehicle may take to answer an instruction before it is sent again.
+        #[arg(long, value_name = "SECONDS", default_value_t = 3600.0)]
+        answer_within: f64,
+        /// Days an instruction holds.
+        #[arg(long, value_name = "DAYS", default_value_t = 30.0)]
+        valid_days: f64,
+        /// What the driver is told.
+        #[arg(long, default_value = "")]
+        message: String,
+    },
+    /// The campaigns, or one with its vehicles.
+    Status {
+        /// A campaign's number or name (default: all, briefly).
+        campaign: Option<String>,
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+        /// JSON for scripts.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Pause a running campaign.
+    Pause {
+        /// Its number.
+        campaign: i64,
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+    },
+    /// Resume a paused campaign.
+    Resume {
+        /// Its number.
+        campaign: i64,
+        /// The fleet database.
+        #[command(flatten)]
+        db: DbArgs,
+    },
+}
+
+/// `autoplug fleet broker` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum BrokerCommand {
+    /// Write a Mosquitto configuration for a fleet (logins, per-vehicle ACL, persistent
+    /// sessions) into a directory: run `mosquitto -c DIR/mosquitto.conf`.
+    Init {
+        /// The directory (created).
+        #[arg(long, value_name = "DIR")]
+        dir: PathBuf,
+        /// Where the broker listens.
+        #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:1883")]
+        listen: std::net::SocketAddr,
+    },
+    /// Add a login: a vehicle (its VIN) or a fleet service (autoplug-fleet). Prints the
+    /// password once unless --password-file names one to use.
+    Add {
+        /// The directory of `broker init`.
+        #[arg(long, value_name = "DIR")]
+        dir: PathBuf,
+        /// The user: a VIN, or autoplug-fleet.
+        #[arg(long)]
+        user: String,
+        /// Use the password in this file.
+        #[arg(long, value_name = "FILE")]
+        password_file: Option<PathBuf>,
+    },
+}
+
+fn open(db: &DbArgs) -> Result<FleetStore, String> {
+    FleetStore::open(&db.db).map_err(|e| e.to_string())
+}
+
+fn json(value: &impl serde::Serialize) -> Result<String, String> {
+    serde_json::to_string_pretty(value).map_err(|e| e.to_string())
+}
+
+fn read_key(path: &Path) -> Result<SigningKey, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read the key '{}': {e}", path.display()))?;
+    SigningKey::parse(&text).map_err(|e| format!("'{}': {e}", path.display()))
+}
+
+/// Carries out `autoplug fleet …`.
+pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
+    let io = |e: std::io::Error| format!("cannot write the output: {e}");
+    match command {
+        FleetCommand::Serve {
+            db,
+            broker,
+            key,
+            tick,
+            duration,
+            client_id,
+            group,
+            clean_session,
+        } => {
+            let mut options = LinkOptions::new(client_id);
+            options.persistent_session = !clean_session;
+            options.manual_acks = true;
+            if group.is_empty() || group.contains(['/', '+', '#']) {
+                return Err(format!("'{group}' cannot name a group (no '/', '+', '#')"));
+            }
+            options.subscriptions = vec![topics::reports_shared(&group)];
+            serve(&db, &broker, key.as_deref(), tick, duration, options, out)
+        }
+        FleetCommand::Recall {
+            db,
+            query,
+            json: as_json,
+        } => {
+            let hits = open(&db)?
+                .recall_by_inventory(&query.query())
+                .map_err(|e| e.to_string())?;
+            if as_json {
+                writeln!(out, "{}", json(&hits)?).map_err(io)?;
+                return Ok(());
+            }
+            writeln!(
+                out,
+                "{:<17} {:<13} {:<16} {:<9} {:<16} serial",
+                "VIN", "ECU", "part number", "software", "hardware"
+            )
+            .map_err(io)?;
+            for h in &hits {
+                let o = |v: &Option<String>| v.clone().unwrap_or_else(|| "-".into());
+                writeln!(
+                    out,
+                    "{:<17} {:<13} {:<16} {:<9} {:<16} {}",
+                    h.vin,
+                    h.ecu,
+                    o(&h.part_number),
+                    o(&h.software_version),
+                    o(&h.hardware_version),
+                    o(&h.serial)
+                )
+                .map_err(io)?;
+            }
+            let vehicles: std::collections::BTreeSet<&str> =
+                hits.iter().map(|h| h.vin.as_str()).collect();
+            writeln!(out, "{} vehicle(s)", vehicles.len()).map_err(io)?;
+            Ok(())
+        }
+        FleetCommand::Evidence {
+            db,
+            query,
+            json: as_json,
+        } => {
+            let query = query
+                .query()
+                .ok_or("name the evidence: --faulty or --dtc CODE")?;
+            let hits = open(&db)?
+                .recall_by_evidence(&query)
+                .map_err(|e| e.to_string())?;
+            if as_json {
+                writeln!(out, "{}", json(&hits)?).map_err(io)?;
+                return Ok(());
+            }
+            for hit in &hits {
+                writeln!(out, "{}", hit.vin).map_err(io)?;
+                for e in &hit.evidence {
+                    writeln!(
+                        out,
+                        "  trip {:<6} {:<13} {}: {}",
+                        e.trip, e.ecu, e.what, e.detail
+                    )
+                    .map_err(io)?;
+                }
+            }
+            writeln!(out, "{} vehicle(s)", hits.len()).map_err(io)?;
+            Ok(())
+        }
+        FleetCommand::Vehicle { vin, db } => {
+            autoplug_vin::Vin::parse(&vin).map_err(|e| format!("VIN \"{vin}\": {e}"))?;
+            let rows = open(&db)?
+                .vehicle_inventory(&vin)
+                .map_err(|e| e.to_string())?;
+            if rows.is_empty() {
+                return Err(format!("the fleet knows no vehicle {vin}"));
+            }
+            writeln!(out, "{}", json(&rows)?).map_err(io)?;
+            Ok(())
+        }
+        FleetCommand::Campaign(command) => campaign(command, out),
+        FleetCommand::Broker(BrokerCommand::Init { dir, listen }) => {
+            let files = broker::init(&dir, &listen.ip().to_string(), listen.port())?;
+            writeln!(
+                out,
+                "wrote {} (with the ACL and an empty password file)\nadd logins with: autoplug fleet broker add --dir {} --user VIN\nrun it with: mosquitto -c {}",
+                files.config.display(),
+                dir.display(),
+                files.config.display()
+            )
+            .map_err(io)?;
+            Ok(())
+        }
+        FleetCommand::Broker(BrokerCommand::Add {
+            dir,
+            user,
+            password_file,
+        }) => {
+            if user != broker::FLEET_USER {
+                autoplug_vin::Vin::parse(&user).map_err(|e| {
+                    format!("'{user}' is neither a VIN ({e}) nor {}", broker::FLEET_USER)
+                })?;
+            }
+            let (password, show) = match password_file {
+                Some(path) => (
+                    std::fs::read_to_string(&path)
+                        .map_err(|e| format!("cannot read '{}': {e}", path.display()))?
+                        .trim_end_matches(['\r', '\n'])
+                        .to_string(),
+                    false,
+                ),
+                None => (broker::random_password()?, true),
+            };
+            broker::add_login(&broker::BrokerDir::at(&dir), &user, &password)?;
+            writeln!(out, "added {user} (a running broker reads it on SIGHUP)").map_err(io)?;
+            if show {
+                writeln!(out, "password: {password}").map_err(io)?;
+            }
+            Ok(())
+        }
+    }
+}
+
+fn campaign(command: CampaignCommand, out: &mut dyn Write) -> Result<(), String> {
+    let io = |e: std::io::Error| format!("cannot write the output: {e}");
+    match command {
+        CampaignCommand::Create {
+            db,
+            broker,
+            name,
+            for_ecu,
+            image,
+            inventory,
+            evidence,
+            vins,
+            stages,
+            failure_threshold,
+            max_attempts,
+            answer_within,
+            valid_days,
+            message,
+        } => {
+            let bytes = std::fs::read(&image)
+                .map_err(|e| format!("cannot read the image '{}': {e}", image.display()))?;
+            let by_inventory = inventory.query() != InventoryQuery::default();
+            let target = match (by_inventory, evidence.query(), vins.is_empty()) {
+                (true, None, true) => Target::Inventory(inventory.query()),
+                (false, Some(query), true) => Target::Evidence(query),
+                (false, None, false) => Target::Vins(vins),
+                (false, None, true) => {
+                    return Err("name the vehicles: inventory filters (--ecu, --part-number, --software-from...), evidence (--faulty, --dtc) or --vins".into())
+                }
+                _ => return Err("one target at a time: inventory filters, evidence or --vins".into()),
+            };
+            if !(answer_within.is_finite()
+                && answer_within > 0.0
+                && valid_days.is_finite()
+                && valid_days > 0.0)
+            {
+                return Err("--answer-within and --valid-days must be positive".into());
+            }
+            let mut spec = CampaignSpec::new(&name, &for_ecu, bytes, target);
+            spec.stages = stages;
+            spec.failure_threshold = failure_threshold;
+            spec.max_attempts = max_attempts;
+            spec.answer_within_ms = (answer_within * 1000.0) as i64;
+            spec.valid_for_ms = (valid_days * 86_400_000.0) as i64;
+            spec.message = message;
+            // The image first: an instruction must never name an image vehicles cannot get.
+            let sha = autoplug_fleet::campaign::sha256_hex(&spec.image);
+            publish_image(&broker.broker()?, &sha, &spec.image)?;
+            let mut store = open(&db)?;
+            let created = store
+                .create_campaign(&spec, autoplug_fleet::campaign::now_ms())
+                .map_err(|e| e.to_string())?;
+            let stages = spec.stages.len();
+            writeln!(
+                out,
+                "campaign {} '{}': {} vehicle(s) in {stages} stage(s); image {sha} published",
+                created.id,
+                name,
+                created.vehicles.len()
+            )
+            .map_err(io)?;
+            Ok(())
+        }
+        CampaignCommand::Status {
+            campaign,
+            db,
+            json: as_json,
+        } => {
+            let mut store = open(&db)?;
+            match campaign {
+                None => {
+                    let all = store.campaigns().map_err(|e| e.to_string())?;
+                    if as_json {
+                        writeln!(out, "{}", json(&all)?).map_err(io)?;
+                    } else if all.is_empty() {
+                        writeln!(out, "no campaigns").map_err(io)?;
+                    } else {
+                        for c in &all {
+                            campaign_line(c, out).map_err(io)?;
+                        }
+                    }
+                }
+                Some(which) => {
+                    let info = store.campaign(&which).map_err(|e| e.to_string())?;
+                    let vehicles = store
+                        .campaign_vehicles(info.id)
+                        .map_err(|e| e.to_string())?;
+                    if as_json {
+                        let value = serde_json::json!({ "campaign": info, "vehicles": vehicles });
+                        writeln!(out, "{}", json(&value)?).map_err(io)?;
+                        return Ok(());
+                    }
+                    campaign_line(&info, out).map_err(io)?;
+                    writeln!(
+                        out,
+                        "{:<17} {:>5} {:<11} {:>8} {:<9} reason",
+                        "VIN", "stage", "state", "attempts", "running"
+                    )
+                    .map_err(io)?;
+                    for v in &vehicles {
+                        writeln!(
+                            out,
+                            "{:<17} {:>5} {:<11} {:>8} {:<9} {}",
+                            v.vin,
+                            v.stage + 1,
+                            v.state.name(),
+                            v.attempts,
+                            v.version_running.as_deref().unwrap_or("-"),
+                            v.reason.as_deref().unwrap_or("")
+                        )
+                        .map_err(io)?;
+                    }
+                }
+            }
+            Ok(())
+        }
+        CampaignCommand::Pause { campaign, db } => {
+            open(&db)?
+                .pause_campaign(campaign)
+                .map_err(|e| e.to_string())?;
+            writeln!(out, "campaign {campaign} paused").map_err(io)?;
+            Ok(())
+        }
+        CampaignCommand::Resume { campaign, db } => {
+            open(&db)?
+                .resume_campaign(campaign)
+                .map_err(|e| e.to_string())?;
+            writeln!(out, "campaign {campaign} resumed").map_err(io)?;
+            Ok(())
+        }
+    }
+}
+
+fn campaign_line(c: &CampaignInfo, out: &mut dyn Write) -> std::io::Result<()> {
+    let counts: Vec<String> = c.counts.iter().map(|(s, n)| format!("{n} {s}")).collect();
+    writeln!(
+        out,
+        "campaign {} '{}': {} {} for {} vehicle(s), {:?}, stage {} of {}{}: {}",
+        c.id,
+        c.name,
+        c.ecu,
+        c.version,
+        c.vehicles,
+        c.state,
+        c.stage + 1,
+        c.stages.len(),
+        c.paused_reason
+            .as_ref()
+            .map_or(String::new(), |r| format!(" ({r})")),
+        counts.join(", ")
+    )
+}
+
+/// A runtime for the fleet's MQTT connections (two workers: the connections only move
+/// bytes).
+pub fn mqtt_runtime() -> Result<tokio::runtime::Runtime, String> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name("mqtt")
+        .enable_all()
+        .build()
+        .map_err(|e| format!("cannot start the MQTT runtime: {e}"))
+}
+
+/// Publishes an image, retained, at its SHA-256's topic; waits until the broker has it.
+fn publish_image(broker: &Broker, sha: &str, image: &[u8]) -> Result<(), String> {
+    let runtime = mqtt_runtime()?;
+    let link = MqttLink::connect(
+        runtime.handle(),
+        broker,
+        LinkOptions::new(format!("autoplug-fleet-publisher-{}", std::process::id())),
+    );
+    link.wait_connected(Duration::from_secs(10))
+        .map_err(|e| e.to_string())?;
+    link.publish(&topics::image(sha), image.to_vec(), true)
+        .map_err(|e| e.to_string())?;
+    link.close(Duration::from_secs(10));
+    Ok(())
+}
+
+fn serve(
+    db: &DbArgs,
+    broker: &BrokerArgs,
+    key: Option<&Path>,
+    tick: f64,
+    duration: Option<f64>,
+    options: LinkOptions,
+    out: &mut dyn Write,
+) -> Result<(), String> {
+    let io = |e: std::io::Error| format!("cannot write the output: {e}");
+    if !(tick.is_finite() && (0.01..=3600.0).contains(&tick)) {
+        return Err("--tick is 0.01 to 3600 seconds".into());
+    }
+    let key = key.map(read_key).transpose()?;
+    let store = open(db)?;
+    let runtime = mqtt_runtime()?;
+    let broker = broker.broker()?;
+    let link = MqttLink::connect(runtime.handle(), &broker, options);
+    link.wait_connected(Duration::from_secs(10))
+        .map_err(|e| e.to_string())?;
+    writeln!(
+        out,
+        "fleet service: reports from {broker} into {}; campaigns {}",
+        store.name(),
+        if key.is_some() {
+            "sent"
+        } else {
+            "not sent (no --key)"
+        }
+    )
+    .map_err(io)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // A second service or a test may have set a handler: then Ctrl-C just ends.
+        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
+    }
+    let started = Instant::now();
+    let mut ingest = Ingest::new(store, link);
+    let mut last_tick: Option<Instant> = None;
+    let tick = Duration::from_secs_f64(tick);
+    let mut failure: Option<String> = None;
+    while !stop.load(Ordering::Relaxed) {
+        if duration.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+            break;
+        }
+        if let Some(message) = ingest.link.recv_timeout(Duration::from_millis(50)) {
+            ingest.take(&message, &stop);
+        }
+        if let Some(key) = &key {
+            if last_tick.is_none_or(|t| t.elapsed() >= tick) {
+                last_tick = Some(Instant::now());
+                match ingest
+                    .store
+                    .campaign_tick(key, autoplug_fleet::campaign::now_ms())
+                {
+                    Ok(dispatches) => {
+                        for d in dispatches {
+                            if let Err(e) = ingest.link.publish(&d.topic, d.payload, false) {
+                                // The vehicle stays 'sent': its answer time brings a retry.
+                                failure = Some(e.to_string());
+                            }
+                        }
+                    }
+                    Err(e) => failure = Some(e.to_string()),
+                }
+            }
+        }
+    }
+    let s = &ingest.stats;
+    writeln!(
+        out,
+        "stored {} inventories, {} trips ({} duplicates), {} campaign reports; refused {}",
+        s.inventories, s.trips, s.duplicates, s.campaign_reports, s.rejected
+    )
+    .map_err(io)?;
+    for reason in &s.last_rejections {
+        writeln!(out, "  refused: {reason}").map_err(io)?;
+    }
+    if let Some(failure) = failure {
+        writeln!(out, "last campaign error: {failure}").map_err(io)?;
+    }
+    ingest.link.close(Duration::from_secs(5));
+    Ok(())
+}
