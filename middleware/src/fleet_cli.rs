@@ -135,6 +135,8 @@ impl EvidenceArgs {
 }
 
 /// `autoplug fleet` subcommands.
+// Parsed once per run: the size of the largest variant does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Subcommand)]
 pub enum FleetCommand {
     /// The fleet service: stores the vehicles' reports from the broker, sends the
@@ -211,6 +213,7 @@ pub enum FleetCommand {
 }
 
 /// `autoplug fleet campaign` subcommands.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Subcommand)]
 pub enum CampaignCommand {
     /// Create a campaign: a signed image for one ECU, the vehicles the target finds (by
