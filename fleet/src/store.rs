@@ -91,6 +91,22 @@ pub struct InventoryHit {
     pub reported_at_ms: i64,
 }
 
+impl InventoryHit {
+    /// A row of `vin, ecu, part_number, software_version, hardware_version, serial,
+    /// reported_at_ms` (the inventory queries' columns).
+    fn from_row(r: &Row) -> Self {
+        InventoryHit {
+            vin: text(r, 0).unwrap_or_default(),
+            ecu: text(r, 1).unwrap_or_default(),
+            part_number: text(r, 2),
+            software_version: text(r, 3),
+            hardware_version: text(r, 4),
+            serial: text(r, 5),
+            reported_at_ms: int(r, 6),
+        }
+    }
+}
+
 /// What evidence a recall asks for.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -503,18 +519,7 @@ impl FleetStore {
         }
         let (sql, params) = Self::inventory_sql(query);
         let rows = self.db.query(&sql, &params)?;
-        Ok(rows
-            .iter()
-            .map(|r| InventoryHit {
-                vin: text(r, 0).unwrap_or_default(),
-                ecu: text(r, 1).unwrap_or_default(),
-                part_number: text(r, 2),
-                software_version: text(r, 3),
-                hardware_version: text(r, 4),
-                serial: text(r, 5),
-                reported_at_ms: int(r, 6),
-            })
-            .collect())
+        Ok(rows.iter().map(InventoryHit::from_row).collect())
     }
 
     /// The SQL and parameters of an evidence recall.
@@ -632,18 +637,7 @@ impl FleetStore {
              FROM ecus WHERE vin = $1 ORDER BY ecu",
             &[Value::from(vin)],
         )?;
-        Ok(rows
-            .iter()
-            .map(|r| InventoryHit {
-                vin: text(r, 0).unwrap_or_default(),
-                ecu: text(r, 1).unwrap_or_default(),
-                part_number: text(r, 2),
-                software_version: text(r, 3),
-                hardware_version: text(r, 4),
-                serial: text(r, 5),
-                reported_at_ms: int(r, 6),
-            })
-            .collect())
+        Ok(rows.iter().map(InventoryHit::from_row).collect())
     }
 
     /// The fleet in figures.
