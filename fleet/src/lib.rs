@@ -17,6 +17,7 @@ pub mod mqtt;
 pub mod report;
 pub mod store;
 pub mod topics;
+pub mod vehicle;
 
 pub use report::{InventoryReport, ReportError, TripReport};
 pub use store::{
