@@ -27,6 +27,9 @@ pub const GAP_SUSPECT_PERIODS: f64 = 3.0;
 pub const GAP_FAULTY_PERIODS: f64 = 10.0;
 /// An answer to a tester this long before a gap still explains it, µs.
 const DIAG_EXPLAINS_US: u64 = 1_000_000;
+/// The whole bus silent this long is asleep (the ignition off), µs: every ECU sends
+/// something at least every 100 ms while awake.
+pub const BUS_ASLEEP_US: u64 = 1_000_000;
 
 struct Tracked {
     id: u16,
@@ -37,6 +40,8 @@ struct Tracked {
     last_us: Option<u64>,
     longest_gap_periods: f64,
     longest_gap: Option<Window>,
+    /// The bus's asleep time so far at this message's last frame.
+    asleep_at_last_us: u64,
 }
 
 /// The presence routine of one ECU.
@@ -44,6 +49,10 @@ pub struct Presence {
     node: Node,
     tracked: Vec<Tracked>,
     last_response_us: Option<u64>,
+    /// The last frame on the bus, anyone's.
+    last_bus_us: Option<u64>,
+    /// Time the whole bus was asleep so far, µs.
+    asleep_us: u64,
 }
 
 impl Presence {
@@ -61,12 +70,15 @@ impl Presence {
                 last_us: None,
                 longest_gap_periods: 0.0,
                 longest_gap: None,
+                asleep_at_last_us: 0,
             })
             .collect();
         Self {
             node,
             tracked,
             last_response_us: None,
+            last_bus_us: None,
+            asleep_us: 0,
         }
     }
 
@@ -86,6 +98,13 @@ impl Routine for Presence {
     }
 
     fn on_frame(&mut self, frame: &LogFrame, update: Update, _state: &CarState) {
+        if let Some(last) = self.last_bus_us {
+            let silence = frame.t_us.saturating_sub(last);
+            if silence >= BUS_ASLEEP_US {
+                self.asleep_us += silence;
+            }
+        }
+        self.last_bus_us = Some(self.last_bus_us.map_or(frame.t_us, |l| l.max(frame.t_us)));
         match update {
             Update::Diagnostic if self.is_response_of_node(frame.id) => {
                 self.last_response_us = Some(frame.t_us);
@@ -101,7 +120,8 @@ impl Routine for Presence {
                 };
                 let t_us = frame.t_us;
                 if let Some(last) = self.tracked[i].last_us {
-                    let gap = t_us.saturating_sub(last);
+                    let asleep = self.asleep_us - self.tracked[i].asleep_at_last_us;
+                    let gap = t_us.saturating_sub(last).saturating_sub(asleep);
                     let periods = gap as f64 / self.tracked[i].period_us as f64;
                     let track = &self.tracked[i];
                     if periods > track.longest_gap_periods
@@ -118,6 +138,7 @@ impl Routine for Presence {
                 }
                 let track = &mut self.tracked[i];
                 track.count += 1;
+                track.asleep_at_last_us = self.asleep_us;
                 track.first_us.get_or_insert(t_us);
                 track.last_us = Some(track.last_us.map_or(t_us, |l| l.max(t_us)));
             }

@@ -172,6 +172,46 @@ fn an_ecu_that_stops_mid_log_is_no_data_and_a_gap_is_faulty() {
     assert!(gap.value.unwrap() > 70.0, "{gap:?}");
 }
 
+#[test]
+fn the_whole_bus_asleep_is_the_ignition_off_not_a_gap() {
+    // Engine and cruise for 1 s, the whole bus silent for 6 s (the ignition off), both
+    // again for 1 s: nobody is blamed.
+    let engine = |_| {
+        EngineMsg {
+            engine_rpm: 900.0,
+            fuel_level: 30.0,
+            engine_mode: EngineMode::Economy,
+            fuel_used: 0.0,
+        }
+        .frame()
+    };
+    let speed = |_| VehicleSpeedMsg { vehicle_speed: 0.0 }.frame();
+    let shifted = |frames: Vec<LogFrame>, by_us: u64| {
+        frames.into_iter().map(move |mut f| {
+            f.t_us += by_us;
+            f
+        })
+    };
+    let mut frames = every(20, 1000, engine);
+    frames.extend(every(10, 1000, speed));
+    frames.extend(shifted(every(20, 1000, engine), 7_000_000));
+    frames.extend(shifted(every(10, 1000, speed), 7_000_000));
+    frames.sort_by_key(|f| f.t_us);
+    let f = run(frames.clone(), crate::presence::ROUTINE);
+    assert_eq!(f.verdict, Verdict::Ok, "{f:?}");
+
+    // The engine alone missing while the rest of the bus is awake is still a gap.
+    let mut frames: Vec<LogFrame> = frames
+        .into_iter()
+        .filter(|f| f.t_us < 7_000_000 || f.id != u32::from(EngineMsg::ID))
+        .collect();
+    frames.extend(shifted(every(10, 6000, speed), 1_000_000));
+    frames.extend(shifted(every(20, 1000, engine), 7_500_000));
+    frames.sort_by_key(|f| f.t_us);
+    let f = run(frames, crate::presence::ROUTINE);
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+}
+
 fn differential_frames(split: f32, speed: f32, steering: f32, error: f32) -> Vec<LogFrame> {
     use autoplug_can::{AbsMsg, DiffMsg, SteeringMsg, YawErrorMsg};
     let mut frames = every(10, 2000, |_| {

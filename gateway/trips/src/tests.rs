@@ -187,6 +187,72 @@ fn a_silent_bus_ends_the_trip_and_the_next_frames_begin_another() {
     assert_eq!(trips[1].stats.max_speed_kmh, 72.0);
 }
 
+/// Frames, then a silent bus whose clock runs on (the virtual car with its ECUs asleep).
+struct FallsAsleep {
+    frames: std::vec::IntoIter<LogFrame>,
+    clock_us: u64,
+}
+
+impl autoplug_gateway::FrameSource for FallsAsleep {
+    fn poll(
+        &mut self,
+        _max_wait: std::time::Duration,
+    ) -> Result<autoplug_gateway::Poll, autoplug_gateway::SourceError> {
+        Ok(match self.frames.next() {
+            Some(frame) => {
+                self.clock_us = frame.t_us;
+                autoplug_gateway::Poll::Frame(frame)
+            }
+            None => {
+                self.clock_us += 5_000;
+                autoplug_gateway::Poll::Idle
+            }
+        })
+    }
+
+    fn describe(&self) -> String {
+        "a bus that falls asleep".into()
+    }
+
+    fn clock_us(&self) -> Option<u64> {
+        Some(self.clock_us)
+    }
+}
+
+#[test]
+fn a_silence_ends_the_trip_on_the_sources_clock_without_another_frame() {
+    let frames: Vec<LogFrame> = (0..2000).step_by(10).map(|t| at(t, speed(36.0))).collect();
+    let mut source = FallsAsleep {
+        frames: frames.into_iter(),
+        clock_us: 0,
+    };
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut tracker = TripTracker::new();
+    // 4.9 s of silence: the trip goes on.
+    let mut polls = 0;
+    pipeline
+        .run(&mut source, &mut [&mut tracker], &mut || {
+            polls += 1;
+            polls > 200 + 980
+        })
+        .unwrap();
+    assert!(tracker.take_completed().is_empty());
+    assert!(tracker.current().is_some());
+    // Past 5 s it ends, with no frame to show the gap.
+    let mut polls = 0;
+    pipeline
+        .run(&mut source, &mut [&mut tracker], &mut || {
+            polls += 1;
+            polls > 30
+        })
+        .unwrap();
+    let trips = tracker.take_completed();
+    assert_eq!(trips.len(), 1);
+    assert_eq!(trips[0].end, TripEnd::BusSilent);
+    assert_eq!(trips[0].stats.end_us, 1_990_000);
+    assert!(tracker.current().is_none());
+}
+
 #[test]
 fn the_fuel_counter_wraps_and_a_restarted_ecu_counts_from_zero() {
     let mut frames = Vec::new();

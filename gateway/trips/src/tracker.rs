@@ -282,6 +282,18 @@ impl TripTracker {
 }
 
 impl Observer for TripTracker {
+    /// A source with a clock of its own (the virtual car, a live bus) tells the time while
+    /// no frame comes: a silence of [`SILENT_AFTER_US`] ends the trip then, the same trip
+    /// the next frame's gap would have ended.
+    fn on_idle(&mut self, state: &CarState) {
+        if let Some(open) = self.open.as_ref() {
+            if state.now_us().saturating_sub(open.last_powertrain_us) >= SILENT_AFTER_US {
+                let end_us = open.last_active_us;
+                self.close(TripEnd::BusSilent, end_us);
+            }
+        }
+    }
+
     fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
         let t = frame.t_us;
         if let Some(open) = self.open.as_ref() {
