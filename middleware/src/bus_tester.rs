@@ -28,6 +28,9 @@ use crate::tester::{
 pub enum UserJob {
     /// Flash an image.
     Flash(Box<FlashJob>),
+    /// Flash an image for the fleet's update campaign: its outcome goes to the fleet's
+    /// agent ([`BusTester::take_fleet_outcome`]), not to the user's.
+    FleetFlash(Box<FlashJob>),
     /// Clear trouble codes.
     Clear(Box<ClearDtcsJob>),
 }
@@ -41,11 +44,15 @@ pub enum JobOutcome {
     Cleared(Vec<EcuClearReport>),
 }
 
+/// How a flash ended, for its ECU.
+pub type FlashOutcome = (Node, Result<FlashReport, Box<FlashError>>);
+
 /// What the tester is doing.
 enum Current {
     Ident(Box<IdentJob>),
     Dtcs(Box<DtcJob>),
-    Flash(Box<FlashJob>),
+    /// A flash, and whether the fleet asked for it.
+    Flash(Box<FlashJob>, bool),
     Clear(Box<ClearDtcsJob>),
     Idle,
 }
@@ -65,6 +72,7 @@ pub struct BusTester {
     current: Current,
     queued: VecDeque<UserJob>,
     outcomes: VecDeque<JobOutcome>,
+    fleet_outcomes: VecDeque<FlashOutcome>,
     dtc_interval_us: u64,
     next_dtc_us: Option<u64>,
     /// Read the identification again when idle (after a flash).
@@ -89,6 +97,7 @@ impl BusTester {
             current: Current::Ident(Box::new(IdentJob::new(ecus, config))),
             queued: VecDeque::new(),
             outcomes: VecDeque::new(),
+            fleet_outcomes: VecDeque::new(),
             dtc_interval_us,
             next_dtc_us: None,
             reidentify: false,
@@ -107,9 +116,10 @@ impl BusTester {
     /// Queues a user's job: it runs when the job under way ends. Refused (with the reason)
     /// when [`MAX_QUEUED_JOBS`] wait already, or a flash is asked while one runs or waits.
     pub fn queue(&mut self, job: UserJob) -> Result<(), String> {
-        let flashing = matches!(self.current, Current::Flash(_))
-            || self.queued.iter().any(|j| matches!(j, UserJob::Flash(_)));
-        if matches!(job, UserJob::Flash(_)) && flashing {
+        let is_flash = |j: &UserJob| matches!(j, UserJob::Flash(_) | UserJob::FleetFlash(_));
+        let flashing =
+            matches!(self.current, Current::Flash(..)) || self.queued.iter().any(is_flash);
+        if is_flash(&job) && flashing {
             return Err("a flash is already under way: wait for its end".into());
         }
         if self.queued.len() >= MAX_QUEUED_JOBS {
@@ -124,10 +134,15 @@ impl BusTester {
         self.outcomes.pop_front()
     }
 
+    /// How the fleet's flashes ended, oldest first (taken).
+    pub fn take_fleet_outcome(&mut self) -> Option<FlashOutcome> {
+        self.fleet_outcomes.pop_front()
+    }
+
     /// The flash under way: its ECU and progress.
     pub fn flash_progress(&self) -> Option<(Node, Progress)> {
         match &self.current {
-            Current::Flash(job) => Some((job.ecu(), job.progress())),
+            Current::Flash(job, _) => Some((job.ecu(), job.progress())),
             _ => None,
         }
     }
@@ -137,7 +152,8 @@ impl BusTester {
         match self.current {
             Current::Ident(_) => "reading identification",
             Current::Dtcs(_) => "reading trouble codes",
-            Current::Flash(_) => "flashing",
+            Current::Flash(_, false) => "flashing",
+            Current::Flash(_, true) => "flashing for the fleet's campaign",
             Current::Clear(_) => "clearing trouble codes",
             Current::Idle => "idle",
         }
@@ -212,7 +228,7 @@ impl BusTester {
                 }
                 done
             }
-            Current::Flash(job) => {
+            Current::Flash(job, for_fleet) => {
                 if let Some(frame) = frame {
                     job.on_frame(now, frame);
                 }
@@ -220,8 +236,12 @@ impl BusTester {
                 match job.take_result() {
                     Some(result) => {
                         let ecu = job.ecu();
-                        self.outcomes
-                            .push_back(JobOutcome::Flash(ecu, result.map_err(Box::new)));
+                        let result = result.map_err(Box::new);
+                        if *for_fleet {
+                            self.fleet_outcomes.push_back((ecu, result));
+                        } else {
+                            self.outcomes.push_back(JobOutcome::Flash(ecu, result));
+                        }
                         // The inventory shows the new software, the codes what it did.
                         self.reidentify = true;
                         true
@@ -252,7 +272,8 @@ impl BusTester {
         self.in_flight = 0;
         self.current = if let Some(job) = self.queued.pop_front() {
             match job {
-                UserJob::Flash(job) => Current::Flash(job),
+                UserJob::Flash(job) => Current::Flash(job, false),
+                UserJob::FleetFlash(job) => Current::Flash(job, true),
                 UserJob::Clear(job) => Current::Clear(job),
             }
         } else if std::mem::take(&mut self.reidentify) {

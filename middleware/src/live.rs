@@ -47,6 +47,11 @@ impl VirtualCarSource {
     pub fn car(&self) -> &VirtualCar {
         &self.car
     }
+
+    /// The car, for whoever drives it (a simulated driver of `autoplug fleet simulate`).
+    pub fn car_mut(&mut self) -> &mut VirtualCar {
+        &mut self.car
+    }
 }
 
 /// Simulated time the car runs on a silent bus before its source reports idle (and its
@@ -165,19 +170,24 @@ pub type Outbox = Rc<RefCell<VecDeque<Frame>>>;
 pub const OUTBOX_CAPACITY: usize = 1024;
 
 /// A live source that also sends what the gateway's tester queued, before each poll.
-pub struct Transmitting {
-    inner: Box<dyn FrameSource>,
+pub struct Transmitting<S: FrameSource = Box<dyn FrameSource>> {
+    inner: S,
     outbox: Outbox,
 }
 
-impl Transmitting {
+impl<S: FrameSource> Transmitting<S> {
     /// `inner`, sending what `outbox` holds.
-    pub fn new(inner: Box<dyn FrameSource>, outbox: Outbox) -> Self {
+    pub fn new(inner: S, outbox: Outbox) -> Self {
         Self { inner, outbox }
+    }
+
+    /// The source inside (the virtual car, for whoever drives it).
+    pub fn inner_mut(&mut self) -> &mut S {
+        &mut self.inner
     }
 }
 
-impl FrameSource for Transmitting {
+impl<S: FrameSource> FrameSource for Transmitting<S> {
     fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
         loop {
             let Some(frame) = self.outbox.borrow_mut().pop_front() else {

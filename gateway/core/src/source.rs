@@ -65,6 +65,25 @@ pub trait FrameSource {
     }
 }
 
+/// A boxed source is a source (a wrapper generic over its inner source takes both).
+impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
+    fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
+        (**self).poll(max_wait)
+    }
+
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+
+    fn transmit(&mut self, frame: &autoplug_can::Frame) -> Result<bool, SourceError> {
+        (**self).transmit(frame)
+    }
+
+    fn clock_us(&self) -> Option<u64> {
+        (**self).clock_us()
+    }
+}
+
 /// Frames a log's reading thread hands over at a time.
 const READ_BATCH: usize = 1024;
 /// Batches read ahead at most: memory stays bounded (about 256 KiB of frames) however long
