@@ -15,7 +15,9 @@ pub mod ingest;
 pub mod migrations;
 pub mod mqtt;
 pub mod report;
+pub mod service;
 pub mod store;
+pub mod testing;
 pub mod topics;
 pub mod vehicle;
 
