@@ -15,6 +15,7 @@ use autoplug_fleet::broker;
 use autoplug_fleet::campaigns::{CampaignInfo, CampaignSpec, Target};
 use autoplug_fleet::ingest::Ingest;
 use autoplug_fleet::mqtt::{Broker, LinkOptions, MqttLink};
+use autoplug_fleet::service::FleetService;
 use autoplug_fleet::{topics, EvidenceQuery, Finding, FleetStore, InventoryQuery};
 use autoplug_image::{SigningKey, Version};
 use clap::{Args, Subcommand};
@@ -169,6 +170,44 @@ pub enum FleetCommand {
         /// while the service is down are then not kept for it.
         #[arg(long)]
         clean_session: bool,
+    },
+    /// A fleet to try it on: N virtual cars, each with its gateway reporting to the broker
+    /// (distinct VINs and serials, a mix of software releases, a share with the faulty
+    /// cruise release 1.1.0, varied drives), headless and faster than real time. Between
+    /// two drives the cars stay parked for --park seconds, answering the updates the fleet
+    /// offers (their drivers agree; the ignition goes on for the flash).
+    Simulate {
+        /// How many cars.
+        #[arg(long, value_name = "N", default_value_t = 200)]
+        vehicles: usize,
+        /// The seed the fleet is drawn from (the same seed, the same fleet).
+        #[arg(long, default_value_t = 2026)]
+        seed: u64,
+        /// Drives per car.
+        #[arg(long, value_name = "N", default_value_t = 2)]
+        drives: usize,
+        /// Seconds (wall time) the cars stay parked between two drives.
+        #[arg(long = "park", value_name = "SECONDS", default_value_t = 0.0)]
+        park_s: f64,
+        /// The serial number (last six characters of the VIN) of the first car.
+        #[arg(long, value_name = "NUMBER", default_value_t = 100_000)]
+        first_serial: u32,
+        /// Worker threads (each keeps its share of the cars).
+        #[arg(long, value_name = "N")]
+        threads: Option<usize>,
+        /// The broker.
+        #[command(flatten)]
+        broker: BrokerArgs,
+        /// The fleet's public key: instructions must verify with it.
+        #[arg(long, value_name = "FILE.pub")]
+        fleet_key: PathBuf,
+        /// The ECUs' image key the gateways check images with (`dev`: the development key).
+        #[arg(long, value_name = "FILE.pub", default_value = "dev")]
+        image_key: PathBuf,
+        /// Write every car's plan and what happened to it (the simulation's truth) here,
+        /// as JSON.
+        #[arg(long, value_name = "FILE.json")]
+        truth: Option<PathBuf>,
     },
     /// Recall by inventory: the vehicles carrying what is described, each with the ECU
     /// that matched.
@@ -339,10 +378,165 @@ fn read_key(path: &Path) -> Result<SigningKey, String> {
     SigningKey::parse(&text).map_err(|e| format!("'{}': {e}", path.display()))
 }
 
+/// Runs `autoplug fleet simulate` (see [`FleetCommand::Simulate`]).
+#[allow(clippy::too_many_arguments)]
+fn simulate(
+    plan: crate::fleet_sim::FleetPlan,
+    park_s: f64,
+    threads: Option<usize>,
+    broker: &BrokerArgs,
+    fleet_key: &Path,
+    image_key: &Path,
+    truth: Option<&Path>,
+    out: &mut dyn Write,
+) -> Result<(), String> {
+    use crate::fleet_sim::{self, Order, SimFleet};
+    let io = |e: std::io::Error| format!("cannot write the output: {e}");
+    if plan.vehicles == 0 || plan.vehicles > 100_000 {
+        return Err("--vehicles is 1 to 100000".into());
+    }
+    if plan.drives == 0 || plan.drives > 100 {
+        return Err("--drives is 1 to 100".into());
+    }
+    if !(park_s.is_finite() && (0.0..=86_400.0).contains(&park_s)) {
+        return Err("--park is 0 to 86400 seconds".into());
+    }
+    let config = crate::fleet_link::FleetConfig {
+        broker: broker.broker()?,
+        fleet_key: crate::image_tool::read_public_key(fleet_key).map_err(|e| e.to_string())?,
+        image_key: crate::image_tool::read_public_key(image_key).map_err(|e| e.to_string())?,
+        security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
+    };
+    let threads = threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .clamp(1, 256);
+    let specs = fleet_sim::plan(&plan);
+    let carriers = specs.iter().filter(|s| s.cruise_faulty).count();
+    writeln!(
+        out,
+        "{} cars ({carriers} with the faulty cruise release {}), reporting to {}",
+        specs.len(),
+        fleet_sim::FAULTY_CRUISE,
+        config.broker
+    )
+    .map_err(io)?;
+    let runtime = mqtt_runtime()?;
+    let started = Instant::now();
+    let (mut fleet, mut statuses) =
+        SimFleet::start(specs.clone(), config, runtime.handle().clone(), threads)?;
+    let simulated =
+        |statuses: &[fleet_sim::VehicleStatus]| -> f64 { statuses.iter().map(|s| s.sim_s).sum() };
+    // What a step took: wall time, simulated time over all cars, the reports still queued.
+    let report = |what: &str,
+                  statuses: &[fleet_sim::VehicleStatus],
+                  sim_before: f64,
+                  since: Instant,
+                  out: &mut dyn Write| {
+        let wall = since.elapsed().as_secs_f64();
+        let sim = simulated(statuses) - sim_before;
+        let errors: Vec<String> = statuses
+            .iter()
+            .filter_map(|s| s.error.as_ref().map(|e| format!("{}: {e}", s.vin)))
+            .collect();
+        writeln!(
+            out,
+            "{what}: {wall:.1} s; {sim:.0} s simulated in all ({:.0}x real time); {} reports waiting{}",
+            sim / wall.max(1e-9),
+            statuses.iter().map(|s| s.waiting_reports).sum::<usize>(),
+            if errors.is_empty() {
+                String::new()
+            } else {
+                format!("; errors: {}", errors.join("; "))
+            }
+        )
+        .map_err(io)
+    };
+    report("connected and identified", &statuses, 0.0, started, out)?;
+    for drive in 0..plan.drives {
+        let (since, before) = (Instant::now(), simulated(&statuses));
+        statuses = fleet.order(Order::Drive)?;
+        let showed = statuses
+            .iter()
+            .filter(|s| s.drives.last().is_some_and(|d| d.showed_faulty_cruise()))
+            .count();
+        report(
+            &format!("drive {} ({showed} showed the faulty cruise)", drive + 1),
+            &statuses,
+            before,
+            since,
+            out,
+        )?;
+        if drive + 1 < plan.drives && park_s > 0.0 {
+            let (since, before) = (Instant::now(), simulated(&statuses));
+            let flag = Arc::new(AtomicBool::new(false));
+            let timer = {
+                let flag = flag.clone();
+                std::thread::spawn(move || {
+                    std::thread::sleep(Duration::from_secs_f64(park_s));
+                    flag.store(true, Ordering::SeqCst);
+                })
+            };
+            statuses = fleet.order(Order::Park(flag))?;
+            let _ = timer.join();
+            let installed = statuses
+                .iter()
+                .flat_map(|s| &s.campaign_reports)
+                .filter(|r| r.state == autoplug_fleet::campaign::VehicleState::Installed)
+                .count();
+            report(
+                &format!("parked ({installed} updates installed)"),
+                &statuses,
+                before,
+                since,
+                out,
+            )?;
+        }
+    }
+    if let Some(path) = truth {
+        let cars: Vec<serde_json::Value> = specs
+            .iter()
+            .zip(&statuses)
+            .map(|(spec, status)| serde_json::json!({ "plan": spec, "outcome": status }))
+            .collect();
+        let text = serde_json::to_string_pretty(&cars).map_err(|e| e.to_string())?;
+        std::fs::write(path, text)
+            .map_err(|e| format!("cannot write '{}': {e}", path.display()))?;
+        writeln!(out, "the simulation's truth: {}", path.display()).map_err(io)?;
+    }
+    fleet.finish();
+    Ok(())
+}
+
 /// Carries out `autoplug fleet …`.
 pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
     let io = |e: std::io::Error| format!("cannot write the output: {e}");
     match command {
+        FleetCommand::Simulate {
+            vehicles,
+            seed,
+            drives,
+            park_s,
+            first_serial,
+            threads,
+            broker,
+            fleet_key,
+            image_key,
+            truth,
+        } => {
+            let mut plan = crate::fleet_sim::FleetPlan::new(vehicles, seed);
+            plan.drives = drives;
+            plan.first_serial = first_serial;
+            simulate(
+                plan,
+                park_s,
+                threads,
+                &broker,
+                &fleet_key,
+                &image_key,
+                truth.as_deref(),
+                out,
+            )
+        }
         FleetCommand::Serve {
             db,
             broker,
@@ -700,37 +894,16 @@ fn serve(
         let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
     let started = Instant::now();
-    let mut ingest = Ingest::new(store, link);
-    let mut last_tick: Option<Instant> = None;
-    let tick = Duration::from_secs_f64(tick);
-    let mut failure: Option<String> = None;
-    while !stop.load(Ordering::Relaxed) {
-        if duration.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
-            break;
-        }
-        if let Some(message) = ingest.link.recv_timeout(Duration::from_millis(50)) {
-            ingest.take(&message, &stop);
-        }
-        if let Some(key) = &key {
-            if last_tick.is_none_or(|t| t.elapsed() >= tick) {
-                last_tick = Some(Instant::now());
-                match ingest
-                    .store
-                    .campaign_tick(key, autoplug_fleet::campaign::now_ms())
-                {
-                    Ok(dispatches) => {
-                        for d in dispatches {
-                            if let Err(e) = ingest.link.publish(&d.topic, d.payload, false) {
-                                // The vehicle stays 'sent': its answer time brings a retry.
-                                failure = Some(e.to_string());
-                            }
-                        }
-                    }
-                    Err(e) => failure = Some(e.to_string()),
-                }
-            }
-        }
+    let mut service =
+        FleetService::new(Ingest::new(store, link), key, Duration::from_secs_f64(tick));
+    while !stop.load(Ordering::Relaxed)
+        && duration.is_none_or(|d| started.elapsed().as_secs_f64() < d)
+    {
+        service.step(&stop, Duration::from_millis(50));
     }
+    let sends = service.sends_campaigns();
+    let (sent, failure) = (service.sent, service.failure.take());
+    let ingest = service.ingest;
     let s = &ingest.stats;
     writeln!(
         out,
@@ -740,6 +913,9 @@ fn serve(
     .map_err(io)?;
     for reason in &s.last_rejections {
         writeln!(out, "  refused: {reason}").map_err(io)?;
+    }
+    if sends {
+        writeln!(out, "sent {sent} campaign instructions").map_err(io)?;
     }
     if let Some(failure) = failure {
         writeln!(out, "last campaign error: {failure}").map_err(io)?;

@@ -12,6 +12,8 @@
 //! | [`live`] | live frame sources for the gateway: the in-process virtual car, socketcand, SocketCAN; the `--bus` URL |
 //! | [`gateway`] | the gateway's commands: `gateway` on a live bus, `replay` and `diagnose` on a log, `trips`, `log export` |
 //! | [`bus_tester`] | the gateway as a tester on a live bus (`--transmit`): identification into the inventory, trouble codes every minute |
+//! | [`fleet_link`] | the gateway's link to the fleet: inventory and trips out, campaigns in (the agent against MQTT and the tester) |
+//! | [`fleet_sim`] | `autoplug fleet simulate`: a planned fleet of virtual cars, each with its gateway and MQTT session, driven headless |
 //! | [`watch`] | what the gateway does with every frame: diagnostics, trips into the store, the status line |
 //! | [`cli`] | the `autoplug` command |
 //!
@@ -45,6 +47,8 @@ pub mod demo;
 pub mod driver;
 pub mod driving;
 pub mod fleet_cli;
+pub mod fleet_link;
+pub mod fleet_sim;
 pub mod gateway;
 pub mod image_tool;
 pub mod live;

@@ -25,6 +25,10 @@ pub const LIVE_SILENCE: Duration = Duration::from_micros(autoplug_trips::SILENT_
 /// -9, power loss) loses at most this much of a trip's statistics.
 pub const CHECKPOINT_US: u64 = 5_000_000;
 
+/// How often the findings are kept while the bus is alive, µs of bus time: a trip that
+/// ends on the bus's silence ends with the last of them.
+pub const ALIVE_FINDINGS_US: u64 = 1_000_000;
+
 /// Where trips go, and what became of them.
 pub struct TripLog {
     store: Box<dyn TripStore>,
@@ -94,7 +98,7 @@ impl TripLog {
         &mut self,
         done: Vec<CompletedTrip>,
         trips: &mut TripTracker,
-        report: impl Fn() -> Findings,
+        report: impl Fn(TripEnd) -> Findings,
         now_us: u64,
     ) {
         if self.failure.is_some() {
@@ -146,7 +150,7 @@ impl TripLog {
     fn finish(
         &mut self,
         done: CompletedTrip,
-        report: &impl Fn() -> Findings,
+        report: &impl Fn(TripEnd) -> Findings,
     ) -> Result<(), autoplug_store::StoreError> {
         let id = match self.open.take() {
             Some(id) => id,
@@ -158,7 +162,7 @@ impl TripLog {
                 start_us: done.stats.start_us,
             })?,
         };
-        let (verdicts, dtcs) = report();
+        let (verdicts, dtcs) = report(done.end);
         let finished = FinishedTrip {
             stats: done.stats,
             end: done.end,
@@ -283,6 +287,11 @@ pub struct Watch<'a> {
     pub tester: Option<BusTester>,
     /// The ECUs' identification, once the tester read it.
     pub identification: Option<Vec<EcuIdentification>>,
+    /// The link to the fleet, if the gateway reports to one.
+    pub fleet: Option<crate::fleet_link::FleetLink>,
+    /// The findings as of the last time the bus was alive (bus time, findings), taken
+    /// every [`ALIVE_FINDINGS_US`] while a trip runs.
+    alive_findings: Option<(u64, Findings)>,
     /// On a real bus: how long it may stay silent, in wall time, before the trip in
     /// progress ends (bus time stands still while no frame comes). `None` for a log or the
     /// virtual car, whose silences are in their own time.
@@ -313,6 +322,8 @@ impl<'a> Watch<'a> {
             dtcs: DtcMonitor::new(),
             tester: None,
             identification: None,
+            fleet: None,
+            alive_findings: None,
             silent_after: None,
             idle_since: None,
         }
@@ -328,14 +339,21 @@ impl<'a> Watch<'a> {
         let done = self.trips.take_completed();
         self.ended
             .extend(done.iter().map(|t| (t.stats.clone(), t.end)));
+        let (diagnostics, dtcs, alive) = (&self.diagnostics, &self.dtcs, &self.alive_findings);
+        // A trip that ended on the bus's silence ends with what was judged while the bus
+        // was alive: judged now, every ECU would be "no data".
+        let report = |end: TripEnd| match (end, alive) {
+            (TripEnd::BusSilent, Some((_, findings))) => findings.clone(),
+            _ => findings(diagnostics, dtcs, state),
+        };
+        if let Some(fleet) = self.fleet.as_mut() {
+            for trip in &done {
+                let (verdicts, dtcs) = report(trip.end);
+                fleet.on_trip(trip, verdicts, dtcs);
+            }
+        }
         if let Some(log) = self.trip_log.as_mut() {
-            let (diagnostics, dtcs) = (&self.diagnostics, &self.dtcs);
-            log.sync(
-                done,
-                &mut self.trips,
-                || findings(diagnostics, dtcs, state),
-                state.now_us(),
-            );
+            log.sync(done, &mut self.trips, report, state.now_us());
         }
     }
 
@@ -351,6 +369,9 @@ impl<'a> Watch<'a> {
                 }
             }
             log.record_inventory(&identities(&rows));
+        }
+        if let Some(fleet) = self.fleet.as_mut() {
+            fleet.on_identification(vehicle_vin(&rows), identities(&rows));
         }
         self.identification = Some(rows);
     }
@@ -423,7 +444,22 @@ impl Observer for Watch<'_> {
             self.take_identities();
         }
         self.trips.on_frame(frame, update, state);
+        let t = frame.t_us;
+        // Only the ECUs' own traffic shows the bus alive: the gateway's tester may still
+        // be asking a bus that has gone to sleep.
+        if matches!(update, Update::Message { .. })
+            && self
+                .alive_findings
+                .as_ref()
+                .is_none_or(|(at, _)| t.saturating_sub(*at) >= ALIVE_FINDINGS_US)
+            && self.trips.current().is_some()
+        {
+            self.alive_findings = Some((t, findings(&self.diagnostics, &self.dtcs, state)));
+        }
         self.sync(state);
+        if let Some(fleet) = self.fleet.as_mut() {
+            fleet.poll(state, self.tester.as_mut());
+        }
         self.maybe_print_status(state);
     }
 
@@ -431,6 +467,11 @@ impl Observer for Watch<'_> {
         if let Some(tester) = self.tester.as_mut() {
             tester.on_idle(state);
             self.take_identities();
+        }
+        self.trips.on_idle(state);
+        self.sync(state);
+        if let Some(fleet) = self.fleet.as_mut() {
+            fleet.poll(state, self.tester.as_mut());
         }
         let Some(silent_after) = self.silent_after else {
             return self.maybe_print_status(state);

@@ -1,0 +1,414 @@
+//! The gateway's link to the fleet (`autoplug gateway --transmit --fleet mqtt://...`, the
+//! dashboard, each car of `autoplug fleet simulate`): it runs the vehicle's campaign agent
+//! ([`autoplug_fleet::vehicle`]) against an MQTT connection and the gateway's own tester.
+//!
+//! The connection opens once the ECUs have answered the vehicle's VIN (its client id and,
+//! with the shipped broker configuration, its login), with a persistent session, so the
+//! campaign instructions sent while the car was off wait at the broker. The inventory goes
+//! out when it changes, every trip when it ends (with the verdicts and trouble codes it
+//! ended with). Reports wait in a bounded queue while the broker is away.
+//!
+//! Whether the car stands is judged from the bus: the vehicle speed at 0 km/h for
+//! [`STANDING_AFTER_US`]. A flash the driver agreed to waits for it.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use autoplug_can::{Node, VehicleSpeedMsg};
+use autoplug_fleet::campaign::now_ms;
+use autoplug_fleet::mqtt::{Broker, LinkOptions, LinkStatus, MqttLink};
+use autoplug_fleet::vehicle::{Action, AgentConfig, FlashResult, Offer, VehicleAgent};
+use autoplug_fleet::TripReport;
+use autoplug_gateway::CarState;
+use autoplug_image::PUBLIC_KEY_LEN;
+use autoplug_store::{DtcRecord, EcuIdentity, VerdictRecord};
+use autoplug_trips::CompletedTrip;
+
+use crate::bus_tester::{BusTester, UserJob};
+use crate::tester::{FlashConfig, FlashJob, UdsError};
+
+/// The vehicle speed must read 0 km/h this long before the car counts as standing, µs of
+/// bus time (a stop, not a car rolling through 0 km/h).
+pub const STANDING_AFTER_US: u64 = 2_000_000;
+/// Reports kept while the broker is away; the oldest go first beyond it.
+pub const MAX_WAITING_REPORTS: usize = 256;
+/// Events kept for the dashboard.
+const MAX_EVENTS: usize = 20;
+/// Broker messages taken per call: a flood cannot hold the pipeline up.
+const MESSAGES_PER_POLL: usize = 16;
+
+/// How the gateway reaches the fleet.
+#[derive(Clone, Debug)]
+pub struct FleetConfig {
+    /// The broker (`mqtt://[VIN:password@]host[:port]`).
+    pub broker: Broker,
+    /// The fleet's public key: campaign instructions must verify with it.
+    pub fleet_key: [u8; PUBLIC_KEY_LEN],
+    /// The ECUs' image key: images must verify with it before the driver is asked.
+    pub image_key: [u8; PUBLIC_KEY_LEN],
+    /// The SecurityAccess secret for flashing.
+    pub security_secret: Vec<u8>,
+}
+
+/// The link (see the module docs).
+pub struct FleetLink {
+    config: FleetConfig,
+    runtime: tokio::runtime::Handle,
+    agent: Option<VehicleAgent>,
+    link: Option<MqttLink>,
+    /// Reports not yet taken by the link, in order.
+    waiting: VecDeque<(String, Vec<u8>)>,
+    /// Trips that ended before the VIN was known (their `vin` is filled in then).
+    held_trips: Vec<TripReport>,
+    pending_flash: Option<(Node, Vec<u8>)>,
+    offer: Option<Offer>,
+    events: VecDeque<String>,
+    zero_since_us: Option<u64>,
+    standing: bool,
+    /// Reports dropped because the queue was full.
+    pub dropped_reports: u64,
+    /// Why the link is not open, when it is not.
+    pub not_connected: Option<String>,
+}
+
+impl FleetLink {
+    /// A link that opens once the VIN is read, its connection on `runtime`.
+    pub fn new(config: FleetConfig, runtime: tokio::runtime::Handle) -> Self {
+        Self {
+            config,
+            runtime,
+            agent: None,
+            link: None,
+            waiting: VecDeque::new(),
+            held_trips: Vec::new(),
+            pending_flash: None,
+            offer: None,
+            events: VecDeque::new(),
+            zero_since_us: None,
+            standing: false,
+            dropped_reports: 0,
+            not_connected: Some("waiting for the ECUs to answer the VIN".into()),
+        }
+    }
+
+    /// The update the driver is asked about, if any.
+    pub fn offer(&self) -> Option<&Offer> {
+        self.offer.as_ref()
+    }
+
+    /// The campaign in progress and where it stands, in a word.
+    pub fn activity(&self) -> Option<(i64, &'static str)> {
+        self.agent.as_ref().and_then(|a| a.activity())
+    }
+
+    /// The latest events (instructions, checks, reports), oldest first.
+    pub fn events(&self) -> impl Iterator<Item = &String> {
+        self.events.iter()
+    }
+
+    /// The connection's state, once it is open.
+    pub fn status(&self) -> Option<LinkStatus> {
+        self.link.as_ref().map(|l| l.status())
+    }
+
+    /// The broker, without its password.
+    pub fn broker(&self) -> String {
+        self.config.broker.to_string()
+    }
+
+    /// Whether the car stands, as judged from the bus.
+    pub fn standing(&self) -> bool {
+        self.standing
+    }
+
+    /// The vehicle's reports on campaigns (the latest few), oldest first.
+    pub fn campaign_reports(&self) -> Vec<autoplug_fleet::campaign::CampaignReport> {
+        self.agent
+            .as_ref()
+            .map(|a| a.reports().cloned().collect())
+            .unwrap_or_default()
+    }
+
+    /// Whether the connection is open (it may still be connecting).
+    pub fn online(&self) -> bool {
+        self.link.is_some()
+    }
+
+    /// Closes the connection (the broker keeps the session: instructions sent meanwhile
+    /// wait there) or opens it again. Reports wait in the queue while it is closed.
+    pub fn set_online(&mut self, online: bool) {
+        match (online, self.link.is_some()) {
+            (false, true) => {
+                self.flush();
+                if let Some(link) = self.link.take() {
+                    link.close(Duration::from_secs(2));
+                }
+                self.not_connected = Some("taken offline".into());
+            }
+            (true, false) => {
+                if let Some(vin) = self.agent.as_ref().map(|a| *a.vin()) {
+                    self.connect(vin);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Reports not yet handed to the connection.
+    pub fn waiting_reports(&self) -> usize {
+        self.waiting.len()
+    }
+
+    /// The driver's answer to the offer of `campaign`.
+    pub fn consent(&mut self, campaign: i64, install: bool) -> Result<(), String> {
+        let agent = self
+            .agent
+            .as_mut()
+            .ok_or("this vehicle is not connected to the fleet")?;
+        agent.consent(campaign, install, now_ms())?;
+        self.run_actions(None);
+        Ok(())
+    }
+
+    /// The gateway read the ECUs' identification: the first time with a VIN, the link
+    /// opens; every time, the inventory goes to the agent.
+    pub fn on_identification(
+        &mut self,
+        vin: Result<Option<autoplug_vin::Vin>, String>,
+        ecus: Vec<EcuIdentity>,
+    ) {
+        if self.agent.is_none() {
+            match vin {
+                Ok(Some(vin)) => self.open(vin),
+                Ok(None) => {
+                    self.not_connected = Some(
+                        "no ECU answered the VIN (DID F190): not connected to the fleet".into(),
+                    );
+                    return;
+                }
+                Err(e) => {
+                    self.not_connected = Some(format!("not connected to the fleet: {e}"));
+                    return;
+                }
+            }
+        }
+        if let Some(agent) = self.agent.as_mut() {
+            agent.on_inventory(ecus, now_ms());
+        }
+        self.run_actions(None);
+    }
+
+    fn open(&mut self, vin: autoplug_vin::Vin) {
+        let mut agent = VehicleAgent::new(AgentConfig {
+            vin,
+            fleet_key: self.config.fleet_key,
+            image_key: self.config.image_key,
+        });
+        for mut trip in std::mem::take(&mut self.held_trips) {
+            trip.vin = vin.to_string();
+            agent.on_trip(&trip);
+        }
+        self.agent = Some(agent);
+        self.connect(vin);
+    }
+
+    fn connect(&mut self, vin: autoplug_vin::Vin) {
+        let mut options = LinkOptions::new(vin.to_string());
+        options.persistent_session = true;
+        options.subscriptions = vec![autoplug_fleet::topics::command(&vin)];
+        options.max_backoff = Duration::from_secs(10);
+        self.link = Some(MqttLink::connect(
+            &self.runtime,
+            &self.config.broker,
+            options,
+        ));
+        self.not_connected = None;
+        self.event(format!("fleet: {vin} connecting to {}", self.config.broker));
+    }
+
+    /// A trip ended, with the verdicts and trouble codes it ended with.
+    pub fn on_trip(
+        &mut self,
+        done: &CompletedTrip,
+        verdicts: Vec<VerdictRecord>,
+        dtcs: Vec<DtcRecord>,
+    ) {
+        let ended_at_ms = now_ms();
+        let report = TripReport {
+            vin: self
+                .agent
+                .as_ref()
+                .map_or_else(String::new, |a| a.vin().to_string()),
+            // The gateway's number for the trip: its end on the gateway's clock, µs (a
+            // report sent twice is stored once; two trips never end in the same µs).
+            trip: unix_us(),
+            started_at_ms: ended_at_ms - (done.stats.duration_s * 1000.0) as i64,
+            ended_at_ms,
+            stats: done.stats.clone(),
+            end: done.end,
+            verdicts,
+            dtcs,
+        };
+        match self.agent.as_mut() {
+            Some(agent) => {
+                agent.on_trip(&report);
+                self.run_actions(None);
+            }
+            None if self.held_trips.len() < MAX_WAITING_REPORTS => self.held_trips.push(report),
+            None => self.dropped_reports += 1,
+        }
+    }
+
+    /// Between frames: judges standing, takes the broker's messages and the tester's
+    /// outcome, and does what the agent asks.
+    pub fn poll(&mut self, state: &CarState, tester: Option<&mut BusTester>) {
+        self.judge_standing(state);
+        let Some(agent) = self.agent.as_mut() else {
+            return;
+        };
+        agent.set_standing(self.standing);
+        if let Some(link) = self.link.as_mut() {
+            for _ in 0..MESSAGES_PER_POLL {
+                let Some(message) = link.try_recv() else {
+                    break;
+                };
+                agent.on_message(&message.topic, &message.payload, now_ms());
+            }
+        }
+        let mut tester = tester;
+        if let Some(tester) = tester.as_deref_mut() {
+            while let Some((_, result)) = tester.take_fleet_outcome() {
+                let result = match result {
+                    Ok(_) => FlashResult::Flashed,
+                    Err(e) if matches!(e.uds(), Some(UdsError::Negative { .. })) => {
+                        FlashResult::RefusedByEcu(e.to_string())
+                    }
+                    Err(e) => FlashResult::Failed(e.to_string()),
+                };
+                agent.flash_done(result, now_ms());
+            }
+        }
+        agent.tick(now_ms());
+        self.run_actions(tester);
+    }
+
+    fn judge_standing(&mut self, state: &CarState) {
+        let now = state.now_us();
+        let Some(speed) = state.signal_of(VehicleSpeedMsg::ID, 0) else {
+            return;
+        };
+        // A silent bus (the ECUs asleep, or their normal traffic off during a flash)
+        // changes nothing: the car stands where it stood.
+        if !speed.is_fresh(now) {
+            return;
+        }
+        if state.get::<VehicleSpeedMsg>().vehicle_speed <= 0.0 {
+            let since = *self.zero_since_us.get_or_insert(now);
+            self.standing = now.saturating_sub(since) >= STANDING_AFTER_US;
+        } else {
+            self.zero_since_us = None;
+            self.standing = false;
+        }
+    }
+
+    fn run_actions(&mut self, tester: Option<&mut BusTester>) {
+        while let Some(action) = self.agent.as_mut().and_then(|a| a.next_action()) {
+            match action {
+                Action::Publish { topic, payload } => {
+                    if self.waiting.len() >= MAX_WAITING_REPORTS {
+                        self.waiting.pop_front();
+                        self.dropped_reports += 1;
+                    }
+                    self.waiting.push_back((topic, payload));
+                }
+                Action::Subscribe(topic) => self.request(|l| l.subscribe(&topic)),
+                Action::Unsubscribe(topic) => self.request(|l| l.unsubscribe(&topic)),
+                Action::Ask(offer) => {
+                    self.event(format!("fleet: {}", offer.question()));
+                    self.offer = Some(offer);
+                }
+                Action::Withdraw(campaign) => {
+                    if self.offer.as_ref().is_some_and(|o| o.campaign == campaign) {
+                        self.offer = None;
+                    }
+                }
+                Action::Flash { ecu, image } => self.pending_flash = Some((ecu, image)),
+                Action::Note(text) => self.event(text),
+            }
+        }
+        self.start_flash(tester);
+        self.flush();
+    }
+
+    fn start_flash(&mut self, tester: Option<&mut BusTester>) {
+        let Some(tester) = tester else {
+            return;
+        };
+        let Some((ecu, image)) = self.pending_flash.take() else {
+            return;
+        };
+        let job = FlashJob::new(FlashConfig::new(
+            ecu,
+            image.clone(),
+            &self.config.security_secret,
+        ));
+        let job = match job {
+            Ok(job) => job,
+            Err(e) => {
+                if let Some(agent) = self.agent.as_mut() {
+                    agent.flash_done(FlashResult::Failed(e.to_string()), now_ms());
+                }
+                return;
+            }
+        };
+        if tester.queue(UserJob::FleetFlash(Box::new(job))).is_err() {
+            // Another flash runs: try again at the next poll.
+            self.pending_flash = Some((ecu, image));
+        }
+    }
+
+    fn request(
+        &mut self,
+        call: impl FnOnce(&MqttLink) -> Result<(), autoplug_fleet::mqtt::LinkError>,
+    ) {
+        if let Some(link) = &self.link {
+            if let Err(e) = call(link) {
+                self.event(format!("fleet: {e}"));
+            }
+        }
+    }
+
+    /// Hands the waiting reports to the connection, in order, while it takes them.
+    fn flush(&mut self) {
+        let Some(link) = &self.link else {
+            return;
+        };
+        while let Some((topic, payload)) = self.waiting.pop_front() {
+            if link.publish(&topic, payload.clone(), false).is_err() {
+                self.waiting.push_front((topic, payload));
+                break;
+            }
+        }
+    }
+
+    fn event(&mut self, text: String) {
+        if self.events.len() >= MAX_EVENTS {
+            self.events.pop_front();
+        }
+        self.events.push_back(text);
+    }
+
+    /// Disconnects, waiting at most `timeout` for the reports handed over to be sent.
+    pub fn close(mut self, timeout: Duration) {
+        self.flush();
+        if let Some(link) = self.link.take() {
+            link.close(timeout);
+        }
+    }
+}
+
+fn unix_us() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
+}
