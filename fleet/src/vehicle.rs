@@ -431,9 +431,8 @@ impl VehicleAgent {
         let Some(instruction) = self.waiting.take() else {
             return;
         };
-        let Some(ecu) = parse_ecu(&instruction.ecu) else {
-            let reason = format!("no ECU is called \"{}\"", cut(&instruction.ecu));
-            return self.answer(
+        let refuse = |agent: &mut Self, reason: String| {
+            agent.answer(
                 &instruction,
                 None,
                 VehicleState::Refused,
@@ -441,14 +440,16 @@ impl VehicleAgent {
                 now_ms,
             );
         };
+        let Some(ecu) = parse_ecu(&instruction.ecu) else {
+            return refuse(
+                self,
+                format!("no ECU is called \"{}\"", cut(&instruction.ecu)),
+            );
+        };
         let Some(identity) = self.identity(ecu).cloned() else {
-            let reason = format!("this vehicle has no {} ECU that answers", ecu_name(ecu));
-            return self.answer(
-                &instruction,
-                None,
-                VehicleState::Refused,
-                Some(reason),
-                now_ms,
+            return refuse(
+                self,
+                format!("this vehicle has no {} ECU that answers", ecu_name(ecu)),
             );
         };
         if identity.software_version.as_deref() == Some(instruction.version.as_str()) {

@@ -95,12 +95,18 @@ fn command_topic() -> String {
     topics::command(&Vin::parse(VIN).unwrap())
 }
 
-/// An agent that has read its inventory and been sent `image`'s instruction.
-fn offered(image: &[u8]) -> (VehicleAgent, Vec<Action>) {
+/// An agent running cruise 1.1.0 that has been sent `image`'s instruction.
+fn instructed(image: &[u8]) -> VehicleAgent {
     let mut agent = new_agent();
     agent.on_inventory(inventory("1.1.0"), NOW);
     let signed = instruction_for(image, 1).sign(&fleet_key());
     agent.on_message(&command_topic(), &signed, NOW);
+    agent
+}
+
+/// The same, with the image delivered: the driver is being asked.
+fn offered(image: &[u8]) -> (VehicleAgent, Vec<Action>) {
+    let mut agent = instructed(image);
     let mut actions = drain(&mut agent);
     agent.on_message(&topics::image(&sha256_hex(image)), image, NOW + 10);
     actions.extend(drain(&mut agent));
@@ -237,13 +243,7 @@ fn a_bad_image_is_refused_with_the_reason_before_the_driver_is_asked() {
 
     // An image that is not the one named: refused on its digest.
     let image = fixed_image(Node::Cruise, &ecu_key());
-    let mut agent = new_agent();
-    agent.on_inventory(inventory("1.1.0"), NOW);
-    agent.on_message(
-        &command_topic(),
-        &instruction_for(&image, 1).sign(&fleet_key()),
-        NOW,
-    );
+    let mut agent = instructed(&image);
     let mut swapped = image.clone();
     swapped[600] ^= 1;
     agent.on_message(&topics::image(&sha256_hex(&image)), &swapped, NOW);
@@ -341,13 +341,7 @@ fn declining_an_already_installed_version_and_an_instruction_before_the_inventor
 #[test]
 fn an_image_that_never_comes_and_an_offer_that_expires_end_the_attempt() {
     let image = fixed_image(Node::Cruise, &ecu_key());
-    let mut agent = new_agent();
-    agent.on_inventory(inventory("1.1.0"), NOW);
-    agent.on_message(
-        &command_topic(),
-        &instruction_for(&image, 1).sign(&fleet_key()),
-        NOW,
-    );
+    let mut agent = instructed(&image);
     drain(&mut agent);
     agent.tick(NOW + IMAGE_WAIT_MS);
     assert!(reports(&drain(&mut agent)).is_empty());
