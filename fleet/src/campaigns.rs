@@ -462,6 +462,15 @@ impl FleetStore {
         rows.iter().map(|r| self.info_of(r)).collect()
     }
 
+    /// One campaign by number, if there is one.
+    pub fn campaign_by_id(&mut self, id: i64) -> Result<Option<CampaignInfo>, StoreError> {
+        let rows = self.db().query(
+            &format!("SELECT {CAMPAIGN_COLUMNS} FROM campaigns WHERE id = $1"),
+            &[Value::Int(id)],
+        )?;
+        rows.first().map(|r| self.info_of(r)).transpose()
+    }
+
     /// One campaign, by number or name.
     pub fn campaign(&mut self, id_or_name: &str) -> Result<CampaignInfo, StoreError> {
         let rows = match id_or_name.parse::<i64>() {

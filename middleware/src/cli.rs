@@ -175,6 +175,9 @@ pub enum Command {
         /// (http://host:port); repeatable.
         #[arg(long = "web-origin", value_name = "ORIGIN", requires = "web")]
         web_origins: Vec<String>,
+        /// The fleet this vehicle reports to (needs --transmit).
+        #[command(flatten)]
+        fleet: crate::fleet_cli::VehicleFleetArgs,
     },
     /// The dashboard (the main command): the virtual car in real time (or a live bus), the
     /// gateway on its bus, trips and recordings in a data folder, and the web dashboard on
@@ -227,6 +230,14 @@ pub enum Command {
         /// ends with it).
         #[arg(long, hide = true)]
         exit_with_input: bool,
+        /// The fleet this vehicle reports to; the driver answers its update offers on
+        /// the page.
+        #[command(flatten)]
+        fleet: crate::fleet_cli::VehicleFleetArgs,
+        /// Show the campaigns of this fleet database on the Fleet view (postgresql://...
+        /// or a SQLite file): the manufacturer's side, read only.
+        #[arg(long, value_name = "ADDRESS")]
+        fleet_db: Option<String>,
     },
     /// The trips in the database.
     #[command(subcommand)]
@@ -769,6 +780,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             dtc_interval,
             web,
             web_origins,
+            fleet,
         } => {
             let options = GatewayOptions {
                 transmit: transmit.then_some((dtc_interval * 1e6) as u64),
@@ -790,6 +802,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 }),
                 recordings_dir: None,
                 replay_pages: None,
+                fleet: fleet.config().map_err(CliError::Fleet)?,
             };
             gateway(&bus, options, out)
         }
@@ -806,6 +819,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             duration,
             status,
             exit_with_input,
+            fleet,
+            fleet_db,
         } => {
             if exit_with_input {
                 // Reads until the other end closes (the parent ended, however it ended).
@@ -830,6 +845,15 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 }
                 (None, false) => Some(crate::dashboard::new_token().map_err(CliError::Log)?),
             };
+            let fleet_page = match fleet_db {
+                Some(address) => {
+                    let page =
+                        crate::fleet_page::FleetPage::open(&address).map_err(CliError::Fleet)?;
+                    writeln!(out, "fleet page: campaigns of {}", page.name())?;
+                    Some(std::sync::Arc::new(page) as std::sync::Arc<dyn autoplug_web::FleetData>)
+                }
+                None => None,
+            };
             let options = GatewayOptions {
                 transmit: (virtual_car || (transmit && matches!(bus, BusUrl::Transport(_))))
                     .then_some(60_000_000),
@@ -851,9 +875,11 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                     trips_db: Some(folder.trips_db()),
                     recordings_dir: Some(folder.recordings()),
                     images_dir: Some(folder.images()),
+                    fleet: fleet_page,
                     ..autoplug_web::WebConfig::loopback(0)
                 }),
                 recordings_dir: Some(folder.recordings()),
+                fleet: fleet.config().map_err(CliError::Fleet)?,
             };
             gateway(&bus, options, out)
         }
@@ -986,6 +1012,8 @@ struct GatewayOptions {
     recordings_dir: Option<PathBuf>,
     /// Recordings may be opened in replay dashboards of their own.
     replay_pages: Option<crate::dashboard::ReplayPages>,
+    /// Report to a fleet (needs `transmit`).
+    fleet: Option<crate::fleet_link::FleetConfig>,
 }
 
 /// Set by Ctrl-C: the live gateway stops at the next frame or idle moment.
@@ -1034,6 +1062,11 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     if replaying && options.transmit.is_some() {
         return Err(CliError::Log(
             "a recorded log cannot be transmitted to: --transmit is for a live bus".into(),
+        ));
+    }
+    if options.fleet.is_some() && options.transmit.is_none() {
+        return Err(CliError::Log(
+            "--fleet needs --transmit: the gateway reads the VIN and flashes the fleet's updates over the bus".into(),
         ));
     }
     let mut tester = None;
@@ -1097,6 +1130,18 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     let mut status_out = io::stderr();
     let mut watch = Watch::new(trip_log);
     watch.tester = tester;
+    // The broker connection's tasks run here; the pipeline only trades messages with them.
+    let fleet_runtime = match &options.fleet {
+        Some(_) => Some(crate::fleet_cli::mqtt_runtime().map_err(CliError::Fleet)?),
+        None => None,
+    };
+    if let (Some(config), Some(runtime)) = (options.fleet.clone(), &fleet_runtime) {
+        writeln!(out, "reporting to the fleet at {}", config.broker)?;
+        watch.fleet = Some(crate::fleet_link::FleetLink::new(
+            config,
+            runtime.handle().clone(),
+        ));
+    }
     if let BusUrl::Transport(_) = bus {
         watch.silent_after = Some(crate::watch::LIVE_SILENCE);
     }
@@ -1221,7 +1266,40 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         writeln!(out, "{}", vin_line(rows))?;
     }
     crate::gateway::heard_dtcs(&watch.dtcs, out)?;
+    if let Some(fleet) = watch.fleet.take() {
+        fleet_summary(&fleet, out)?;
+        // The last trip's report goes out before the connection closes.
+        fleet.close(Duration::from_secs(5));
+    }
+    drop(fleet_runtime);
     result.map_err(|e| CliError::Log(e.to_string()))
+}
+
+/// The fleet link at the end of a run: where it reported, what waits, the campaigns.
+fn fleet_summary(fleet: &crate::fleet_link::FleetLink, out: &mut dyn Write) -> io::Result<()> {
+    match (&fleet.vin(), &fleet.not_connected) {
+        (_, Some(why)) => writeln!(out, "fleet: {why}")?,
+        (Some(vin), None) => writeln!(
+            out,
+            "fleet: reported as {vin} to {}; {} report(s) waiting, {} dropped",
+            fleet.broker(),
+            fleet.waiting_reports(),
+            fleet.dropped_reports
+        )?,
+        (None, None) => {}
+    }
+    for report in fleet.campaign_reports() {
+        writeln!(
+            out,
+            "fleet: campaign {} ({}): {}{}, running {}",
+            report.campaign,
+            report.ecu,
+            report.state.name(),
+            report.reason.map_or(String::new(), |r| format!(" ({r})")),
+            report.version_running.as_deref().unwrap_or("?")
+        )?;
+    }
+    Ok(())
 }
 
 /// `autoplug log export`: written to FILE.partial and renamed when complete, so a failed

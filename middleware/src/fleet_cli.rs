@@ -42,6 +42,52 @@ pub struct BrokerArgs {
     pub broker_password_file: Option<PathBuf>,
 }
 
+/// How a vehicle's gateway reports to the fleet (`autoplug gateway`, `autoplug dashboard`).
+#[derive(Debug, Args, Clone)]
+pub struct VehicleFleetArgs {
+    /// Report to the fleet through this MQTT broker, mqtt://[VIN:PASSWORD@]HOST[:PORT]
+    /// (the inventory, every trip with its verdicts and trouble codes) and take its update
+    /// campaigns, which the driver is asked about. The connection opens once the ECUs
+    /// answered the VIN; needs --fleet-key.
+    #[arg(long, value_name = "URL", value_parser = parse_broker)]
+    pub fleet: Option<Broker>,
+    /// Read the broker password from this file (instead of the URL).
+    #[arg(long, value_name = "FILE", requires = "fleet")]
+    pub fleet_password_file: Option<PathBuf>,
+    /// The fleet's public key (`autoplug keygen`'s FILE.pub): campaign instructions must
+    /// verify with it.
+    #[arg(long, value_name = "FILE.pub", requires = "fleet")]
+    pub fleet_key: Option<PathBuf>,
+    /// The ECUs' image key (`dev`: the development key): a campaign's image must verify
+    /// with it before the driver is asked.
+    #[arg(long, value_name = "FILE.pub", requires = "fleet")]
+    pub image_key: Option<PathBuf>,
+}
+
+impl VehicleFleetArgs {
+    /// The link's configuration, if the gateway reports to a fleet.
+    pub fn config(&self) -> Result<Option<crate::fleet_link::FleetConfig>, String> {
+        let Some(broker) = &self.fleet else {
+            return Ok(None);
+        };
+        let fleet_key = self.fleet_key.as_deref().ok_or(
+            "--fleet needs --fleet-key FILE.pub (the fleet's public key: instructions are checked with it)",
+        )?;
+        let image_key = self.image_key.as_deref().unwrap_or(Path::new("dev"));
+        let broker = BrokerArgs {
+            broker: broker.clone(),
+            broker_password_file: self.fleet_password_file.clone(),
+        }
+        .broker()?;
+        Ok(Some(crate::fleet_link::FleetConfig {
+            broker,
+            fleet_key: crate::image_tool::read_public_key(fleet_key).map_err(|e| e.to_string())?,
+            image_key: crate::image_tool::read_public_key(image_key).map_err(|e| e.to_string())?,
+            security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
+        }))
+    }
+}
+
 fn parse_broker(text: &str) -> Result<Broker, String> {
     text.parse()
 }
@@ -170,6 +216,10 @@ pub enum FleetCommand {
         /// while the service is down are then not kept for it.
         #[arg(long)]
         clean_session: bool,
+        /// Serve the fleet page (the dashboard's Fleet view: campaigns in total and per
+        /// vehicle, read only) on this address, e.g. 127.0.0.1:8090.
+        #[arg(long, value_name = "ADDR")]
+        web: Option<std::net::SocketAddr>,
     },
     /// A fleet to try it on: N virtual cars, each with its gateway reporting to the broker
     /// (distinct VINs and serials, a mix of software releases, a share with the faulty
@@ -192,6 +242,10 @@ pub enum FleetCommand {
         /// The serial number (last six characters of the VIN) of the first car.
         #[arg(long, value_name = "NUMBER", default_value_t = 100_000)]
         first_serial: u32,
+        /// Make each drive last about this many minutes (default: half a minute to a
+        /// minute). A car lives at most an hour of simulated time.
+        #[arg(long, value_name = "MINUTES")]
+        drive_minutes: Option<f64>,
         /// Worker threads (each keeps its share of the cars).
         #[arg(long, value_name = "N")]
         threads: Option<usize>,
@@ -493,10 +547,15 @@ fn simulate(
         }
     }
     if let Some(path) = truth {
+        // The statuses come back in the workers' order: each plan finds its car by VIN.
+        let by_vin: std::collections::HashMap<&str, &fleet_sim::VehicleStatus> =
+            statuses.iter().map(|s| (s.vin.as_str(), s)).collect();
         let cars: Vec<serde_json::Value> = specs
             .iter()
-            .zip(&statuses)
-            .map(|(spec, status)| serde_json::json!({ "plan": spec, "outcome": status }))
+            .map(|spec| {
+                let outcome = by_vin.get(spec.vin.as_str()).copied();
+                serde_json::json!({ "plan": spec, "outcome": outcome })
+            })
             .collect();
         let text = serde_json::to_string_pretty(&cars).map_err(|e| e.to_string())?;
         std::fs::write(path, text)
@@ -517,6 +576,7 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             drives,
             park_s,
             first_serial,
+            drive_minutes,
             threads,
             broker,
             fleet_key,
@@ -526,6 +586,17 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             let mut plan = crate::fleet_sim::FleetPlan::new(vehicles, seed);
             plan.drives = drives;
             plan.first_serial = first_serial;
+            if let Some(minutes) = drive_minutes {
+                if !(minutes.is_finite() && (0.5..=50.0).contains(&minutes))
+                    || minutes * drives as f64 > 50.0
+                {
+                    return Err(
+                        "--drive-minutes is 0.5 to 50, and all drives of a car together at most 50 minutes (a car lives an hour of simulated time)"
+                            .into(),
+                    );
+                }
+                plan.drive_minutes = Some(minutes);
+            }
             simulate(
                 plan,
                 park_s,
@@ -546,6 +617,7 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             client_id,
             group,
             clean_session,
+            web,
         } => {
             let mut options = LinkOptions::new(client_id);
             options.persistent_session = !clean_session;
@@ -554,7 +626,13 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
                 return Err(format!("'{group}' cannot name a group (no '/', '+', '#')"));
             }
             options.subscriptions = vec![topics::reports_shared(&group)];
-            serve(&db, &broker, key.as_deref(), tick, duration, options, out)
+            let settings = ServeSettings {
+                key,
+                tick,
+                duration,
+                web,
+            };
+            serve(&db, &broker, settings, options, out)
         }
         FleetCommand::Recall {
             db,
@@ -856,21 +934,54 @@ fn publish_image(broker: &Broker, sha: &str, image: &[u8]) -> Result<(), String>
     Ok(())
 }
 
+/// `autoplug fleet serve`'s settings besides the database and the broker.
+struct ServeSettings {
+    key: Option<PathBuf>,
+    tick: f64,
+    duration: Option<f64>,
+    web: Option<std::net::SocketAddr>,
+}
+
 fn serve(
     db: &DbArgs,
     broker: &BrokerArgs,
-    key: Option<&Path>,
-    tick: f64,
-    duration: Option<f64>,
+    settings: ServeSettings,
     options: LinkOptions,
     out: &mut dyn Write,
 ) -> Result<(), String> {
     let io = |e: std::io::Error| format!("cannot write the output: {e}");
+    let ServeSettings {
+        key,
+        tick,
+        duration,
+        web,
+    } = settings;
     if !(tick.is_finite() && (0.01..=3600.0).contains(&tick)) {
         return Err("--tick is 0.01 to 3600 seconds".into());
     }
-    let key = key.map(read_key).transpose()?;
+    let key = key.as_deref().map(read_key).transpose()?;
     let store = open(db)?;
+    // The fleet page reads through a connection of its own (the service's is busy).
+    let _page_server = match web {
+        Some(addr) => {
+            let page = crate::fleet_page::FleetPage::open(&db.db)?;
+            let config = autoplug_web::WebConfig {
+                addr,
+                fleet: Some(Arc::new(page)),
+                live: false,
+                ..autoplug_web::WebConfig::loopback(0)
+            };
+            let server = autoplug_web::WebServer::start(
+                config,
+                Arc::new(autoplug_web::LiveTable::new()),
+                None,
+            )
+            .map_err(|e| e.to_string())?;
+            writeln!(out, "fleet page on http://{}/fleet", server.addr()).map_err(io)?;
+            Some(server)
+        }
+        None => None,
+    };
     let runtime = mqtt_runtime()?;
     let broker = broker.broker()?;
     let link = MqttLink::connect(runtime.handle(), &broker, options);

@@ -116,6 +116,11 @@ impl FleetLink {
         self.config.broker.to_string()
     }
 
+    /// The vehicle's VIN, once its ECUs answered it.
+    pub fn vin(&self) -> Option<String> {
+        self.agent.as_ref().map(|a| a.vin().to_string())
+    }
+
     /// Whether the car stands, as judged from the bus.
     pub fn standing(&self) -> bool {
         self.standing

@@ -69,6 +69,8 @@ pub const CRUISE_DRIVE_SHARE: f64 = 0.6;
 pub const MIN_CRUISE_S: f64 = 20.0;
 /// Simulated time a car may live, s (the longest a scenario may run).
 const CAR_LIFE_S: f64 = 3600.0;
+/// A drive's time besides holding its speed, s (start, accelerate, brake, stand), roughly.
+const DRIVE_OVERHEAD_S: f64 = 30.0;
 /// How often the gateway reads the trouble codes, µs of bus time.
 const DTC_INTERVAL_US: u64 = 60_000_000;
 /// Bus time the ignition stays off after a drive before the car counts as parked: the
@@ -92,6 +94,9 @@ pub struct FleetPlan {
     pub decline_share: f64,
     /// The serial of the first car's VIN (the last six characters); the others follow.
     pub first_serial: u32,
+    /// Make every drive last about this many minutes (the speed held that much longer;
+    /// the benchmark's 10-minute drives). `None`: drives of half a minute to a minute.
+    pub drive_minutes: Option<f64>,
 }
 
 impl FleetPlan {
@@ -103,6 +108,7 @@ impl FleetPlan {
             drives: 2,
             decline_share: 0.0,
             first_serial: 100_000,
+            drive_minutes: None,
         }
     }
 }
@@ -184,6 +190,14 @@ pub fn plan(plan: &FleetPlan) -> Vec<VehicleSpec> {
                         economy: rng.random_bool(0.5),
                         headlights: rng.random_bool(0.3),
                     }
+                })
+                // Drawn as ever (the same seed, the same fleet), then lengthened: about
+                // half a minute goes to starting, accelerating, braking and standing.
+                .map(|mut drive: Drive| {
+                    if let Some(minutes) = plan.drive_minutes {
+                        drive.hold_s = (minutes * 60.0 - DRIVE_OVERHEAD_S).max(drive.hold_s);
+                    }
+                    drive
                 })
                 .collect();
             VehicleSpec {

@@ -48,6 +48,7 @@ pub mod driver;
 pub mod driving;
 pub mod fleet_cli;
 pub mod fleet_link;
+pub mod fleet_page;
 pub mod fleet_sim;
 pub mod gateway;
 pub mod image_tool;

@@ -273,6 +273,15 @@ impl<'a> Session<'a> {
                 self.event(format!("replay of {name} opened on port {port}"));
                 Ok(json!({ "port": port, "file": name }))
             }
+            Action::CampaignConsent { campaign, install } => {
+                let Some(fleet) = self.watch.fleet.as_mut() else {
+                    return Err(
+                        "this gateway is not connected to a fleet (start it with --fleet)".into(),
+                    );
+                };
+                fleet.consent(campaign, install)?;
+                Ok(json!({ "campaign": campaign, "install": install }))
+            }
         }
     }
 
@@ -579,6 +588,7 @@ impl<'a> Session<'a> {
             "recording": recording,
             "driver": driver,
             "trip": self.watch.trips.current(),
+            "fleet": self.watch.fleet.as_ref().map(fleet_state),
             "events": self.events.iter().map(|(t, text)| json!({ "t": t, "text": text })).collect::<Vec<_>>(),
         })
     }
@@ -604,6 +614,39 @@ impl<'a> Session<'a> {
             self.table.set_session(&value);
         }
     }
+}
+
+/// The fleet link as the page shows it: the offer the driver answers, the campaign's
+/// progress, the connection.
+fn fleet_state(fleet: &crate::fleet_link::FleetLink) -> Value {
+    let status = fleet.status();
+    json!({
+        "broker": fleet.broker(),
+        "online": fleet.online(),
+        "connected": status.as_ref().is_some_and(|s| s.connected),
+        "problem": fleet.not_connected.as_deref().or_else(|| {
+            status
+                .as_ref()
+                .filter(|s| !s.connected)
+                .and_then(|s| s.refused.as_deref().or(s.last_error.as_deref()))
+        }),
+        "vin": fleet.vin(),
+        "standing": fleet.standing(),
+        "offer": fleet.offer().map(|o| json!({
+            "campaign": o.campaign,
+            "name": o.name,
+            "ecu": o.ecu,
+            "version": o.version,
+            "message": o.message,
+            "bytes": o.bytes,
+            "question": o.question(),
+        })),
+        "activity": fleet.activity().map(|(campaign, what)| json!({ "campaign": campaign, "what": what })),
+        "reports": fleet.campaign_reports(),
+        "events": fleet.events().collect::<Vec<_>>(),
+        "waiting_reports": fleet.waiting_reports(),
+        "dropped_reports": fleet.dropped_reports,
+    })
 }
 
 fn replay_state(desk: &ReplayDesk) -> Value {

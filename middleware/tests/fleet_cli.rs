@@ -244,3 +244,188 @@ fn a_campaign_from_the_command_line_reaches_its_vehicle_and_the_report_comes_bac
     .unwrap_err();
     assert!(e.contains("one"), "{e}");
 }
+
+#[test]
+fn fleet_simulate_runs_its_cars_reports_them_to_the_broker_and_writes_its_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let key_base = dir.path().join("fleet");
+    run_args(&args(&["keygen", "--out", &key_base.display().to_string()])).unwrap();
+    let fleet_pub = dir.path().join("fleet.pub").display().to_string();
+    let truth = dir.path().join("truth.json");
+    // Serials of their own (the other fleet tests use 100000 and up by hundreds).
+    let first_serial = 800_000 + (std::process::id() % 1000) * 10;
+    let broker: Broker = broker_url().parse().unwrap();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let mut options = LinkOptions::new(format!("simulate-test-{}", std::process::id()));
+    options.subscriptions = vec![topics::REPORTS.to_string()];
+    let mut listener = MqttLink::connect(runtime.handle(), &broker, options);
+    listener.wait_connected(Duration::from_secs(10)).unwrap();
+    // The subscription is granted before the cars start.
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while listener.status().granted.is_empty() && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
+    let output = run_args(&args(&[
+        "fleet",
+        "simulate",
+        "--vehicles",
+        "6",
+        "--drives",
+        "1",
+        "--seed",
+        "11",
+        "--first-serial",
+        &first_serial.to_string(),
+        "--threads",
+        "2",
+        "--broker",
+        &broker_url(),
+        "--fleet-key",
+        &fleet_pub,
+        "--truth",
+        &truth.display().to_string(),
+    ]))
+    .unwrap();
+    assert!(output.starts_with("6 cars ("), "{output}");
+    assert!(output.contains("drive 1 ("), "{output}");
+    assert!(!output.contains("errors:"), "{output}");
+
+    let cars: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+    assert_eq!(cars.len(), 6);
+    let mut vins = Vec::new();
+    for car in &cars {
+        let vin = car["plan"]["vin"].as_str().unwrap().to_string();
+        Vin::parse(&vin).unwrap_or_else(|e| panic!("{vin}: {e}"));
+        assert_eq!(car["outcome"]["vin"].as_str(), Some(vin.as_str()));
+        let drives = car["outcome"]["drives"].as_array().unwrap();
+        assert_eq!(drives.len(), 1, "{car}");
+        assert!(drives[0]["distance_m"].as_f64().unwrap() > 100.0, "{car}");
+        vins.push(vin);
+    }
+    vins.sort();
+    vins.dedup();
+    assert_eq!(vins.len(), 6, "the cars' VINs are distinct");
+
+    // Each car reported its inventory and its drive through the broker, as itself.
+    let mut inventories = std::collections::BTreeSet::new();
+    let mut trips = std::collections::BTreeSet::new();
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while (inventories.len() < 6 || trips.len() < 6) && std::time::Instant::now() < deadline {
+        let Some(message) = listener.recv_timeout(Duration::from_millis(200)) else {
+            continue;
+        };
+        let Ok((vin, kind)) = topics::parse_report(&message.topic) else {
+            continue;
+        };
+        let vin = vin.to_string();
+        if !vins.contains(&vin) {
+            continue;
+        }
+        match kind {
+            ReportKind::Inventory => {
+                let report: InventoryReport = serde_json::from_slice(&message.payload).unwrap();
+                assert_eq!(report.vin, vin);
+                assert_eq!(report.ecus.len(), 9, "{vin}: {:?}", report.ecus);
+                inventories.insert(vin);
+            }
+            ReportKind::Trip => {
+                let report: autoplug_fleet::TripReport =
+                    serde_json::from_slice(&message.payload).unwrap();
+                assert_eq!(report.vin, vin);
+                if report.stats.distance_m > 100.0 {
+                    trips.insert(vin);
+                }
+            }
+            ReportKind::Campaign => {}
+        }
+    }
+    assert_eq!(inventories.len(), 6, "inventories from {inventories:?}");
+    assert_eq!(trips.len(), 6, "drives from {trips:?}");
+    listener.close(Duration::from_secs(2));
+}
+
+#[test]
+fn a_gateway_reports_to_a_fleet_only_when_it_may_transmit_and_knows_the_fleet_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/cruise-hold.toml");
+    let bus = format!("virtual:{scenario}");
+    let no_key = run_args(&args(&[
+        "gateway",
+        "--bus",
+        &bus,
+        "--no-db",
+        "--quiet",
+        "--fast",
+        "--transmit",
+        "--fleet",
+        "mqtt://127.0.0.1:1",
+    ]))
+    .unwrap_err();
+    assert!(no_key.contains("--fleet needs --fleet-key"), "{no_key}");
+    run_args(&args(&[
+        "keygen",
+        "--out",
+        &dir.path().join("fleet").display().to_string(),
+    ]))
+    .unwrap();
+    let key = dir.path().join("fleet.pub").display().to_string();
+    let listening = run_args(&args(&[
+        "gateway",
+        "--bus",
+        &bus,
+        "--no-db",
+        "--quiet",
+        "--fast",
+        "--fleet",
+        "mqtt://127.0.0.1:1",
+        "--fleet-key",
+        &key,
+    ]))
+    .unwrap_err();
+    assert!(
+        listening.contains("--fleet needs --transmit"),
+        "{listening}"
+    );
+    let missing = run_args(&args(&[
+        "gateway",
+        "--bus",
+        &bus,
+        "--no-db",
+        "--transmit",
+        "--fleet",
+        "mqtt://127.0.0.1:1",
+        "--fleet-key",
+        &dir.path().join("nowhere.pub").display().to_string(),
+    ]))
+    .unwrap_err();
+    assert!(missing.contains("nowhere.pub"), "{missing}");
+    let bad_url = run_args(&args(&["gateway", "--bus", &bus, "--fleet", "http://x"])).unwrap_err();
+    assert!(bad_url.contains("--fleet"), "{bad_url}");
+
+    // With both, on the real broker: the gateway reads the VIN, connects as that vehicle
+    // and has handed every report over when it ends.
+    let reported = run_args(&args(&[
+        "gateway",
+        "--bus",
+        &bus,
+        "--no-db",
+        "--quiet",
+        "--fast",
+        "--transmit",
+        "--fleet",
+        &broker_url(),
+        "--fleet-key",
+        &key,
+    ]))
+    .unwrap();
+    assert!(
+        reported.contains("fleet: reported as ") && reported.contains("0 report(s) waiting"),
+        "{reported}"
+    );
+}

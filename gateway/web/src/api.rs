@@ -3,7 +3,7 @@
 //!
 //! | method and path | what | token |
 //! |---|---|---|
-//! | `GET /api/info` | what this gateway can do: `{"write": bool, "control": bool}` | — |
+//! | `GET /api/info` | what this gateway can do: `{"write": bool, "control": bool, "fleet": bool, "live": bool}` | — |
 //! | `POST /api/auth` | 204 if the bearer token is right, else 401 | checks it |
 //! | `POST /api/ecus/{ecu}/flash` | flash the body (a signed image), or `?image=NAME` from the library | yes |
 //! | `POST /api/ecus/{ecu}/clear-dtcs` | clear one ECU's trouble codes (`all`: every ECU's) | yes |
@@ -14,6 +14,8 @@
 //! | `GET /api/recordings`, `GET /api/recordings/{name}` | the recordings, and one to download | — |
 //! | `POST /api/recordings/{name}/replay` | open it in a replay dashboard of its own: `{"port": N}` | yes |
 //! | `GET /api/trips`, `GET /api/trips/{id}`, `GET /api/trips/{id}/series?signal=PATH` | the stored trips | — |
+//! | `POST /api/fleet/consent` | `{"campaign": 7, "install": true}`: the driver's answer to the fleet's update offer | yes |
+//! | `GET /api/fleet`, `GET /api/fleet/campaigns/{id}` | the fleet's campaigns in total, one campaign per vehicle (a server with a fleet database) | — |
 //!
 //! Every answer is JSON (a download aside); every error is `{"error": "..."}` with the
 //! status that fits: 400 a malformed request, 401 no or a wrong token, 404 nothing of that
@@ -79,6 +81,9 @@ pub(crate) fn routes() -> Router<Arc<Shared>> {
         .route("/api/trips", get(trips))
         .route("/api/trips/{id}", get(trip))
         .route("/api/trips/{id}/series", get(series))
+        .route("/api/fleet/consent", post(consent))
+        .route("/api/fleet", get(fleet_overview))
+        .route("/api/fleet/campaigns/{id}", get(fleet_campaign))
         .layer(DefaultBodyLimit::max(MAX_JSON_BYTES))
 }
 
@@ -86,6 +91,8 @@ async fn info(State(shared): State<Arc<Shared>>) -> Response {
     Json(serde_json::json!({
         "write": shared.config.token.is_some(),
         "control": shared.control.is_some(),
+        "fleet": shared.config.fleet.is_some(),
+        "live": shared.config.live,
         "version": env!("CARGO_PKG_VERSION"),
     }))
     .into_response()
@@ -567,6 +574,83 @@ async fn series(
             .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
         points.truncate(MAX_SERIES_POINTS);
         Ok(points)
+    })
+    .await
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ConsentBody {
+    campaign: i64,
+    install: bool,
+}
+
+async fn consent(
+    State(shared): State<Arc<Shared>>,
+    headers: HeaderMap,
+    body: Result<Json<ConsentBody>, JsonRejection>,
+) -> Response {
+    if let Err(e) = authorize(&shared, &headers) {
+        return e.into_response();
+    }
+    match json_body(body) {
+        Ok(ConsentBody { campaign, install }) => {
+            act(&shared, Action::CampaignConsent { campaign, install }).await
+        }
+        Err(e) => e.into_response(),
+    }
+}
+
+/// Runs a fleet query off the event loop, one at a time (the database is shared with the
+/// rest of the fleet: a flood of page loads queues here, it does not open connections).
+async fn fleet_query<T: serde::Serialize + Send + 'static>(
+    shared: &Arc<Shared>,
+    query: impl FnOnce(&dyn crate::fleet::FleetData) -> Result<T, ApiError> + Send + 'static,
+) -> Response {
+    let Some(fleet) = shared.config.fleet.clone() else {
+        return error(
+            StatusCode::NOT_FOUND,
+            "this server shows no fleet (start it with a fleet database: --fleet-db)",
+        );
+    };
+    let Ok(Ok(permit)) =
+        tokio::time::timeout(ANSWER_TIMEOUT, shared.fleet_queries.clone().acquire_owned()).await
+    else {
+        return error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the fleet database is busy: try again",
+        );
+    };
+    blocking(move || {
+        let _permit = permit;
+        query(fleet.as_ref())
+    })
+    .await
+}
+
+async fn fleet_overview(State(shared): State<Arc<Shared>>) -> Response {
+    fleet_query(&shared, |fleet| {
+        fleet
+            .overview()
+            .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e))
+    })
+    .await
+}
+
+async fn fleet_campaign(
+    State(shared): State<Arc<Shared>>,
+    UrlPath(id): UrlPath<String>,
+) -> Response {
+    let Ok(id) = id.parse::<i64>() else {
+        return error(StatusCode::BAD_REQUEST, "a campaign id is a number");
+    };
+    fleet_query(&shared, move |fleet| match fleet.campaign(id) {
+        Ok(Some(value)) => Ok(value),
+        Ok(None) => Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            format!("no campaign {id}"),
+        )),
+        Err(e) => Err(ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e)),
     })
     .await
 }

@@ -51,6 +51,13 @@ pub enum Action {
         /// The recording (already checked to be a file in the recordings directory).
         path: std::path::PathBuf,
     },
+    /// The driver's answer to the fleet's offer of an update.
+    CampaignConsent {
+        /// The campaign offered.
+        campaign: i64,
+        /// Install it (when parked), or not.
+        install: bool,
+    },
 }
 
 /// What a replay does next.

@@ -31,9 +31,11 @@
 pub mod api;
 pub mod assets;
 pub mod control;
+pub mod fleet;
 pub mod live;
 pub mod server;
 
 pub use control::{Action, Answer, Command, Commands, Control, DriveInput, Press, ReplayAction};
+pub use fleet::FleetData;
 pub use live::{LiveTable, Publisher};
 pub use server::{WebConfig, WebServer};

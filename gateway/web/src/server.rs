@@ -55,6 +55,12 @@ pub struct WebConfig {
     pub recordings_dir: Option<PathBuf>,
     /// The firmware library: signed images the ECUs view offers to flash.
     pub images_dir: Option<PathBuf>,
+    /// The fleet's campaigns, for the Fleet view (`GET /api/fleet/...`), if this server
+    /// shows them.
+    pub fleet: Option<Arc<dyn crate::fleet::FleetData>>,
+    /// Whether a bus stands behind the stream (`false`: a fleet page only, and the page
+    /// shows only its Fleet view).
+    pub live: bool,
 }
 
 impl WebConfig {
@@ -68,6 +74,8 @@ impl WebConfig {
             trips_db: None,
             recordings_dir: None,
             images_dir: None,
+            fleet: None,
+            live: true,
         }
     }
 }
@@ -77,6 +85,8 @@ pub(crate) struct Shared {
     pub(crate) config: WebConfig,
     clients: AtomicUsize,
     pub(crate) control: Option<Control>,
+    /// One fleet query at a time.
+    pub(crate) fleet_queries: Arc<tokio::sync::Semaphore>,
 }
 
 /// The running server; dropping it stops it.
@@ -109,6 +119,7 @@ impl WebServer {
             config,
             clients: AtomicUsize::new(0),
             control,
+            fleet_queries: Arc::new(tokio::sync::Semaphore::new(1)),
         });
         let thread = std::thread::Builder::new()
             .name("web server".into())

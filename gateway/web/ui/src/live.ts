@@ -54,6 +54,23 @@ export interface Session {
   replay_page: { file: string; port: number } | null;
   replay: { playing: boolean; speed: number; position_s: number; duration_s: number; at_end: boolean } | null;
   events: { t: number; text: string }[];
+  fleet: FleetLink | null;
+}
+
+// The vehicle's link to its fleet (the gateway started with --fleet).
+export interface FleetLink {
+  broker: string;
+  online: boolean;
+  connected: boolean;
+  problem: string | null;
+  vin: string | null;
+  standing: boolean;
+  offer: { campaign: number; name: string; ecu: string; version: string; message: string; bytes: number; question: string } | null;
+  activity: { campaign: number; what: string } | null;
+  reports: { campaign: number; state: string; reason: string | null; ecu: string; version_running: string | null; at_ms: number }[];
+  events: string[];
+  waiting_reports: number;
+  dropped_reports: number;
 }
 
 export interface Diagnosis {

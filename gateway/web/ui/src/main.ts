@@ -1,5 +1,5 @@
 import './style.css';
-import { post, tokenFromAddress } from './api';
+import { get, post, tokenFromAddress } from './api';
 import { Live } from './live';
 import { h, num, seconds, setText } from './util';
 import type { Ctx, View } from './view';
@@ -11,6 +11,8 @@ import { ecusView } from './views/ecus';
 import { tripsView } from './views/trips';
 import { recordingsView } from './views/recordings';
 import { driveView } from './views/drive';
+import { fleetView } from './views/fleet';
+import { offerBanner } from './offer';
 
 const VIEWS: [string, string, (ctx: Ctx) => View][] = [
   ['car', 'Car', carView],
@@ -21,7 +23,12 @@ const VIEWS: [string, string, (ctx: Ctx) => View][] = [
   ['trips', 'Trips', tripsView],
   ['recordings', 'Recordings', recordingsView],
   ['drive', 'Drive', driveView],
+  ['fleet', 'Fleet', fleetView],
 ];
+// What this server shows (`/api/info`): a fleet page alone has no live bus; the Fleet view
+// shows only where there is a fleet database behind the server.
+const info = await get('/api/info').catch(() => ({ live: true, fleet: false }));
+const shown = VIEWS.filter(([path]) => (path === 'fleet' ? info.fleet : info.live !== false));
 
 tokenFromAddress();
 
@@ -48,15 +55,15 @@ const ctx: Ctx = {
 };
 
 const nav = document.getElementById('nav')!;
-for (const [path, label] of VIEWS) {
+for (const [path, label] of shown) {
   nav.append(h('a', { href: `/${path}`, 'data-link': true, 'data-view': path, text: label }));
 }
 const main = document.getElementById('view')!;
 let current: View | null = null;
 
 function route(): void {
-  const name = location.pathname.replace(/^\//, '') || 'car';
-  const found = VIEWS.find(([path]) => path === name) ?? VIEWS[0];
+  const name = location.pathname.replace(/^\//, '') || shown[0][0];
+  const found = shown.find(([path]) => path === name) ?? shown[0];
   current?.destroy?.();
   current = found[2](ctx);
   main.replaceChildren(current.el);
@@ -107,6 +114,9 @@ function updatePlayer(): void {
   setText(where, `${seconds(r.position_s)} / ${seconds(r.duration_s)}${r.at_end ? ' (end)' : ''}`);
 }
 
+const offer = offerBanner(live, ctx.toast);
+document.getElementById('offer-slot')!.append(offer.el);
+
 const conn = document.getElementById('conn')!;
 const busTime = document.getElementById('bustime')!;
 // Events already shown (the page shows only those that happen while it is open).
@@ -128,9 +138,14 @@ live.subscribe(() => {
       seenEvents = last;
     }
     updatePlayer();
+    offer.update();
     current?.update();
   });
 });
 
 route();
-live.connect();
+if (info.live !== false) live.connect();
+else {
+  setText(conn, 'fleet');
+  conn.className = 'pill on';
+}
