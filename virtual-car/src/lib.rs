@@ -9,6 +9,7 @@ pub mod plot;
 pub mod report;
 pub mod scenario;
 pub mod socketcand;
+pub mod sweep;
 
 #[cfg(test)]
 mod tests;

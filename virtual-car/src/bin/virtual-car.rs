@@ -2,6 +2,7 @@
 //!
 //!     virtual-car run scenarios/drive-cycle.toml            # as fast as possible
 //!     virtual-car run scenarios/cruise-hold.toml --realtime --socketcand 127.0.0.1:29536
+//!     virtual-car abs-sweep --out out                      # ABS stops over friction and speed
 //!     virtual-car list
 
 use autoplug_vin::Vin;
@@ -51,6 +52,14 @@ enum Command {
         /// every ECU answers it as UDS DID F190.
         #[arg(long, value_parser = parse_vin)]
         vin: Option<Vin>,
+    },
+    /// Full braking over a grid of road friction (0.2 to 1.0) and speed (40 to 200 km/h),
+    /// and on split friction: each stop against the limit v²/(2µg), as a table
+    /// (abs-sweep.md) and a plot (abs-sweep.svg).
+    AbsSweep {
+        /// Output folder.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
     },
     /// Lists the scenarios in a folder with their descriptions.
     List {
@@ -146,8 +155,47 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
         }
+        Command::AbsSweep { out } => abs_sweep(&out),
         Command::List { dir } => list(&dir),
     }
+}
+
+fn abs_sweep(out: &Path) -> ExitCode {
+    use autoplug_virtual_car::sweep;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let wall = Instant::now();
+    let stops = match sweep::run_sweep(
+        &sweep::FRICTIONS,
+        &sweep::SPEEDS_KMH,
+        &sweep::SPLIT_FRICTIONS,
+        &sweep::SPLIT_SPEEDS_KMH,
+        threads,
+    ) {
+        Ok(stops) => stops,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let table = sweep::table(&stops);
+    print!("{table}");
+    let written = std::fs::create_dir_all(out)
+        .and_then(|()| std::fs::write(out.join("abs-sweep.md"), &table))
+        .and_then(|()| std::fs::write(out.join("abs-sweep.svg"), sweep::plot(&stops).to_svg()));
+    if let Err(e) = written {
+        eprintln!(
+            "error: --out '{}': cannot write the sweep: {e}",
+            out.display()
+        );
+        return ExitCode::FAILURE;
+    }
+    println!(
+        "{} stops in {:.1} s; table and plot in {}",
+        stops.len(),
+        wall.elapsed().as_secs_f64(),
+        out.display()
+    );
+    ExitCode::SUCCESS
 }
 
 fn run_one(

@@ -1,0 +1,109 @@
+//! The ABS on any friction: full braking over friction 0.2–1.0 and speeds 40–200 km/h with
+//! the whole virtual car, each stop against the physical limit v²/(2µg), and split-friction
+//! stops for the heading. `virtual-car abs-sweep` prints the same sweep as a table and a
+//! plot.
+
+use autoplug_virtual_car::sweep::{self, SweepStop};
+
+/// Every stop from this speed up is held to [`FAST_RATIO`]; below it the brake system's
+/// pressure build-up (a fixed ~0.1 s at full speed) weighs more: [`SLOW_RATIO`].
+const FAST_FROM_KMH: f64 = 50.0;
+const FAST_RATIO: f64 = 1.05;
+const SLOW_RATIO: f64 = 1.10;
+/// Longest a wheel may stay locked (below 10 % of the car's speed), s.
+const MAX_LOCK_S: f64 = 0.2;
+/// Largest heading change of a split-friction stop with the wheel held straight, degrees.
+const MAX_SPLIT_HEADING_DEG: f64 = 10.0;
+
+fn check(s: &SweepStop) -> Result<(), String> {
+    let where_ = format!("µ {}/{} from {} km/h", s.mu_left, s.mu_right, s.speed_kmh);
+    let stop = s.stop.as_ref().ok_or(format!("{where_}: no stop"))?;
+    if stop.longest_wheel_lock_s > MAX_LOCK_S {
+        return Err(format!(
+            "{where_}: a wheel locked for {} s",
+            stop.longest_wheel_lock_s
+        ));
+    }
+    if s.even() {
+        let bound = if stop.from_kmh >= FAST_FROM_KMH - 0.5 {
+            FAST_RATIO
+        } else {
+            SLOW_RATIO
+        };
+        if stop.ratio_to_limit > bound {
+            return Err(format!(
+                "{where_}: {} m = {} x the limit (bound {bound})",
+                stop.distance_m, stop.ratio_to_limit
+            ));
+        }
+    } else {
+        let low = s.mu_left.min(s.mu_right);
+        let v = stop.from_kmh / 3.6;
+        let low_side_limit = v * v / (2.0 * low * 9.80665);
+        if stop.distance_m > low_side_limit {
+            return Err(format!(
+                "{where_}: {} m, longer than all wheels on µ {low} ({low_side_limit:.1} m)",
+                stop.distance_m
+            ));
+        }
+        if stop.heading_change_deg.abs() > MAX_SPLIT_HEADING_DEG {
+            return Err(format!(
+                "{where_}: heading changed {}°",
+                stop.heading_change_deg
+            ));
+        }
+    }
+    Ok(())
+}
+
+#[test]
+#[ignore = "issue 13 in progress: the ABS is not yet within these bounds on low friction and at 50-80 km/h (run with --ignored; `virtual-car abs-sweep` shows where)"]
+fn full_braking_stays_near_the_limit_on_any_friction_and_keeps_the_heading_on_split_friction() {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let stops = sweep::run_sweep(
+        &sweep::FRICTIONS,
+        &sweep::SPEEDS_KMH,
+        &sweep::SPLIT_FRICTIONS,
+        &sweep::SPLIT_SPEEDS_KMH,
+        threads,
+    )
+    .expect("the sweep's scenarios are valid");
+    assert_eq!(
+        stops.len(),
+        sweep::FRICTIONS.len() * sweep::SPEEDS_KMH.len()
+            + sweep::SPLIT_FRICTIONS.len() * sweep::SPLIT_SPEEDS_KMH.len()
+    );
+    let failures: Vec<String> = stops.iter().filter_map(|s| check(s).err()).collect();
+    assert!(
+        failures.is_empty(),
+        "{}\n\n{}",
+        failures.join("\n"),
+        sweep::table(&stops)
+    );
+}
+
+/// The sweep's machinery on one point: its scenario brakes from the speed asked for, the
+/// stop is found and measured against the limit, the table and the plot show it.
+#[test]
+fn a_sweep_point_is_a_full_stop_from_its_speed_measured_against_the_limit() {
+    let point = sweep::run_stop(0.6, 0.6, 80.0).expect("a valid point");
+    let stop = point.stop.as_ref().expect("the car came to rest");
+    assert!(
+        (stop.from_kmh - 80.0).abs() < 1.0,
+        "braked from {} km/h",
+        stop.from_kmh
+    );
+    let limit = (stop.from_kmh / 3.6).powi(2) / (2.0 * 0.6 * 9.80665);
+    assert!(
+        (stop.limit_m - limit).abs() < 0.02,
+        "{} m vs {limit} m",
+        stop.limit_m
+    );
+    assert!(stop.ratio_to_limit > 0.9 && stop.ratio_to_limit < 1.3);
+    let table = sweep::table(std::slice::from_ref(&point));
+    assert!(table.contains("| 0.6 | 80 |"), "{table}");
+    let svg = sweep::plot(std::slice::from_ref(&point)).to_svg();
+    assert!(svg.contains("µ 0.6"));
+    assert!(sweep::run_stop(f64::NAN, 0.6, 80.0).is_err());
+    assert!(sweep::run_stop(0.6, 0.6, -5.0).is_err());
+}
