@@ -59,7 +59,7 @@ class AllBytes(udsoncan.DidCodec):
 
 def security_key(node):
     def algorithm(level, seed, params=None):
-        return hmac.new(DEV_SECURITY_SECRET, bytes([node]) + bytes(seed), hashlib.sha256).digest()[:16]
+        return hmac.new(DEV_SECURITY_SECRET, bytes([node]) + bytes(seed), hashlib.sha512).digest()[:16]
 
     return algorithm
 

@@ -3,6 +3,7 @@
 //! and the error monitor. The pins are the board's: each board module passes its own to
 //! `Can::new` together with [`Irqs`].
 
+use core::num::{NonZeroU16, NonZeroU8};
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use autoplug_can::{Frame, Node};
@@ -31,6 +32,25 @@ const MAX_FILTER_IDS: usize = 4 * 14;
 /// The AutoPlug bus bit rate.
 pub const BITRATE: u32 = 500_000;
 
+/// CAN1's bit timing for [`BITRATE`] from APB1: a prescaler of 6 makes 7 MHz time quanta,
+/// 14 per bit (sync 1 + segment 1 of 11 + segment 2 of 2), sampled at 12/14 = 85.7 %, with
+/// a resynchronisation jump width of 1. That is what the HAL's `set_bitrate` would work out
+/// at every start; given here as constants (checked below) so the firmware carries neither
+/// the search nor its error's formatting.
+const BIT_TIMING: bxcan::util::NominalBitTiming = bxcan::util::NominalBitTiming {
+    prescaler: NonZeroU16::new(6).unwrap(),
+    seg1: NonZeroU8::new(11).unwrap(),
+    seg2: NonZeroU8::new(2).unwrap(),
+    sync_jump_width: NonZeroU8::new(1).unwrap(),
+};
+const _: () = {
+    let quanta = 1 + BIT_TIMING.seg1.get() as u32 + BIT_TIMING.seg2.get() as u32;
+    let cycles = BIT_TIMING.prescaler.get() as u32 * quanta;
+    assert!(crate::clocks::APB1_HZ % cycles == 0 && crate::clocks::APB1_HZ / cycles == BITRATE);
+    // bxCAN's limits: segment 1 at most 16 quanta, segment 2 at most 8.
+    assert!(BIT_TIMING.seg1.get() <= 16 && BIT_TIMING.seg2.get() <= 8);
+};
+
 /// Frames received, waiting for the control task (a 10 ms step sees at most a few).
 pub type RxQueue = Channel<CriticalSectionRawMutex, Frame, 16>;
 
@@ -51,7 +71,7 @@ pub static BUS_ERRORS: AtomicU32 = AtomicU32::new(0);
 /// the controller rejoins on its own once it has seen 128 × 11 recessive bits.
 pub async fn start(can: &mut Can<'static>, node: Node) {
     can.modify_config()
-        .set_bitrate(BITRATE)
+        .set_bit_timing(BIT_TIMING)
         .set_loopback(false)
         .set_silent(false)
         .set_automatic_retransmit(true);

@@ -10,6 +10,9 @@ use embassy_stm32::rcc::{
 use embassy_stm32::time::Hertz;
 use embassy_stm32::{Config, Peripherals};
 
+/// APB1's clock (CAN1's), as [`config`] sets it up: 168 MHz / 4.
+pub const APB1_HZ: u32 = 42_000_000;
+
 /// The HAL configuration with the clock tree above.
 pub fn config() -> Config {
     let mut config = Config::default();

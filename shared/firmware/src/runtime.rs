@@ -100,14 +100,16 @@ where
 
     can_io::start(&mut can, E::NODE).await;
     let (tx, rx) = can.split();
-    spawner.spawn(can_rx(rx).expect("can_rx spawned once"));
-    spawner.spawn(can_tx(tx).expect("can_tx spawned once"));
-    spawner.spawn(can_monitor().expect("can_monitor spawned once"));
+    // defmt's unwrap, not `expect`: the latter's message formatting would pull core::fmt
+    // into the image (see `fault`).
+    spawner.spawn(defmt::unwrap!(can_rx(rx)));
+    spawner.spawn(defmt::unwrap!(can_tx(tx)));
+    spawner.spawn(defmt::unwrap!(can_monitor()));
 
     let layout = Flash::new_blocking(flash).into_blocking_regions();
     let mut ecu_flash = EcuFlash::new(layout.bank1_region1, layout.bank1_region3);
     let mut unconfirmed = ecu_flash.boot_state() == State::Swap;
-    let mut diag = DiagNode::new(E::NODE, DEV_SECURITY_SECRET, now()).expect("an ECU");
+    let mut diag = defmt::unwrap!(DiagNode::new(E::NODE, DEV_SECURITY_SECRET, now()));
     let mut seeds = entropy::seed_source(ecu_flash.next_seed_epoch());
 
     let timeout_us = WATCHDOG_TIMEOUT_PERIODS * E::STEP_PERIOD_US;

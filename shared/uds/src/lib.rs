@@ -9,7 +9,7 @@
 //! | 0x14 | clear all DTCs (group 0xFFFFFF) | all | — |
 //! | 0x19 | DTCs: 0x01 count by status mask, 0x02 by status mask, 0x0A all stored | all | — |
 //! | 0x22 | F186 session, F187 part number, F189 software version, F18C serial, F191 hardware version, the ECU's live data | all | — |
-//! | 0x27 | seed 0x01 / key 0x02: HMAC-SHA-256 of node ‖ seed; 3 wrong keys lock for 10 s, counted in flash before the key is checked and kept across resets | extended, programming | — |
+//! | 0x27 | seed 0x01 / key 0x02: HMAC-SHA-512 of node ‖ seed; 3 wrong keys lock for 10 s, counted in flash before the key is checked and kept across resets | extended, programming | — |
 //! | 0x28 | normal messages: rx/tx on/off | extended, programming | — |
 //! | 0x3E | tester present | all | — |
 //! | 0x31 | start FF00 erase (the DFU slot), FF01 check the downloaded image (signature, ECU, hardware, version floor, length) and mark it for the swap | programming | yes |
