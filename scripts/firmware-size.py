@@ -28,10 +28,9 @@ except ImportError:
 
 FLASH = (0x0800_0000, 0x0808_0000)  # 512 KiB on the F446RE
 RAM = (0x2000_0000, 0x2002_0000)  # 128 KiB
-# Hard limit: the active slot (autoplug-flash ACTIVE) less the image header and signature.
-SLOT = 128 * 1024 - 512 - 64
-# Budgets of issue 13: 64 KiB of flash and 16 KiB of static RAM per firmware.
-FLASH_GOAL = 64 * 1024
+# Budgets of issue 13: 64 KiB of flash and 16 KiB of static RAM per firmware (the active
+# slot, 128 KiB less the image header and signature, would take twice the flash).
+FLASH_BUDGET = 64 * 1024
 RAM_BUDGET = 16 * 1024
 SHF_ALLOC = 0x2
 # Rows of the breakdown: the largest crates, the rest summed.
@@ -166,11 +165,11 @@ def main():
         print("| firmware | flash (B) | of 64 KiB | static RAM (B) | of 16 KiB |")
         print("|---|---:|---:|---:|---:|")
         for name, flash, ram, _ in rows:
-            print(f"| {name} | {flash:,} | {pct(flash, FLASH_GOAL)} | {ram:,} | {pct(ram, RAM_BUDGET)} |")
+            print(f"| {name} | {flash:,} | {pct(flash, FLASH_BUDGET)} | {ram:,} | {pct(ram, RAM_BUDGET)} |")
     else:
         print(f"{'firmware':<12} {'flash (B)':>10} {'of 64 KiB':>10} {'static RAM (B)':>15} {'of 16 KiB':>10}")
         for name, flash, ram, _ in rows:
-            print(f"{name:<12} {flash:>10,} {pct(flash, FLASH_GOAL):>10} {ram:>15,} {pct(ram, RAM_BUDGET):>10}")
+            print(f"{name:<12} {flash:>10,} {pct(flash, FLASH_BUDGET):>10} {ram:>15,} {pct(ram, RAM_BUDGET):>10}")
 
     # The breakdown: one column per firmware, the crates that take most over all of them.
     total = collections.Counter()
@@ -203,14 +202,9 @@ def main():
     for label in sorted(others):
         line(label, [shares[label] for *_, shares in rows])
 
-    over_ram = [name for name, _, ram, _ in rows if ram > RAM_BUDGET]
-    over_slot = [name for name, flash, _, _ in rows if flash > SLOT]
-    over_goal = [name for name, flash, _, _ in rows if flash > FLASH_GOAL]
-    if over_goal:
-        # Issue 13's goal, not yet met by all: reported, and fatal only above the slot.
-        print(f"\nover 64 KiB of flash: {', '.join(over_goal)}")
-    if over_slot or over_ram:
-        sys.exit(f"firmware-size: over budget (active slot or 16 KiB RAM): {', '.join(over_slot + over_ram)}")
+    over = [name for name, flash, ram, _ in rows if flash > FLASH_BUDGET or ram > RAM_BUDGET]
+    if over:
+        sys.exit(f"firmware-size: over budget (64 KiB of flash, 16 KiB of static RAM): {', '.join(over)}")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 //! PWM outputs on a general-purpose timer, each with the [`analog`](crate::analog) scaling
 //! of its signal. Which pin is which signal stays in each ECU's board module.
 
-use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
+use embassy_stm32::adc::{Adc, AnyAdcChannel, SampleTime};
 use embassy_stm32::peripherals::ADC1;
 use embassy_stm32::timer::simple_pwm::SimplePwmChannel;
 use embassy_stm32::timer::GeneralInstance4Channel;
@@ -17,12 +17,12 @@ pub const SAMPLE_TIME: SampleTime = SampleTime::CYCLES144;
 /// turns it into a steady voltage where an analog one is wanted.
 pub const PWM_FREQUENCY_HZ: u32 = 20_000;
 
+/// An analog input pin of ADC1 (`pin.degrade_adc()`): one type for every pin, so that
+/// [`read_analog`] is one function in the image rather than one per pin.
+pub type AnalogPin = AnyAdcChannel<'static, ADC1>;
+
 /// Reads one analog input on ADC1 and scales it.
-pub fn read_analog(
-    adc: &mut Adc<'static, ADC1>,
-    pin: &mut impl AdcChannel<ADC1>,
-    scale: &LinearInput,
-) -> f32 {
+pub fn read_analog(adc: &mut Adc<'static, ADC1>, pin: &mut AnalogPin, scale: &LinearInput) -> f32 {
     scale.value(adc.blocking_read(pin, SAMPLE_TIME))
 }
 

@@ -21,17 +21,16 @@
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
-use autoplug_firmware::io::{read_analog, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_abs::{AbsEcu, Actuators, Sensors};
-use embassy_stm32::adc::Adc;
+use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
-use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4, PB0, TIM3};
+use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::Peri;
 
 /// A wheel speed: 0–3.3 V is 0–255 km/h (VehicleSpeedMsg's range).
 const WHEEL_SPEED: LinearInput = LinearInput::new(0.0, 255.0);
@@ -41,10 +40,10 @@ const BRAKE: LinearOutput = LinearOutput::new(0.0, 100.0);
 /// The ABS ECU's wheel-speed inputs and brake outputs, FL, FR, RL, RR.
 pub struct Board {
     adc: Adc<'static, ADC1>,
-    front_left_speed: Peri<'static, PA0>,
-    front_right_speed: Peri<'static, PA1>,
-    rear_left_speed: Peri<'static, PA4>,
-    rear_right_speed: Peri<'static, PB0>,
+    front_left_speed: AnalogPin,
+    front_right_speed: AnalogPin,
+    rear_left_speed: AnalogPin,
+    rear_right_speed: AnalogPin,
     brakes: [PwmOutput<TIM3>; 4],
 }
 
@@ -68,10 +67,10 @@ pub fn init() -> (Platform, Board) {
     .split();
     let board = Board {
         adc: Adc::new(p.ADC1),
-        front_left_speed: p.PA0,
-        front_right_speed: p.PA1,
-        rear_left_speed: p.PA4,
-        rear_right_speed: p.PB0,
+        front_left_speed: p.PA0.degrade_adc(),
+        front_right_speed: p.PA1.degrade_adc(),
+        rear_left_speed: p.PA4.degrade_adc(),
+        rear_right_speed: p.PB0.degrade_adc(),
         brakes: [
             PwmOutput::new(pwm.ch1, BRAKE, 0.0),
             PwmOutput::new(pwm.ch2, BRAKE, 0.0),

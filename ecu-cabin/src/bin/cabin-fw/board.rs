@@ -16,17 +16,16 @@
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
-use autoplug_firmware::io::{read_analog, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_cabin::{Actuators, CabinEcu, Sensors, SET_TEMP_MAX_F, SET_TEMP_MIN_F};
-use embassy_stm32::adc::Adc;
+use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
-use embassy_stm32::peripherals::{ADC1, PA0, PA1, TIM3};
+use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::Peri;
 
 /// The cabin temperature sensor: 0–3.3 V is −50–170 °F.
 const CABIN_TEMP: LinearInput = LinearInput::new(-50.0, 170.0);
@@ -38,8 +37,8 @@ const FAN: LinearOutput = LinearOutput::new(0.0, 100.0);
 /// The cabin ECU's sensors and fan.
 pub struct Board {
     adc: Adc<'static, ADC1>,
-    cabin_temp: Peri<'static, PA0>,
-    set_temp: Peri<'static, PA1>,
+    cabin_temp: AnalogPin,
+    set_temp: AnalogPin,
     fan: PwmOutput<TIM3>,
 }
 
@@ -63,8 +62,8 @@ pub fn init() -> (Platform, Board) {
     .split();
     let board = Board {
         adc: Adc::new(p.ADC1),
-        cabin_temp: p.PA0,
-        set_temp: p.PA1,
+        cabin_temp: p.PA0.degrade_adc(),
+        set_temp: p.PA1.degrade_adc(),
         fan: PwmOutput::new(pwm.ch1, FAN, 0.0),
     };
     (platform, board)

@@ -13,14 +13,13 @@
 
 use autoplug_firmware::analog::LinearInput;
 use autoplug_firmware::can_io;
-use autoplug_firmware::io::read_analog;
+use autoplug_firmware::io::{read_analog, AnalogPin};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_cruise::{CruiseEcu, Sensors, Status};
-use embassy_stm32::adc::Adc;
+use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::{Level, Output, Speed};
-use embassy_stm32::peripherals::{ADC1, PA0};
-use embassy_stm32::Peri;
+use embassy_stm32::peripherals::ADC1;
 
 /// The speed signal: 0–3.3 V is 0–255 km/h (VehicleSpeedMsg's range).
 const VEHICLE_SPEED: LinearInput = LinearInput::new(0.0, 255.0);
@@ -28,7 +27,7 @@ const VEHICLE_SPEED: LinearInput = LinearInput::new(0.0, 255.0);
 /// The cruise ECU's sensor and lamp.
 pub struct Board {
     adc: Adc<'static, ADC1>,
-    vehicle_speed: Peri<'static, PA0>,
+    vehicle_speed: AnalogPin,
     engaged_lamp: Output<'static>,
 }
 
@@ -42,7 +41,7 @@ pub fn init() -> (Platform, Board) {
     };
     let board = Board {
         adc: Adc::new(p.ADC1),
-        vehicle_speed: p.PA0,
+        vehicle_speed: p.PA0.degrade_adc(),
         engaged_lamp: Output::new(p.PA5, Level::Low, Speed::Low),
     };
     (platform, board)

@@ -12,17 +12,16 @@
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
-use autoplug_firmware::io::{read_analog, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_diff::{Actuators, DiffEcu, Sensors, SPLIT_LIMIT_NM};
-use embassy_stm32::adc::Adc;
+use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
-use embassy_stm32::peripherals::{ADC1, PA0, TIM3};
+use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::Peri;
 
 /// The yaw-rate error signal: 0–3.3 V is −2.5–+2.5 rad/s (YawErrorMsg's range).
 const YAW_RATE_ERROR: LinearInput = LinearInput::new(-2.5, 2.5);
@@ -32,7 +31,7 @@ const TORQUE_SPLIT: LinearOutput = LinearOutput::new(-SPLIT_LIMIT_NM, SPLIT_LIMI
 /// The differential ECU's sensor and actuator.
 pub struct Board {
     adc: Adc<'static, ADC1>,
-    yaw_rate_error: Peri<'static, PA0>,
+    yaw_rate_error: AnalogPin,
     torque_split: PwmOutput<TIM3>,
 }
 
@@ -56,7 +55,7 @@ pub fn init() -> (Platform, Board) {
     .split();
     let board = Board {
         adc: Adc::new(p.ADC1),
-        yaw_rate_error: p.PA0,
+        yaw_rate_error: p.PA0.degrade_adc(),
         torque_split: PwmOutput::new(pwm.ch1, TORQUE_SPLIT, 0.0),
     };
     (platform, board)

@@ -13,15 +13,14 @@
 
 use autoplug_firmware::analog::LinearInput;
 use autoplug_firmware::can_io;
-use autoplug_firmware::io::read_analog;
+use autoplug_firmware::io::{read_analog, AnalogPin};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_engine::{
     EngineEcu, Sensors, Status, ENGINE_RPM_MAX, FUEL_FLOW_MAX_L_PER_H, FUEL_LEVEL_MAX_L,
 };
-use embassy_stm32::adc::Adc;
+use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
-use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4};
-use embassy_stm32::Peri;
+use embassy_stm32::peripherals::ADC1;
 
 /// Engine speed: 0–3.3 V is 0–9000 rpm.
 const ENGINE_SPEED: LinearInput = LinearInput::new(0.0, ENGINE_RPM_MAX);
@@ -33,9 +32,9 @@ const FUEL_FLOW: LinearInput = LinearInput::new(0.0, FUEL_FLOW_MAX_L_PER_H);
 /// The engine ECU's sensors.
 pub struct Board {
     adc: Adc<'static, ADC1>,
-    engine_speed: Peri<'static, PA0>,
-    fuel_level: Peri<'static, PA1>,
-    fuel_flow: Peri<'static, PA4>,
+    engine_speed: AnalogPin,
+    fuel_level: AnalogPin,
+    fuel_flow: AnalogPin,
 }
 
 /// Brings up the clocks, CAN1 and the sensor inputs.
@@ -48,9 +47,9 @@ pub fn init() -> (Platform, Board) {
     };
     let board = Board {
         adc: Adc::new(p.ADC1),
-        engine_speed: p.PA0,
-        fuel_level: p.PA1,
-        fuel_flow: p.PA4,
+        engine_speed: p.PA0.degrade_adc(),
+        fuel_level: p.PA1.degrade_adc(),
+        fuel_flow: p.PA4.degrade_adc(),
     };
     (platform, board)
 }

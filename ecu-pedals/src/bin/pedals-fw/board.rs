@@ -15,17 +15,16 @@
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
-use autoplug_firmware::io::{read_analog, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_pedals::{Actuators, PedalsEcu, Sensors, PEDAL_FULL};
-use embassy_stm32::adc::Adc;
+use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
-use embassy_stm32::peripherals::{ADC1, PA0, PA1, TIM3};
+use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::Peri;
 
 /// A pedal: 0–3.3 V is 0–100 pedal units.
 const PEDAL: LinearInput = LinearInput::new(0.0, PEDAL_FULL);
@@ -35,8 +34,8 @@ const COMMAND: LinearOutput = LinearOutput::new(0.0, PEDAL_FULL);
 /// The pedals ECU's sensors and actuators.
 pub struct Board {
     adc: Adc<'static, ADC1>,
-    accelerator_pedal: Peri<'static, PA0>,
-    brake_pedal: Peri<'static, PA1>,
+    accelerator_pedal: AnalogPin,
+    brake_pedal: AnalogPin,
     accelerator_cmd: PwmOutput<TIM3>,
     brake_cmd: PwmOutput<TIM3>,
 }
@@ -61,8 +60,8 @@ pub fn init() -> (Platform, Board) {
     .split();
     let board = Board {
         adc: Adc::new(p.ADC1),
-        accelerator_pedal: p.PA0,
-        brake_pedal: p.PA1,
+        accelerator_pedal: p.PA0.degrade_adc(),
+        brake_pedal: p.PA1.degrade_adc(),
         accelerator_cmd: PwmOutput::new(pwm.ch1, COMMAND, 0.0),
         brake_cmd: PwmOutput::new(pwm.ch2, COMMAND, 0.0),
     };

@@ -21,17 +21,16 @@
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
-use autoplug_firmware::io::{read_analog, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_steering::{Actuators, Sensors, SteeringEcu, STEERING_LIMIT_DEG};
-use embassy_stm32::adc::Adc;
+use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::{Input, OutputType, Pull};
-use embassy_stm32::peripherals::{ADC1, PA0, TIM3};
+use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::Peri;
 
 /// The wheel angle: 0–3.3 V is the full lock-to-lock range, positive (left) at 3.3 V.
 const WHEEL_ANGLE: LinearInput = LinearInput::new(-STEERING_LIMIT_DEG, STEERING_LIMIT_DEG);
@@ -41,7 +40,7 @@ const STEERING_CMD: LinearOutput = LinearOutput::new(-STEERING_LIMIT_DEG, STEERI
 /// The steering ECU's wheel, buttons and steering command.
 pub struct Board {
     adc: Adc<'static, ADC1>,
-    wheel_angle: Peri<'static, PA0>,
+    wheel_angle: AnalogPin,
     shift_up: Input<'static>,
     shift_down: Input<'static>,
     cruise_on: Input<'static>,
@@ -69,7 +68,7 @@ pub fn init() -> (Platform, Board) {
     .split();
     let board = Board {
         adc: Adc::new(p.ADC1),
-        wheel_angle: p.PA0,
+        wheel_angle: p.PA0.degrade_adc(),
         shift_up: Input::new(p.PA10, Pull::Up),
         shift_down: Input::new(p.PB3, Pull::Up),
         cruise_on: Input::new(p.PB10, Pull::Up),
