@@ -3,6 +3,7 @@
 #![deny(missing_docs)]
 
 pub mod car;
+pub mod decimal;
 pub mod diag;
 pub mod driver;
 pub mod plot;

@@ -847,3 +847,44 @@ fn the_development_key_pair_matches() {
     let key = SigningKey::from_seed(crate::dev::SIGNING_SEED);
     assert_eq!(key.public_key(), crate::dev::PUBLIC_KEY);
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Signing (ed25519-compact) and verification (salty, as on the ECUs) are two
+    /// implementations of RFC 8032: same public key, same deterministic signature, and
+    /// salty accepts it.
+    #[test]
+    fn signing_agrees_with_the_verifier(seed in any::<[u8; 32]>(), message in proptest::collection::vec(any::<u8>(), 0..200)) {
+        let key = SigningKey::from_seed(seed);
+        let reference = salty::Keypair::from(&seed);
+        prop_assert_eq!(key.public_key(), reference.public.to_bytes());
+        let signature = key.sign(&message);
+        prop_assert_eq!(signature, reference.sign(&message).to_bytes());
+        let public = salty::PublicKey::try_from(&key.public_key()).unwrap();
+        prop_assert!(public.verify(&message, &salty::Signature::from(&signature)).is_ok());
+    }
+}
+
+/// RFC 8032, section 7.1, test 2: the signer gives the standard's bytes.
+#[test]
+fn signing_matches_rfc_8032() {
+    let hex = |s: &str| -> Vec<u8> {
+        (0..s.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+            .collect()
+    };
+    let seed: [u8; 32] = hex("4ccd089b28ff96da9db6c346ec114e0f5b8a319f35aba624da8cf6ed4fb8a6fb")
+        .try_into()
+        .unwrap();
+    let key = SigningKey::from_seed(seed);
+    assert_eq!(
+        key.public_key().to_vec(),
+        hex("3d4017c3e843895a92b70aa74d1b7ebc9c982ccf2ec4968cc0cd55f12af4660c")
+    );
+    assert_eq!(
+        key.sign(&[0x72]).to_vec(),
+        hex("92a009a9f0d4cab8720e820b5f642540a2b27b5416503f8fb3762223ebdb69da085ac1e43e15996e458f3613d0f11d8c387b2eaeb4302aeeb00d291612bb0c00")
+    );
+}
