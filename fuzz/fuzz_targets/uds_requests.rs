@@ -64,8 +64,8 @@ impl Backend for Ecu {
     fn public_key(&self) -> [u8; 32] {
         [9; 32]
     }
-    fn dfu_erase_steps(&self) -> u32 {
-        2
+    fn dfu_erase_steps(&self, len: u32) -> u32 {
+        len.min(2 * SECTOR as u32).div_ceil(SECTOR as u32)
     }
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
         let start = step as usize * SECTOR;

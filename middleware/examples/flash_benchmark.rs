@@ -55,8 +55,10 @@ fn main() {
     assert_eq!(image.len(), IMAGE_LEN);
 
     // The UDS download, on the virtual car standing in the workshop.
+    // Standing long enough for the ECU to accept a programming session: it needs to have
+    // seen the car stand for the whole standstill window first.
     let mut car = VirtualCar::new(&scenario);
-    for _ in 0..100 {
+    while car.time_us() < autoplug_uds::STANDSTILL_WINDOW_US + 100_000 {
         car.tick();
     }
     let job = FlashJob::new(FlashConfig::new(

@@ -516,8 +516,8 @@ impl Backend for EcuBackend<'_> {
         self.key
     }
 
-    fn dfu_erase_steps(&self) -> u32 {
-        DFU.size / SECTORS[7].size
+    fn dfu_erase_steps(&self, len: u32) -> u32 {
+        len.min(DFU.size).div_ceil(SECTORS[7].size)
     }
 
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {

@@ -5,7 +5,7 @@
 //! |---|---|
 //! | session setup | functional 0x10 03 (extended), 0x85 02 (DTC setting off), 0x28 03 01 (normal communication off); physical 0x10 02 (programming) |
 //! | security | 0x27 01 (seed), 0x27 02 (key = `key_for(secret, node, seed)`) |
-//! | erase | 0x31 01 FF00, answered after a series of 0x78 |
+//! | erase | 0x31 01 FF00 44 (slot address, image length): the sectors the image needs, answered after a series of 0x78 |
 //! | transfer | 0x34 00 44 (slot address, image length); 0x36 blocks of the announced length; 0x37 |
 //! | check | 0x31 01 FF01 (the ECU verifies the signature and marks the image) |
 //! | reset and wait | 0x11 01; TesterPresent (0x3E 00) until the ECU answers again |
@@ -509,7 +509,20 @@ impl FlashJob {
                 request.extend_from_slice(&self.key);
                 tester.request_echoing(now, ecu, &request, 1)
             }
-            Step::Erase => tester.request_echoing(now, ecu, &[0x31, 0x01, 0xFF, 0x00], 3),
+            Step::Erase => {
+                // With the image's length (addressAndLengthFormatIdentifier 0x44): the ECU
+                // erases only the sectors the image needs.
+                let mut request = vec![0x31, 0x01, 0xFF, 0x00];
+                if let Some(len) = u32::try_from(self.config.image.len())
+                    .ok()
+                    .filter(|&len| len > 0)
+                {
+                    request.push(0x44);
+                    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+                    request.extend_from_slice(&len.to_be_bytes());
+                }
+                tester.request_echoing(now, ecu, &request, 3)
+            }
             Step::RequestDownload => {
                 let len = u32::try_from(self.config.image.len())
                     .ok()

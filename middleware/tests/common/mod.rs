@@ -129,8 +129,8 @@ impl Backend for MemEcu {
         self.public_key
     }
 
-    fn dfu_erase_steps(&self) -> u32 {
-        (DFU_LEN / SECTOR_LEN) as u32
+    fn dfu_erase_steps(&self, len: u32) -> u32 {
+        (len as usize).min(DFU_LEN).div_ceil(SECTOR_LEN) as u32
     }
 
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {

@@ -310,8 +310,8 @@ impl Backend for FirmwareBackend<'_> {
         dev::PUBLIC_KEY
     }
 
-    fn dfu_erase_steps(&self) -> u32 {
-        DFU.size / SLOT_ERASE_SIZE
+    fn dfu_erase_steps(&self, len: u32) -> u32 {
+        len.min(DFU.size).div_ceil(SLOT_ERASE_SIZE)
     }
 
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {

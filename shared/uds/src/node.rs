@@ -115,8 +115,8 @@ impl<B: Backend> Backend for WithStack<'_, B> {
     fn public_key(&self) -> [u8; 32] {
         self.ecu.public_key()
     }
-    fn dfu_erase_steps(&self) -> u32 {
-        self.ecu.dfu_erase_steps()
+    fn dfu_erase_steps(&self, len: u32) -> u32 {
+        self.ecu.dfu_erase_steps(len)
     }
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
         self.ecu.dfu_erase(step)

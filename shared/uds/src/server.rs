@@ -121,8 +121,10 @@ pub trait Backend {
     fn image_expectations(&self) -> Expectations;
     /// The key images are signed with.
     fn public_key(&self) -> [u8; 32];
-    /// Number of erase steps of the DFU partition (one step: one sector).
-    fn dfu_erase_steps(&self) -> u32;
+    /// Number of erase steps (one step: one sector, from the start of the DFU partition)
+    /// that cover its first `len` bytes. Only those are erased before a download: the
+    /// bootloader erases the rest of the partition itself before it copies into it.
+    fn dfu_erase_steps(&self, len: u32) -> u32;
     /// Erases step `step` of the DFU partition (the core may stall for a second).
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError>;
     /// Programs `data` at `offset` in the DFU partition (erased before). Both are whole
@@ -217,8 +219,9 @@ enum Security {
 enum Programming {
     /// Nothing erased since the last download (or since power-up).
     Idle,
-    /// The DFU partition is erased: a download may start.
-    Erased,
+    /// The first `len` bytes of the DFU partition are erased: a download of up to that
+    /// many bytes may start.
+    Erased { len: u32 },
     /// A download is under way.
     Downloading {
         size: u32,
@@ -241,6 +244,8 @@ enum Work {
     Erase {
         step: u32,
         steps: u32,
+        /// Bytes from the partition's start that the steps erase.
+        len: u32,
     },
     Check {
         header: ImageHeader,
@@ -498,7 +503,7 @@ impl Server {
             return Reply::Nothing;
         };
         match work {
-            Work::Erase { step, steps } => {
+            Work::Erase { step, steps, len } => {
                 if backend.dfu_erase(step).is_err() {
                     self.programming = Programming::Idle;
                     return negative(sid::ROUTINE_CONTROL, Nrc::GeneralProgrammingFailure, out);
@@ -507,11 +512,12 @@ impl Server {
                     self.work = Some(Work::Erase {
                         step: step + 1,
                         steps,
+                        len,
                     });
                     // The next sector stalls the core again: keep the tester waiting.
                     return pending(sid::ROUTINE_CONTROL, out);
                 }
-                self.programming = Programming::Erased;
+                self.programming = Programming::Erased { len };
                 Reply::Send(routine_ok(ROUTINE_ERASE_MEMORY, out))
             }
             Work::Check {
@@ -881,7 +887,10 @@ impl Server {
             return Err(Nrc::SecurityAccessDenied);
         }
         if routine == ROUTINE_ERASE_MEMORY {
-            self.check_erase_option(&request[4..], backend)?;
+            // Only what the image needs: the size the tester gave, else the largest image.
+            let len = self
+                .check_erase_option(&request[4..], backend)?
+                .unwrap_or(backend.image_expectations().max_image_len);
             if !vehicle_stationary(backend) {
                 return Err(Nrc::ConditionsNotCorrect);
             }
@@ -889,7 +898,8 @@ impl Server {
             self.unwritten = Unwritten::new();
             self.work = Some(Work::Erase {
                 step: 0,
-                steps: backend.dfu_erase_steps(),
+                steps: backend.dfu_erase_steps(len),
+                len,
             });
             return Ok(pending(sid::ROUTINE_CONTROL, out));
         }
@@ -936,18 +946,23 @@ impl Server {
         Ok(pending(sid::ROUTINE_CONTROL, out))
     }
 
-    /// The erase routine's option record: empty (the whole slot), or
-    /// addressAndLengthFormatIdentifier 0x44, the slot's address and a size within it.
-    fn check_erase_option(&self, option: &[u8], backend: &impl Backend) -> Result<(), Nrc> {
+    /// The erase routine's option record: empty (room for the largest image), or
+    /// addressAndLengthFormatIdentifier 0x44, the slot's address and a size within it
+    /// (returned).
+    fn check_erase_option(
+        &self,
+        option: &[u8],
+        backend: &impl Backend,
+    ) -> Result<Option<u32>, Nrc> {
         if option.is_empty() {
-            return Ok(());
+            return Ok(None);
         }
         let (address, size) = address_and_size(option)?;
         let expected = backend.image_expectations();
         if address != slot_address(&expected) || size == 0 || size > expected.max_image_len {
             return Err(Nrc::RequestOutOfRange);
         }
-        Ok(())
+        Ok(Some(size))
     }
 
     fn request_download(
@@ -981,8 +996,16 @@ impl Server {
             });
             return Err(Nrc::UploadDownloadNotAccepted);
         }
-        if !matches!(self.programming, Programming::Erased) {
+        let Programming::Erased { len: erased } = self.programming else {
             return Err(Nrc::ConditionsNotCorrect);
+        };
+        if size > erased {
+            // More than the erase routine was asked to make room for.
+            self.refuse_image(ImageError::Oversized {
+                max: u64::from(erased),
+                found: u64::from(size),
+            });
+            return Err(Nrc::UploadDownloadNotAccepted);
         }
         self.programming = Programming::Downloading {
             size,
