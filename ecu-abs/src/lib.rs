@@ -9,7 +9,8 @@
 //!
 //! While the driver brakes (command above [`BRAKING_THRESHOLD`]) above
 //! [`ABS_MIN_SPEED_KMH`], the ECU computes each wheel's slip
-//! `(v − v_wheel) / max(v, SLIP_SPEED_FLOOR_KMH)`. A wheel whose slip exceeds
+//! `(v − v_wheel) / max(v, SLIP_SPEED_FLOOR_KMH)`, where `v` is its own estimate of the
+//! vehicle speed, finer than VehicleSpeedMsg's 1 km/h (see `AbsEcu::speed_reference`). A wheel whose slip exceeds
 //! [`SLIP_THRESHOLD`] is slipping: its control channel engages and a PID on the slip error
 //! (`slip − target`, the target just below the tyre's peak-friction slip) computes an ABS
 //! release command in 0..100. The brake applied to each wheel is the driver's command
@@ -234,10 +235,19 @@ pub const DECEL_AT_FULL_FRICTION_MPS2: f32 = 9.0;
 /// still follows a change of road within about a second.
 pub const DECEL_FILTER_TAU_S: f32 = 0.3;
 
-/// Slip is computed relative to at least this speed (km/h). At low speed the 1 km/h
-/// resolution of VehicleSpeedMsg would make the relative slip noise; below this speed the
-/// thresholds act as an absolute speed difference (0.10 × 20 = 2 km/h).
-pub const SLIP_SPEED_FLOOR_KMH: f32 = 20.0;
+/// VehicleSpeedMsg carries the speed rounded to 1 km/h: the true speed is within this of it.
+pub const SPEED_MSG_ROUNDING_KMH: f32 = 0.5;
+
+/// How old the speed in a VehicleSpeedMsg is when the ABS uses it, at most, s: the cruise
+/// ECU's 10 ms step between its measurement and the frame, the frame, and up to one ABS
+/// step of 5 ms.
+pub const SPEED_MSG_AGE_S: f32 = 0.016;
+
+/// Slip is computed relative to at least this speed (km/h): below it the thresholds act
+/// as an absolute speed difference (0.10 × 10 = 1 km/h), so that the last metres, where
+/// the speed reference's remaining error is a large part of the speed, do not look like
+/// slip.
+pub const SLIP_SPEED_FLOOR_KMH: f32 = 10.0;
 
 /// PID on the slip error (release in % of full brake per unit of slip). Mostly P + D: the
 /// derivative of slip is the early warning of a wheel running into lock (and of it
@@ -453,6 +463,9 @@ pub struct AbsEcu {
     decel_mps2: f32,
     /// The speed reference at the previous braking step, km/h.
     previous_speed_kmh: Option<f32>,
+    /// The ABS's own estimate of the vehicle speed while braking, km/h (see
+    /// [`AbsEcu::speed_reference`]).
+    speed_estimate_kmh: Option<f32>,
     /// Wheel speeds at the previous braking step, km/h.
     previous_wheels_kmh: Option<[f32; 4]>,
     /// Per channel: a full release in progress, watched for the friction peak.
@@ -488,6 +501,7 @@ impl AbsEcu {
             yaw_delay_margin: None,
             decel_mps2: 0.0,
             previous_speed_kmh: None,
+            speed_estimate_kmh: None,
             previous_wheels_kmh: None,
             recovery: [None; CHANNELS],
             peak_slip: [None; CHANNELS],
@@ -608,6 +622,7 @@ impl AbsEcu {
     fn reset_friction_estimate(&mut self) {
         self.decel_mps2 = 0.0;
         self.previous_speed_kmh = None;
+        self.speed_estimate_kmh = None;
         self.previous_wheels_kmh = None;
         self.recovery = [None; CHANNELS];
         self.peak_slip = [None; CHANNELS];
@@ -623,6 +638,25 @@ impl AbsEcu {
             }
         }
         self.previous_speed_kmh = Some(v);
+    }
+
+    /// The vehicle speed the slips are computed against while braking, km/h, finer than
+    /// VehicleSpeedMsg's 1 km/h: at 15 km/h on ice one step of it is more slip than the
+    /// tyre's peak. The estimate follows the filtered deceleration from step to step and is
+    /// held to what the message allows: within its rounding (±0.5 km/h) of the message,
+    /// less what the car has lost since the message's speed was measured. No wheel turns
+    /// faster than the car while it brakes, so the fastest wheel is a floor.
+    fn speed_reference(&mut self, v_msg: f32, wheels: &[f32; 4], dt_s: f32) -> f32 {
+        let decel_kmh_s = self.decel_mps2.max(0.0) * 3.6;
+        let predicted = self
+            .speed_estimate_kmh
+            .map_or(v_msg, |v| v - decel_kmh_s * dt_s);
+        let high = v_msg + SPEED_MSG_ROUNDING_KMH;
+        let low = v_msg - SPEED_MSG_ROUNDING_KMH - decel_kmh_s * SPEED_MSG_AGE_S;
+        let fastest_wheel = wheels.iter().fold(0.0f32, |m, &w| m.max(w));
+        let v = limit(predicted, low.max(fastest_wheel.min(high)), high);
+        self.speed_estimate_kmh = Some(v);
+        v
     }
 
     /// The slip channel `ch` regulates to: [`SLIP_TARGET`] until the channel has measured
@@ -693,6 +727,7 @@ impl AbsEcu {
             return [0.0; 4];
         }
         self.update_friction_estimate(v, dt_s);
+        let v = self.speed_reference(v, wheels, dt_s);
         let [fl, fr, rl, rr] = wheels.map(|w| (v - w) / v.max(SLIP_SPEED_FLOOR_KMH));
         // Select-low on the rear axle: the rear channel follows the wheel that slips more.
         let rear_wheel = if rr > rl { 3 } else { 2 };

@@ -61,7 +61,9 @@ fn a_complete_flash_lands_byte_for_byte_and_is_marked() {
     // Only the sector the image needs was erased (one of the partition's two 128 KiB
     // sectors): the bootloader erases the other itself before it copies into it.
     assert_eq!(cruise.backend.erases, 1);
-    assert!(cruise.backend.dfu[image.len()..128 * 1024].iter().all(|&b| b == 0xFF));
+    assert!(cruise.backend.dfu[image.len()..128 * 1024]
+        .iter()
+        .all(|&b| b == 0xFF));
     assert!(cruise.backend.dfu[128 * 1024..].iter().all(|&b| b == 0x00));
     assert!(cruise.backend.marked);
     assert_eq!(cruise.resets, 1);
