@@ -82,6 +82,30 @@ fn full_braking_stays_near_the_limit_on_any_friction_and_keeps_the_heading_on_sp
     );
 }
 
+/// The part of the sweep the ABS already meets, held so it stays met: ice and snow
+/// (friction 0.2 and 0.3) from 40 to 100 km/h, where the 1 km/h VehicleSpeedMsg alone made
+/// the slip too coarse (up to 1.16 × the limit before the ABS estimated the speed itself).
+#[test]
+fn full_braking_on_ice_and_snow_stays_near_the_limit() {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let stops = sweep::run_sweep(
+        &[0.2, 0.3],
+        &[40.0, 50.0, 60.0, 80.0, 100.0],
+        &[],
+        &[],
+        threads,
+    )
+    .expect("the sweep's scenarios are valid");
+    assert_eq!(stops.len(), 10);
+    let failures: Vec<String> = stops.iter().filter_map(|s| check(s).err()).collect();
+    assert!(
+        failures.is_empty(),
+        "{}\n\n{}",
+        failures.join("\n"),
+        sweep::table(&stops)
+    );
+}
+
 /// The sweep's machinery on one point: its scenario brakes from the speed asked for, the
 /// stop is found and measured against the limit, the table and the plot show it.
 #[test]
