@@ -33,7 +33,7 @@ use embassy_boot::{
     AlignedBuffer, BlockingFirmwareState, BlockingFirmwareUpdater, BootError, BootLoader,
     BootLoaderConfig, FirmwareUpdaterConfig, FirmwareUpdaterError, State,
 };
-use embedded_storage::nor_flash::{NorFlash, NorFlashErrorKind};
+use embedded_storage::nor_flash::NorFlashErrorKind;
 
 /// Opening the state copies failed (only a flash read can fail, and the simulation's never
 /// does): reported as the flash error embassy-boot would see.
