@@ -124,7 +124,29 @@ pub struct ReplayPages {
     listen: std::net::IpAddr,
     data: PathBuf,
     token: Option<String>,
-    child: Option<(Child, String)>,
+    child: Option<ReplayChild>,
+}
+
+/// One replay dashboard started by [`ReplayPages::open`].
+struct ReplayChild {
+    process: Child,
+    /// The recording's file name.
+    name: String,
+    port: u16,
+    /// It has been seen to accept connections.
+    listening: bool,
+}
+
+/// A replay dashboard that runs: its recording and port, and whether it listens yet.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RunningReplay<'a> {
+    /// The recording's file name.
+    pub file: &'a str,
+    /// Its port, on the address of this dashboard.
+    pub port: u16,
+    /// Whether it accepts connections yet (it reads its recording first): the page opens
+    /// its tab only then, rather than probing a port nobody listens on.
+    pub listening: bool,
 }
 
 impl ReplayPages {
@@ -170,27 +192,52 @@ impl ReplayPages {
         let name = log
             .file_name()
             .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-        self.child = Some((child, name));
+        self.child = Some(ReplayChild {
+            process: child,
+            name,
+            port,
+            listening: false,
+        });
         Ok(port)
     }
 
-    /// The replay dashboard running: its recording's name, if one runs.
-    pub fn running(&mut self) -> Option<&str> {
-        let exited = match &mut self.child {
-            Some((child, _)) => !matches!(child.try_wait(), Ok(None)),
-            None => return None,
-        };
+    /// The replay dashboard running, if one runs. Until it has been seen listening, each
+    /// call tries one connection to its port (loopback: refused or accepted at once).
+    pub fn running(&mut self) -> Option<RunningReplay<'_>> {
+        let exited = !matches!(self.child.as_mut()?.process.try_wait(), Ok(None));
         if exited {
             self.child = None;
             return None;
         }
-        self.child.as_ref().map(|(_, name)| name.as_str())
+        let child = self.child.as_mut()?;
+        if !child.listening {
+            let host = match self.listen {
+                std::net::IpAddr::V4(a) if a.is_unspecified() => {
+                    std::net::Ipv4Addr::LOCALHOST.into()
+                }
+                std::net::IpAddr::V6(a) if a.is_unspecified() => {
+                    std::net::Ipv6Addr::LOCALHOST.into()
+                }
+                other => other,
+            };
+            let address = std::net::SocketAddr::new(host, child.port);
+            child.listening = std::net::TcpStream::connect_timeout(
+                &address,
+                std::time::Duration::from_millis(50),
+            )
+            .is_ok();
+        }
+        Some(RunningReplay {
+            file: &child.name,
+            port: child.port,
+            listening: child.listening,
+        })
     }
 
     fn close(&mut self) {
-        if let Some((mut child, _)) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
+        if let Some(mut child) = self.child.take() {
+            let _ = child.process.kill();
+            let _ = child.process.wait();
         }
     }
 }

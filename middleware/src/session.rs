@@ -76,7 +76,6 @@ pub struct Session<'a> {
     desk: Option<Rc<RefCell<DriverDesk>>>,
     replay: Option<Rc<RefCell<ReplayDesk>>>,
     replay_pages: Option<crate::dashboard::ReplayPages>,
-    replay_port: Option<u16>,
     security_secret: Vec<u8>,
     recordings_dir: Option<PathBuf>,
     rotate: RotatePolicy,
@@ -106,7 +105,6 @@ impl<'a> Session<'a> {
             desk: None,
             replay: None,
             replay_pages: None,
-            replay_port: None,
             security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
             recordings_dir: None,
             rotate: RotatePolicy::default(),
@@ -266,7 +264,6 @@ impl<'a> Session<'a> {
                     return Err("this dashboard cannot open replays".into());
                 };
                 let port = pages.open(&path)?;
-                self.replay_port = Some(port);
                 let name = path
                     .file_name()
                     .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
@@ -459,7 +456,9 @@ impl<'a> Session<'a> {
     /// The session's state as the page reads it (see the module docs).
     fn state(&mut self, state: &CarState) -> Value {
         let replay_page = match self.replay_pages.as_mut().and_then(|p| p.running()) {
-            Some(file) => json!({ "file": file, "port": self.replay_port }),
+            Some(page) => {
+                json!({ "file": page.file, "port": page.port, "listening": page.listening })
+            }
             None => Value::Null,
         };
         let diagnostics: Vec<Value> = self

@@ -51,7 +51,7 @@ export interface Session {
     mu_right: number;
   } | null;
   trip: Record<string, number> | null;
-  replay_page: { file: string; port: number } | null;
+  replay_page: { file: string; port: number; listening: boolean } | null;
   replay: { playing: boolean; speed: number; position_s: number; duration_s: number; at_end: boolean } | null;
   events: { t: number; text: string }[];
   fleet: FleetLink | null;

@@ -37,14 +37,12 @@ export function recordingsView(ctx: Ctx): View {
       const answer = await post(`/api/recordings/${encodeURIComponent(name)}/replay`);
       const url = pageUrl(answer.port);
       ctx.toast(`Replay of ${name} opening in a new tab`);
-      // Its own dashboard, beside this one: wait until it reads the log and listens.
+      // Its own dashboard, beside this one: wait until this gateway has seen it listen
+      // (the session's state says so), rather than knock on a port nobody listens on yet.
       for (let i = 0; i < 40; i++) {
-        try {
-          await fetch(`${location.protocol}//${location.hostname}:${answer.port}/api/info`, { mode: 'no-cors' });
-          break;
-        } catch {
-          await new Promise((r) => setTimeout(r, 250));
-        }
+        const page = live.session?.replay_page;
+        if (page && page.port === answer.port && page.listening) break;
+        await new Promise((r) => setTimeout(r, 250));
       }
       if (tab) tab.location.href = url;
     } catch (e: any) {
