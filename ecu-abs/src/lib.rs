@@ -10,8 +10,8 @@
 //! While the driver brakes (command above [`BRAKING_THRESHOLD`]) above
 //! [`ABS_MIN_SPEED_KMH`], the ECU computes each wheel's slip
 //! `(v − v_wheel) / max(v, SLIP_SPEED_FLOOR_KMH)`, where `v` is its own estimate of the
-//! vehicle speed, finer than VehicleSpeedMsg's 1 km/h (see `AbsEcu::speed_reference`). A wheel whose slip exceeds
-//! [`SLIP_THRESHOLD`] is slipping: its control channel engages and a PID on the slip error
+//! vehicle speed, finer than VehicleSpeedMsg's 1 km/h (see `AbsEcu::speed_reference`). A
+//! wheel whose slip exceeds [`SLIP_THRESHOLD`] is slipping: its control channel engages and a PID on the slip error
 //! (`slip − target`, the target just below the tyre's peak-friction slip) computes an ABS
 //! release command in 0..100. The brake applied to each wheel is the driver's command
 //! minus the release, limited to [0, 100]; it is never above the driver's command.
@@ -235,13 +235,15 @@ pub const DECEL_AT_FULL_FRICTION_MPS2: f32 = 9.0;
 /// still follows a change of road within about a second.
 pub const DECEL_FILTER_TAU_S: f32 = 0.3;
 
-/// VehicleSpeedMsg carries the speed rounded to 1 km/h: the true speed is within this of it.
-pub const SPEED_MSG_ROUNDING_KMH: f32 = 0.5;
+/// VehicleSpeedMsg carries the speed rounded to its resolution (the DBC's factor, 1 km/h):
+/// the true speed is within half a step of it.
+pub const SPEED_MSG_ROUNDING_KMH: f32 = VehicleSpeedMsg::VEHICLE_SPEED.factor() / 2.0;
 
-/// How old the speed in a VehicleSpeedMsg is when the ABS uses it, at most, s: the cruise
-/// ECU's 10 ms step between its measurement and the frame, the frame, and up to one ABS
-/// step of 5 ms.
-pub const SPEED_MSG_AGE_S: f32 = 0.016;
+/// How old the speed in a VehicleSpeedMsg is when the ABS uses it, at most, s: one cycle of
+/// the message (the cruise ECU measures, then sends), a millisecond for the frame and its
+/// queue, and one ABS step.
+pub const SPEED_MSG_AGE_S: f32 =
+    VehicleSpeedMsg::CYCLE_TIME_MS as f32 * 1e-3 + 1e-3 + STEP_PERIOD_US as f32 * 1e-6;
 
 /// Slip is computed relative to at least this speed (km/h): below it the thresholds act
 /// as an absolute speed difference (0.10 × 10 = 1 km/h), so that the last metres, where

@@ -110,3 +110,87 @@ fn turning_wheels_veto_programming() {
         assert_eq!(ecu.own_sensors_show_motion(), vetoes, "{wheels:?}");
     }
 }
+
+/// The ABS's own vehicle-speed estimate while braking (`AbsEcu::speed_reference`), fed as
+/// `abs` feeds it, against a car whose true speed is known.
+mod speed_reference {
+    extern crate std;
+    use crate::*;
+    use std::vec::Vec;
+
+    /// A stop at `decel_mps2` from 60 km/h: VehicleSpeedMsg rounded to 1 km/h, measured one
+    /// message cycle before the ABS uses it and sent every 10 ms; wheels slipping `slip`
+    /// (the fastest `fastest_slip`). Returns (estimate, message, true speed) per ABS step.
+    fn run(decel_mps2: f32, slip: f32, fastest_slip: f32) -> Vec<(f32, f32, f32)> {
+        let mut ecu = AbsEcu::new(Variant::Correct, Instant::ZERO);
+        let dt_s = STEP_PERIOD_US as f32 * 1e-6;
+        let cycle_steps = (VehicleSpeedMsg::CYCLE_TIME_MS as u64 * 1000 / STEP_PERIOD_US) as usize;
+        let speed_at = |k: usize| 60.0 - decel_mps2 * 3.6 * dt_s * k as f32;
+        let mut v_msg = speed_at(0).round();
+        let mut out = Vec::new();
+        for k in 0..400 {
+            let v = speed_at(k);
+            if v < 10.0 {
+                break;
+            }
+            if k % cycle_steps == 0 {
+                v_msg = speed_at(k.saturating_sub(cycle_steps)).round();
+            }
+            let wheels = [
+                v * (1.0 - slip),
+                v * (1.0 - slip),
+                v * (1.0 - fastest_slip),
+                v * (1.0 - slip),
+            ];
+            ecu.update_friction_estimate(v_msg, dt_s);
+            out.push((ecu.speed_reference(v_msg, &wheels, dt_s), v_msg, v));
+        }
+        out
+    }
+
+    fn rms(errors: impl Iterator<Item = f32>) -> f32 {
+        let (sum, n) = errors.fold((0.0, 0), |(s, n), e| (s + e * e, n + 1));
+        (sum / n as f32).sqrt()
+    }
+
+    #[test]
+    fn follows_a_stop_closer_than_the_message_does() {
+        for decel in [2.0, 5.0, 9.0] {
+            let run = run(decel, 0.05, 0.05);
+            assert!(run.len() > 100);
+            // Once the deceleration filter has settled (its time constant, a few times).
+            let settled = &run[(4.0 * DECEL_FILTER_TAU_S / 0.005) as usize..];
+            // Against what the ABS had before: the last message, rounded and late.
+            let estimate = rms(settled.iter().map(|(e, _, v)| e - v));
+            let message = rms(settled.iter().map(|(_, m, v)| m - v));
+            // Closer than the message at every deceleration, and by far on ice, where one
+            // 1 km/h step is more slip than the tyre's peak and the estimate matters most.
+            let bound = if decel < 3.0 { 0.5 } else { 0.9 };
+            assert!(
+                estimate < bound * message,
+                "decel {decel}: estimate rms {estimate} km/h, the message alone {message}"
+            );
+            for (e, _, v) in settled {
+                assert!((e - v).abs() < 1.0, "decel {decel}: estimate {e}, true {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn never_above_what_the_message_allows_and_never_below_the_fastest_wheel() {
+        let run = run(5.0, 0.08, 0.0);
+        for (e, m, v) in &run {
+            // The unbraked wheel turns at the true speed: the estimate is at least that,
+            // unless the message's rounding rules it out; and never above that rounding.
+            let high = m + SPEED_MSG_ROUNDING_KMH;
+            assert!(
+                *e >= v.min(high) - 1e-3,
+                "estimate {e} below the free wheel {v}"
+            );
+            assert!(
+                *e <= high + 1e-3,
+                "estimate {e} above the message {m} allows"
+            );
+        }
+    }
+}

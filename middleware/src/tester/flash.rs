@@ -387,6 +387,17 @@ pub struct FlashJob {
     last_progress: Option<Progress>,
 }
 
+/// addressAndLengthFormatIdentifier 0x44, the slot's address and the image's length: the
+/// record RequestDownload and the erase routine both carry. `None` for a length UDS cannot
+/// announce (0, or 4 GiB and more).
+fn slot_and_length(image_len: usize) -> Option<[u8; 9]> {
+    let len = u32::try_from(image_len).ok().filter(|&len| len > 0)?;
+    let mut record = [0x44; 9];
+    record[1..5].copy_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    record[5..].copy_from_slice(&len.to_be_bytes());
+    Some(record)
+}
+
 impl FlashJob {
     /// A job flashing `config.image` into `config.ecu`. Refused when the node is not one of
     /// the nine ECUs; an empty image or one too long for a 32-bit length fails at the
@@ -513,29 +524,20 @@ impl FlashJob {
                 // With the image's length (addressAndLengthFormatIdentifier 0x44): the ECU
                 // erases only the sectors the image needs.
                 let mut request = vec![0x31, 0x01, 0xFF, 0x00];
-                if let Some(len) = u32::try_from(self.config.image.len())
-                    .ok()
-                    .filter(|&len| len > 0)
-                {
-                    request.push(0x44);
-                    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
-                    request.extend_from_slice(&len.to_be_bytes());
+                if let Some(record) = slot_and_length(self.config.image.len()) {
+                    request.extend_from_slice(&record);
                 }
                 tester.request_echoing(now, ecu, &request, 3)
             }
             Step::RequestDownload => {
-                let len = u32::try_from(self.config.image.len())
-                    .ok()
-                    .filter(|&len| len > 0)
-                    .ok_or_else(|| {
-                        FlashFailure::Invalid(format!(
-                            "an image of {} bytes cannot be downloaded (1 byte to 4 GiB)",
-                            self.config.image.len()
-                        ))
-                    })?;
-                let mut request = vec![0x34, 0x00, 0x44];
-                request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
-                request.extend_from_slice(&len.to_be_bytes());
+                let record = slot_and_length(self.config.image.len()).ok_or_else(|| {
+                    FlashFailure::Invalid(format!(
+                        "an image of {} bytes cannot be downloaded (1 byte to 4 GiB)",
+                        self.config.image.len()
+                    ))
+                })?;
+                let mut request = vec![0x34, 0x00];
+                request.extend_from_slice(&record);
                 tester.request(now, ecu, &request)
             }
             Step::TransferData => {
