@@ -8,10 +8,16 @@
 //! The number is the root-mean-square tracking error of the worst engagement that lasted
 //! long enough to judge ([`MIN_EVIDENCE_S`] after settling).
 //!
-//! Thresholds, km/h rms: the bus carries speed in 1 km/h steps, so a perfect controller
-//! already shows up to about 0.5 km/h against a latched value (quantisation of both the
-//! speed and the latch); a correct controller on a 6 % grade stays under about 0.6 km/h
-//! (scenario cruise-hold). The faulty bang-bang software of the report oscillates by
+//! The bus carries speed in 1 km/h steps (the DBC's factor), and the ECU latches its own,
+//! finer reading: the latched bus value may sit a whole step from the speed a perfect
+//! controller then holds, which would show as a constant error of up to 1 km/h. A constant
+//! offset within one step is therefore not counted: the error is taken about
+//! `clamp(mean error, −1 step, +1 step)`. An oscillation, or an offset beyond one step,
+//! counts in full.
+//!
+//! Thresholds, km/h rms: a perfect controller shows up to about 0.5 km/h (the speed
+//! flickering between two steps); a correct controller on a 6 % grade stays under about
+//! 0.6 km/h (scenario cruise-hold). The faulty bang-bang software of the report oscillates by
 //! ±2–3 km/h, about 1.5 km/h rms. Suspect above [`SUSPECT_KMH`], faulty above
 //! [`FAULTY_KMH`].
 
@@ -34,11 +40,15 @@ pub const SUSPECT_KMH: f64 = 0.8;
 pub const FAULTY_KMH: f64 = 1.1;
 /// The cruise ECU latches its set speed after this long, µs (two 10 ms steps).
 const LATCH_DELAY_US: u64 = 20_000;
+/// One step of VehicleSpeedMsg, km/h: how far the latched bus value may lie from the set
+/// speed the ECU latched.
+const SPEED_STEP_KMH: f64 = VehicleSpeedMsg::VEHICLE_SPEED.factor() as f64;
 
 #[derive(Clone, Copy)]
 struct Engagement {
     start_us: u64,
     set_kmh: Option<f64>,
+    sum: f64,
     sum_sq: f64,
     samples: u64,
     max_abs: f64,
@@ -51,8 +61,15 @@ impl Engagement {
         (self.last_us.saturating_sub(self.first_us)) as f64 * 1e-6
     }
 
+    /// The rms error about the latch's uncertainty: a constant offset up to one speed step
+    /// is taken out, anything beyond counts.
     fn rms(&self) -> f64 {
-        (self.sum_sq / self.samples.max(1) as f64).sqrt()
+        let n = self.samples.max(1) as f64;
+        let mean = self.sum / n;
+        let bias = mean.clamp(-SPEED_STEP_KMH, SPEED_STEP_KMH);
+        (self.sum_sq / n - 2.0 * bias * mean + bias * bias)
+            .max(0.0)
+            .sqrt()
     }
 }
 
@@ -96,6 +113,7 @@ impl Routine for Cruise {
                         self.current = Some(Engagement {
                             start_us: t,
                             set_kmh: None,
+                            sum: 0.0,
                             sum_sq: 0.0,
                             samples: 0,
                             max_abs: 0.0,
@@ -134,6 +152,7 @@ impl Routine for Cruise {
                     e.first_us = t;
                 }
                 e.samples += 1;
+                e.sum += error;
                 e.sum_sq += error * error;
                 e.max_abs = e.max_abs.max(error.abs());
                 e.last_us = t;

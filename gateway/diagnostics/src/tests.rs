@@ -698,3 +698,60 @@ fn a_steering_angle_that_jumps_faster_than_a_hand_is_flagged() {
     );
     assert_eq!(jump.verdict, Verdict::Faulty, "{jump:?}");
 }
+
+/// Cruise engaged at 1 s for 20 s; VehicleSpeedMsg every 10 ms from `speed(t_ms)`.
+fn cruise_run(speed: impl Fn(u64) -> f32) -> Finding {
+    let mut frames = every(10, 22_000, |t| {
+        CruiseModeMsg {
+            cruise_mode: if (1000..21_000).contains(&t) {
+                CruiseMode::On
+            } else {
+                CruiseMode::Off
+            },
+        }
+        .frame()
+    });
+    frames.extend(every(10, 22_000, |t| {
+        VehicleSpeedMsg {
+            vehicle_speed: speed(t),
+        }
+        .frame()
+    }));
+    run(frames, "tracking error")
+}
+
+#[test]
+fn a_held_speed_one_step_off_the_latched_value_is_ok_for_the_cruise() {
+    // Latched at 100 (the bus value 20 ms after engagement), then held where the bus shows
+    // 99: the ECU latched its own reading, e.g. 99.4, and holds it perfectly.
+    let f = cruise_run(|t| if t <= 1030 { 100.0 } else { 99.0 });
+    assert_eq!(f.verdict, Verdict::Ok, "{f:?}");
+    assert!(f.value.unwrap() < 0.01, "{f:?}");
+    // Flickering between the two steps around it: still ok.
+    let f = cruise_run(|t| {
+        if t <= 1030 || (t / 10) % 3 == 0 {
+            100.0
+        } else {
+            99.0
+        }
+    });
+    assert_eq!(f.verdict, Verdict::Ok, "{f:?}");
+}
+
+#[test]
+fn an_offset_beyond_one_step_or_an_oscillation_still_counts_for_the_cruise() {
+    // 3 km/h below the set speed for good: 2 km/h beyond the latch's uncertainty.
+    let f = cruise_run(|t| if t <= 1030 { 100.0 } else { 97.0 });
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    assert!((f.value.unwrap() - 2.0).abs() < 0.01, "{f:?}");
+    // The report's bang-bang: ±2 km/h around the set speed, a 4 s period.
+    let f = cruise_run(|t| {
+        if t <= 1030 {
+            100.0
+        } else {
+            100.0 + (2.0 * (t as f32 * 1e-3 * core::f32::consts::PI / 2.0).sin()).round()
+        }
+    });
+    assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
+    assert!(f.value.unwrap() > 1.1, "{f:?}");
+}
