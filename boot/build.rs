@@ -1,5 +1,5 @@
 //! Writes the bootloader's memory.x from the flash map (`autoplug-flash`), so the linker
-//! refuses a bootloader that would spill into the boot state sector.
+//! refuses a bootloader that would spill into the state copies.
 
 use std::env;
 use std::fs;

@@ -1,13 +1,16 @@
-//! The AutoPlug bootloader for the STM32F446RE (sectors 0–1): at every reset it lets
-//! embassy-boot finish what the application asked for — swap in a new image from the DFU
-//! slot, or revert one that did not confirm itself — and then starts the application in
-//! the active slot, whose vector table follows the 512-byte image header.
+//! The AutoPlug bootloader for the STM32F446RE (sectors 0–1): at every reset it reads the
+//! boot record (`autoplug_flash::ab`) and starts the image slot it names — the confirmed
+//! one, or once, on trial, the slot an update has just written — in place, where the
+//! image was linked to run, its vector table right after the 512-byte image header.
 //!
-//! The swap erases and copies 128 KiB sectors (about 3 s in all on the F446). An
-//! application that started the independent watchdog leaves it running across the reset
-//! (nothing can stop it), so the bootloader stretches its timeout to
-//! [`WATCHDOG_TIMEOUT_US`], longer than the slowest sector erase of the datasheet (2 s), and
-//! feeds it before every flash operation.
+//! Nothing is copied, so a start costs the record's one word program at most. A trial that
+//! never confirmed itself (a crash, the watchdog, a power cut) is reverted at the next
+//! reset. A slot whose vector table cannot be an application for it (erased, half written,
+//! linked elsewhere) is never started. An application that started the independent
+//! watchdog leaves it running across the reset (nothing can stop it): the bootloader
+//! stretches its timeout to [`WATCHDOG_TIMEOUT_US`], longer than the slowest sector erase
+//! of the datasheet (2 s), which the two-copy state's switch may need, and feeds it before
+//! every flash operation.
 //!
 //! Flash once with probe-rs: `cargo flash-boot` (README, "Firmware upgrades over CAN").
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -24,14 +27,11 @@ fn main() {
 mod boot {
     use core::cell::RefCell;
 
+    use autoplug_flash::ab::{self, BootAction, ImageSlot};
     use autoplug_flash::twin::Twin;
-    use autoplug_flash::{
-        ACTIVE, APP_VECTOR_TABLE, BOOT_SWAP_BUFFER_SIZE, DFU, LARGE_SECTORS, SMALL_SECTORS,
-        STATE_COPIES,
-    };
+    use autoplug_flash::{SMALL_SECTORS, STATE_COPIES};
     use cortex_m_rt::{entry, exception, ExceptionFrame};
     use defmt_rtt as _;
-    use embassy_boot_stm32::{BootLoader, BootLoaderConfig, State};
     use embassy_embedded_hal::flash::partition::BlockingPartition;
     use embassy_stm32::flash::{Blocking, Flash};
     use embassy_stm32::wdg::IndependentWatchdog;
@@ -39,8 +39,8 @@ mod boot {
     use embassy_sync::blocking_mutex::Mutex;
     use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 
-    /// Watchdog timeout while the bootloader works: above the F446's worst-case 128 KiB
-    /// sector erase (2 s, DS10693), so a running watchdog never fires mid-erase.
+    /// Watchdog timeout while the bootloader works: above the F446's worst-case sector
+    /// erase (2 s for 128 KiB, DS10693), so a running watchdog never fires mid-erase.
     pub const WATCHDOG_TIMEOUT_US: u32 = 4_000_000;
 
     /// A flash region that feeds the watchdog before each operation.
@@ -85,6 +85,19 @@ mod boot {
         }
     }
 
+    /// Whether `slot` starts with a vector table an application linked for it would have.
+    fn startable(slot: ImageSlot) -> bool {
+        let table = slot.vector_table() as *const u32;
+        // SAFETY: both words lie in the MCU's memory-mapped flash, always readable.
+        let (sp, reset) = unsafe {
+            (
+                core::ptr::read_volatile(table),
+                core::ptr::read_volatile(table.add(1)),
+            )
+        };
+        ab::plausible_vector_table(slot, sp, reset)
+    }
+
     #[entry]
     fn main() -> ! {
         // Default clocks (16 MHz HSI): the bootloader waits on the flash, not the core.
@@ -94,36 +107,49 @@ mod boot {
 
         let layout = Flash::<Blocking>::new_blocking(p.FLASH).into_blocking_regions();
         let small = Mutex::<NoopRawMutex, _>::new(RefCell::new(Fed(layout.bank1_region1)));
-        let large = Mutex::<NoopRawMutex, _>::new(RefCell::new(Fed(layout.bank1_region3)));
-        // embassy-boot's state lives in the two-copy persistent state: its erase of the
-        // state prepares the other copy, so a power cut there never loses a rollback.
         let copies = STATE_COPIES.map(|copy| {
             BlockingPartition::new(&small, copy.start - SMALL_SECTORS.start, copy.size)
         });
-        let mut twin = match Twin::open(copies) {
-            Ok(twin) => twin,
+        let choice = match Twin::open(copies) {
+            Ok(mut twin) => ab::choose(&mut twin, startable),
             Err(_) => {
-                defmt::error!("boot: the state copies cannot be read: starting the active slot");
-                feed();
-                // SAFETY: as below; nothing is pending that the bootloader could finish.
-                unsafe { cortex_m::asm::bootload(APP_VECTOR_TABLE as *const u32) }
+                defmt::error!("boot: the state copies cannot be read");
+                let slot = if startable(ImageSlot::A) {
+                    ImageSlot::A
+                } else {
+                    ImageSlot::B
+                };
+                ab::BootChoice {
+                    slot,
+                    action: BootAction::Fallback,
+                }
             }
         };
-        let config = BootLoaderConfig {
-            active: BlockingPartition::new(&large, ACTIVE.start - LARGE_SECTORS.start, ACTIVE.size),
-            dfu: BlockingPartition::new(&large, DFU.start - LARGE_SECTORS.start, DFU.size),
-            state: twin.boot_state(),
-        };
-        let loader = BootLoader::prepare::<_, _, _, { BOOT_SWAP_BUFFER_SIZE }>(config);
-        match loader.state {
-            State::Swap => defmt::info!("boot: new image swapped in, starting it unconfirmed"),
-            State::Revert => defmt::warn!("boot: the last image did not confirm itself: reverted"),
-            _ => defmt::info!("boot: starting the application"),
+        let letter = choice.slot.letter();
+        match choice.action {
+            BootAction::Normal => defmt::info!("boot: starting slot {=char}", letter),
+            BootAction::Trial => {
+                defmt::info!("boot: starting slot {=char} on trial (new image)", letter)
+            }
+            BootAction::Reverted => defmt::warn!(
+                "boot: the image on trial did not confirm itself: back to slot {=char}",
+                letter
+            ),
+            BootAction::Fallback => defmt::warn!(
+                "boot: no usable boot record or confirmed image: trying slot {=char}",
+                letter
+            ),
         }
         feed();
-        // SAFETY: the active slot holds an image (its vector table after the header); the
-        // bootloader hands over the whole MCU and never runs again until the next reset.
-        unsafe { loader.load(APP_VECTOR_TABLE) }
+        let table = choice.slot.vector_table();
+        // SAFETY: the slot holds a vector table linked for it (checked above, unless neither
+        // slot has one, when nothing better can be done); the bootloader hands over the
+        // whole MCU and never runs again until the next reset. The application's
+        // interrupts need VTOR on its table before its first instruction.
+        unsafe {
+            (*cortex_m::peripheral::SCB::PTR).vtor.write(table);
+            cortex_m::asm::bootload(table as *const u32)
+        }
     }
 
     #[panic_handler]

@@ -11,7 +11,7 @@
 
 use std::collections::BTreeMap;
 
-use autoplug_image::{ImageHeader, SigningKey};
+use autoplug_image::{ImageHeader, ImageSet, SigningKey};
 use serde::{Deserialize, Serialize};
 
 use crate::campaign::{sha256_hex, CampaignReport, Instruction, VehicleState};
@@ -194,11 +194,14 @@ fn check_spec(spec: &CampaignSpec) -> Result<ImageHeader, StoreError> {
             "a campaign needs a name of 1 to 100 printable characters",
         ));
     }
-    let header = ImageHeader::parse(&spec.image).map_err(|e| {
+    // One image, or a release's images for both slots one after the other (the vehicle's
+    // tester sends the one for the slot its ECU writes).
+    let set = ImageSet::parse(&spec.image).map_err(|e| {
         invalid(format!(
-            "the campaign's image is not an AutoPlug image: {e}"
+            "the campaign's image is not an AutoPlug image or release: {e}"
         ))
     })?;
+    let header = set.first();
     let node = autoplug_can::parse_ecu(&spec.ecu).ok_or_else(|| {
         invalid(format!(
             "'{}' is not an ECU ({})",
@@ -206,20 +209,21 @@ fn check_spec(spec: &CampaignSpec) -> Result<ImageHeader, StoreError> {
             autoplug_can::ECU_NAME_LIST
         ))
     })?;
-    if node.diag_node_number() != Some(header.node) {
-        return Err(invalid(format!(
-            "the image is for node 0x{:02X}, not for {} (node 0x{:02X})",
-            header.node,
-            spec.ecu,
-            node.diag_node_number().unwrap_or(0)
-        )));
-    }
-    if spec.image.len() as u64 != header.image_len() {
-        return Err(invalid(format!(
-            "the image is {} bytes, its header says {}",
-            spec.image.len(),
-            header.image_len()
-        )));
+    for (_, image) in set.iter() {
+        if node.diag_node_number() != Some(image.node) {
+            return Err(invalid(format!(
+                "the image is for node 0x{:02X}, not for {} (node 0x{:02X})",
+                image.node,
+                spec.ecu,
+                node.diag_node_number().unwrap_or(0)
+            )));
+        }
+        if (image.version, image.variant) != (header.version, header.variant) {
+            return Err(invalid(format!(
+                "the release's images differ: version {} ({}) and {} ({})",
+                header.version, header.variant, image.version, image.variant
+            )));
+        }
     }
     let stages = &spec.stages;
     if stages.is_empty()

@@ -637,9 +637,21 @@ fn check_image(
     if sha256_hex(image) != instruction.image_sha256 {
         return Err("the image's SHA-256 is not the one the instruction names".into());
     }
-    let verified = autoplug_image::verify(image, image_key)
+    // One image, or a release's images for both slots: each must verify, and all say the
+    // same of themselves (the tester sends the one for the slot the ECU writes).
+    let set = autoplug_image::ImageSet::parse(image)
         .map_err(|e| format!("the image does not verify with the ECUs' key: {e}"))?;
-    let header: &ImageHeader = verified.header();
+    for (slot_image, _) in set.iter() {
+        autoplug_image::verify(slot_image, image_key)
+            .map_err(|e| format!("the image does not verify with the ECUs' key: {e}"))?;
+    }
+    let first = set.first();
+    if set.iter().any(|(_, h)| {
+        (h.node, h.version, h.hardware_id) != (first.node, first.version, first.hardware_id)
+    }) {
+        return Err("the release's images differ in ECU, version or hardware".into());
+    }
+    let header: &ImageHeader = &first;
     let node = ecu.diag_node_number().unwrap_or(0);
     if header.node != node {
         let target = Node::ALL

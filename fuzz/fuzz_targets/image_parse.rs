@@ -4,7 +4,7 @@
 #![no_main]
 
 use autoplug_image::{
-    verify, Expectations, ImageHeader, SigningKey, StreamVerifier, Version, F446RE_LOAD_ADDRESS,
+    verify, Expectations, ImageHeader, ImageSet, ImageSlot, SigningKey, StreamVerifier, Version,
     HEADER_LEN, NUCLEO_F446RE, SIGNATURE_LEN,
 };
 use std::sync::OnceLock;
@@ -18,6 +18,11 @@ fn key() -> &'static [u8; 32] {
 }
 
 fuzz_target!(|data: &[u8]| {
+    // A release splits into images that lie back to back and cover the file exactly.
+    if let Ok(set) = ImageSet::parse(data) {
+        let total: usize = set.iter().map(|(image, _)| image.len()).sum();
+        assert_eq!(total, data.len());
+    }
     if let Ok(header) = ImageHeader::parse(data) {
         // A header that parses re-encodes to the same bytes.
         assert_eq!(&header.to_bytes()[..], &data[..HEADER_LEN]);
@@ -26,7 +31,7 @@ fuzz_target!(|data: &[u8]| {
             hardware_id: NUCLEO_F446RE,
             version_floor: Version::new(1, 0, 0),
             max_image_len: 128 * 1024,
-            load_address: F446RE_LOAD_ADDRESS,
+            load_address: ImageSlot::B.vector_table(),
         };
         let _ = header.check(&expected);
     }

@@ -4,7 +4,7 @@
 #![no_main]
 
 use autoplug_ecu::{Dtcs, Instant};
-use autoplug_image::{Expectations, Version, F446RE_LOAD_ADDRESS, NUCLEO_F446RE};
+use autoplug_image::{BootState, Expectations, ImageSlot, Version, NUCLEO_F446RE};
 use autoplug_uds::security::key_for;
 use autoplug_uds::{Backend, Config, FlashError, Identification, Reply, Server};
 use libfuzzer_sys::fuzz_target;
@@ -28,6 +28,7 @@ impl Backend for Ecu {
             serial_number: b"0001",
             hardware_version: b"NUCLEO-F446RE",
             vin: b"1AP0FUZZ3XX000001",
+            boot_slot: Some((ImageSlot::A, BootState::Confirmed)),
         }
     }
     fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
@@ -58,14 +59,14 @@ impl Backend for Ecu {
             hardware_id: NUCLEO_F446RE,
             version_floor: Version::new(1, 0, 0),
             max_image_len: SECTOR as u32,
-            load_address: F446RE_LOAD_ADDRESS,
+            load_address: ImageSlot::B.vector_table(),
         }
     }
     fn public_key(&self) -> [u8; 32] {
         [9; 32]
     }
     fn dfu_erase_steps(&self, len: u32) -> u32 {
-        len.min(2 * SECTOR as u32).div_ceil(SECTOR as u32)
+        len.min(SECTOR as u32).div_ceil(SECTOR as u32)
     }
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
         let start = step as usize * SECTOR;
@@ -93,7 +94,7 @@ impl Backend for Ecu {
 
 fuzz_target!(|data: &[u8]| {
     let mut ecu = Ecu {
-        dfu: vec![0xFF; 2 * SECTOR],
+        dfu: vec![0xFF; SECTOR],
         dtcs: Dtcs::new(),
         speed: Some(0.0),
         key_failures: 0,

@@ -19,13 +19,14 @@
 use std::path::Path;
 
 use autoplug_can::{Frame, Node};
+use autoplug_image::ImageSlot;
 use autoplug_image::{SigningKey, SoftwareVariant, Version};
 use autoplug_middleware::on_car::OnCar;
 use autoplug_middleware::tester::{FlashConfig, FlashJob, Phase};
 use autoplug_middleware::DEV_SECURITY_SECRET;
 use autoplug_virtual_bus::{AcceptanceFilter, BusConfig, VirtualBus};
 use autoplug_virtual_car::car::VirtualCar;
-use autoplug_virtual_car::diag::build_image;
+use autoplug_virtual_car::diag::{build_image, build_slot_image};
 use autoplug_virtual_car::scenario::Scenario;
 
 /// Bytes of payload in the benchmark image: 64 KiB of image in all.
@@ -45,14 +46,26 @@ fn main() {
         Scenario::load(&root.join("scenarios/workshop.toml")).expect("workshop scenario");
     let key = SigningKey::from_seed(autoplug_image::dev::SIGNING_SEED);
     let payload = IMAGE_LEN - autoplug_image::OVERHEAD_LEN;
-    let image = build_image(
+    let version = Version::new(1, 1, 0);
+    // A release: the image linked for slot A followed by the one linked for slot B, as
+    // `autoplug image build` writes it; the tester sends the one for the slot the ECU is
+    // not running, 64 KiB.
+    let release = build_image(
         Node::Cruise,
-        Version::new(1, 1, 0),
+        version,
         SoftwareVariant::Standard,
         payload,
         &key,
     );
-    assert_eq!(image.len(), IMAGE_LEN);
+    assert_eq!(release.len(), 2 * IMAGE_LEN);
+    let image = build_slot_image(
+        Node::Cruise,
+        ImageSlot::B,
+        version,
+        SoftwareVariant::Standard,
+        payload,
+        &key,
+    );
 
     // The UDS download, on the virtual car standing in the workshop.
     // Standing long enough for the ECU to accept a programming session: it needs to have
@@ -61,12 +74,8 @@ fn main() {
     while car.time_us() < autoplug_uds::STANDSTILL_WINDOW_US + 100_000 {
         car.tick();
     }
-    let job = FlashJob::new(FlashConfig::new(
-        Node::Cruise,
-        image.clone(),
-        DEV_SECURITY_SECRET,
-    ))
-    .expect("a flash job");
+    let job = FlashJob::new(FlashConfig::new(Node::Cruise, release, DEV_SECURITY_SECRET))
+        .expect("a flash job");
     let mut on_car = OnCar::new(job, &mut car);
     let report = on_car
         .run(&mut car, 120_000_000)
@@ -89,7 +98,7 @@ fn main() {
         ISO_TP_LIMIT
     );
     println!(
-        "  total update: {:.2} s (erase, transfer, check, reset with the swap, confirmation)",
+        "  total update: {:.2} s (erase, transfer, check, reset into the new slot, confirmation)",
         report.total_us as f64 * 1e-6
     );
 

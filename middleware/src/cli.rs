@@ -368,7 +368,8 @@ fn parse_bus(text: &str) -> Result<BusUrl, String> {
 /// `image` subcommands.
 #[derive(Debug, Subcommand)]
 pub enum ImageCommand {
-    /// Build a signed image from a raw binary or an ELF file.
+    /// Build a signed image from a raw binary or an ELF file, or a release for both slots
+    /// (one image per slot, one file) from two ELF files.
     Build {
         /// The target ECU: engine, pedals, steering, transmission (trans), cabin, console,
         /// differential (diff), cruise, abs.
@@ -387,10 +388,14 @@ pub enum ImageCommand {
         /// SHA-256.
         #[arg(long, value_name = "HEX32", value_parser = parse_build_id)]
         build_id: Option<[u8; BUILD_ID_LEN]>,
-        /// The application: a raw binary, or an ELF file whose loadable segments start at
-        /// the load address (0x08020200).
-        #[arg(long, value_name = "FILE")]
-        payload: PathBuf,
+        /// The application: a raw binary, or an ELF file linked for slot A (loadable
+        /// segments from 0x08020200) or slot B (from 0x08040200). Give it twice, once per
+        /// slot's build, for a release both slots can take.
+        #[arg(long, value_name = "FILE", required = true)]
+        payload: Vec<PathBuf>,
+        /// The slot a raw binary is linked for (an ELF file says it itself).
+        #[arg(long, value_enum)]
+        slot: Option<SlotArg>,
         /// The secret key file to sign with ("dev": the development key, whose secret is
         /// public: for the virtual car and benches without their own keys).
         #[arg(long, value_name = "FILE.key")]
@@ -408,6 +413,24 @@ pub enum ImageCommand {
         #[arg(long, value_name = "FILE.pub")]
         key: Option<PathBuf>,
     },
+}
+
+/// `--slot`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SlotArg {
+    /// Slot A (sector 5, vector table at 0x08020200).
+    A,
+    /// Slot B (sector 6, vector table at 0x08040200).
+    B,
+}
+
+impl From<SlotArg> for autoplug_image::ImageSlot {
+    fn from(slot: SlotArg) -> Self {
+        match slot {
+            SlotArg::A => autoplug_image::ImageSlot::A,
+            SlotArg::B => autoplug_image::ImageSlot::B,
+        }
+    }
 }
 
 /// `--variant`.
@@ -644,6 +667,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             part_number,
             build_id,
             payload,
+            slot,
             key,
             out: image,
         }) => {
@@ -653,30 +677,46 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 variant: variant.into(),
                 part_number,
                 build_id,
-                payload,
+                payloads: payload,
+                slot: slot.map(Into::into),
                 key,
                 out: image,
             };
             let built = image_tool::build_image(&options)?;
-            let kind = match built.kind {
-                PayloadKind::Raw => "raw binary".to_string(),
-                PayloadKind::Elf { segments } => format!("ELF, {segments} loadable segment(s)"),
-            };
             writeln!(
                 out,
-                "wrote {} ({} bytes; payload {} bytes from {kind})\n{}",
+                "wrote {} ({} bytes, {} image(s))",
                 options.out.display(),
                 built.image_len,
-                built.header.payload_len,
-                built.header
+                built.images.len()
             )?;
+            for (header, kind) in &built.images {
+                let kind = match kind {
+                    PayloadKind::Raw => "raw binary".to_string(),
+                    PayloadKind::Elf { segments } => {
+                        format!("ELF, {segments} loadable segment(s)")
+                    }
+                };
+                let slot = header.slot().map_or('?', |slot| slot.letter());
+                writeln!(
+                    out,
+                    "slot {slot}: payload {} bytes from {kind}\n{header}",
+                    header.payload_len,
+                )?;
+            }
             Ok(())
         }
         Command::Image(ImageCommand::Inspect { file, key }) => {
-            let inspection = image_tool::inspect_file(&file, key.as_deref())?;
+            let inspections = image_tool::inspect_file(&file, key.as_deref())?;
             writeln!(out, "File:           {}", file.display())?;
-            writeln!(out, "{inspection}")?;
-            let problems = inspection.problems();
+            let mut problems = Vec::new();
+            for (index, inspection) in inspections.iter().enumerate() {
+                if inspections.len() > 1 {
+                    writeln!(out, "--- image {} of {}", index + 1, inspections.len())?;
+                }
+                writeln!(out, "{inspection}")?;
+                problems.extend(inspection.problems());
+            }
             if !problems.is_empty() {
                 return Err(ImageToolError::Corrupted {
                     path: file,
@@ -1444,7 +1484,30 @@ fn precheck_image(
     path: &Path,
     key: Option<&Path>,
 ) -> Result<(Vec<u8>, ImageHeader), CliError> {
-    let inspection = image_tool::inspect_file(path, key)?;
+    let inspections = image_tool::inspect_file(path, key)?;
+    for inspection in &inspections {
+        precheck_one(ecu, path, inspection)?;
+    }
+    let bytes = std::fs::read(path).map_err(|source| {
+        CliError::Image(ImageToolError::Io {
+            context: format!("cannot read the image '{}'", path.display()),
+            source,
+        })
+    })?;
+    // `inspect_file` returns at least one inspection, or an error.
+    let header = inspections
+        .first()
+        .map(|i| i.header)
+        .ok_or_else(|| CliError::WrongImage(format!("'{}' holds no image", path.display())))?;
+    Ok((bytes, header))
+}
+
+/// One image of the file against the ECU.
+fn precheck_one(
+    ecu: Node,
+    path: &Path,
+    inspection: &image_tool::Inspection,
+) -> Result<(), CliError> {
     let header = inspection.header;
     if Some(header.node) != ecu.diag_node_number() {
         let target = ECUS
@@ -1472,13 +1535,7 @@ fn precheck_image(
         }
         .into());
     }
-    let bytes = std::fs::read(path).map_err(|source| {
-        CliError::Image(ImageToolError::Io {
-            context: format!("cannot read the image '{}'", path.display()),
-            source,
-        })
-    })?;
-    Ok((bytes, header))
+    Ok(())
 }
 
 #[allow(clippy::too_many_arguments)] // one per command-line option
@@ -1504,10 +1561,10 @@ fn flash(
         ecu_label(ecu),
         image.display(),
         header.version,
-        bytes.len(),
+        header.image_len(),
         transport.describe()
     )?;
-    let total = bytes.len() as u64;
+    let total = header.image_len();
     let mut config = FlashConfig::new(ecu, bytes, &secret);
     config.tester = timing.tester_config();
     config.reset_timeout_us = (reset_timeout * 1e6) as u64;
@@ -1532,6 +1589,8 @@ fn flash(
             }
             observer.set_message(progress.phase.name());
         }
+        // The image for the slot the ECU writes is known once the ECU said which it runs.
+        observer.set_length(progress.total);
         observer.set_position(progress.transferred);
     });
     let result = driver::run(transport.as_mut(), &mut job);

@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 
 use autoplug_can::Node;
 use autoplug_image::{
-    parse_public_key, verify, ImageBuilder, ImageError, ImageHeader, KeyFileError, KeyGenError,
-    KeyKind, PartNumber, SigningKey, SoftwareVariant, Version, BUILD_ID_LEN, F446RE_LOAD_ADDRESS,
-    HEADER_LEN, OVERHEAD_LEN, PUBLIC_KEY_LEN, SIGNATURE_LEN,
+    parse_public_key, verify, ImageBuilder, ImageError, ImageHeader, ImageSet, ImageSlot,
+    KeyFileError, KeyGenError, KeyKind, PartNumber, SigningKey, SoftwareVariant, Version,
+    BUILD_ID_LEN, HEADER_LEN, OVERHEAD_LEN, PUBLIC_KEY_LEN, SIGNATURE_LEN,
 };
 use object::elf;
 use object::read::elf::{FileHeader, ProgramHeader};
@@ -21,9 +21,9 @@ use sha2::{Digest, Sha256};
 
 use crate::names::ecu_label;
 
-/// Bytes of the F446RE's active slot, where an image runs after the swap: header,
-/// payload and signature must fit it.
-pub const SLOT_LEN: u32 = autoplug_flash::ACTIVE.size;
+/// Bytes of an F446RE image slot, where an image runs in place: header, payload and
+/// signature must fit it.
+pub const SLOT_LEN: u32 = autoplug_flash::SLOT_A.size;
 
 /// The largest payload an image for the F446RE's slot can carry.
 pub const MAX_PAYLOAD_LEN: usize = SLOT_LEN as usize - OVERHEAD_LEN;
@@ -316,11 +316,10 @@ pub fn extract_payload(
     Ok((payload, kind))
 }
 
-fn elf_payload(
-    bytes: &[u8],
-    load_address: u32,
-    max_len: usize,
-) -> Result<(Vec<u8>, usize), String> {
+/// The loadable segments with data of an ELF file for the STM32F446, by address (the
+/// physical address: where the bytes sit in flash; .data's initial values sit in flash even
+/// though the section runs in RAM).
+fn elf_segments(bytes: &[u8]) -> Result<Vec<(u64, &[u8])>, String> {
     // e_ident[EI_CLASS], the fifth byte: 1 for 32-bit files.
     if bytes.get(4) != Some(&elf::ELFCLASS32) {
         return Err("a 64-bit ELF file: the STM32F446 runs 32-bit Arm code".into());
@@ -340,27 +339,67 @@ fn elf_payload(
     let program_headers = header
         .program_headers(endian, bytes)
         .map_err(|e| format!("unreadable program headers: {e}"))?;
-    let slot_end = u64::from(load_address) + max_len as u64;
     let mut segments: Vec<(u64, &[u8])> = Vec::new();
     for (index, ph) in program_headers.iter().enumerate() {
         if ph.p_type(endian) != elf::PT_LOAD || ph.p_filesz(endian) == 0 {
             continue;
         }
-        // The physical address is where the bytes sit in flash (.data's initial values sit
-        // in flash even though the section runs in RAM).
         let start = u64::from(ph.p_paddr(endian));
         let data = ph
             .data(endian, bytes)
             .map_err(|()| format!("segment {index} lies outside the ELF file"))?;
-        let end = start + data.len() as u64;
-        if start < u64::from(load_address) || end > slot_end {
-            return Err(format!(
-                "loadable segment {index} at 0x{start:08X}..0x{end:08X} lies outside the slot 0x{load_address:08X}..0x{slot_end:08X} (link the application for the AutoPlug slot)"
-            ));
-        }
         segments.push((start, data));
     }
     segments.sort_by_key(|(start, _)| *start);
+    Ok(segments)
+}
+
+/// The slot a payload is for: an ELF file's from where it is linked (its first loadable
+/// segment is the vector table, at a slot's start + 512), a raw binary's as `given`
+/// (default A). A `given` slot an ELF file is not linked for is refused.
+pub fn payload_slot(bytes: &[u8], given: Option<ImageSlot>) -> Result<ImageSlot, String> {
+    if !bytes.starts_with(&elf::ELFMAG) {
+        return Ok(given.unwrap_or(ImageSlot::A));
+    }
+    let segments = elf_segments(bytes)?;
+    let Some(&(first, _)) = segments.first() else {
+        return Err("the ELF file has no loadable segment with data".into());
+    };
+    let linked = u32::try_from(first)
+        .ok()
+        .and_then(ImageSlot::at_vector_table)
+        .ok_or_else(|| {
+            format!(
+                "the ELF file is linked at 0x{first:08X}, not for slot A (0x{:08X}) or slot B (0x{:08X}): build the firmware with AUTOPLUG_SLOT=a or b",
+                ImageSlot::A.vector_table(),
+                ImageSlot::B.vector_table()
+            )
+        })?;
+    match given {
+        Some(slot) if slot != linked => Err(format!(
+            "the ELF file is linked for slot {}, not slot {} as --slot says",
+            linked.letter(),
+            slot.letter()
+        )),
+        _ => Ok(linked),
+    }
+}
+
+fn elf_payload(
+    bytes: &[u8],
+    load_address: u32,
+    max_len: usize,
+) -> Result<(Vec<u8>, usize), String> {
+    let segments = elf_segments(bytes)?;
+    let slot_end = u64::from(load_address) + max_len as u64;
+    for &(start, data) in &segments {
+        let end = start + data.len() as u64;
+        if start < u64::from(load_address) || end > slot_end {
+            return Err(format!(
+                "a loadable segment at 0x{start:08X}..0x{end:08X} lies outside the slot 0x{load_address:08X}..0x{slot_end:08X} (link the application for the AutoPlug slot)"
+            ));
+        }
+    }
     let Some(&(first, _)) = segments.first() else {
         return Err("the ELF file has no loadable segment with data".into());
     };
@@ -430,8 +469,11 @@ pub struct BuildOptions {
     pub part_number: Option<String>,
     /// The build id; [`default_build_id`] of the payload if not given.
     pub build_id: Option<[u8; BUILD_ID_LEN]>,
-    /// The raw binary or ELF file.
-    pub payload: PathBuf,
+    /// The raw binaries or ELF files: one, or one per slot (the release for both slots in
+    /// one file).
+    pub payloads: Vec<PathBuf>,
+    /// The slot a raw binary is linked for (an ELF file says it itself); default A.
+    pub slot: Option<ImageSlot>,
     /// The secret key file.
     pub key: PathBuf,
     /// The image file to write.
@@ -441,49 +483,87 @@ pub struct BuildOptions {
 /// What `image build` made.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Built {
-    /// The header written.
-    pub header: ImageHeader,
-    /// What the payload file was.
-    pub kind: PayloadKind,
+    /// Each image written, in file order: its header and what its payload file was.
+    pub images: Vec<(ImageHeader, PayloadKind)>,
     /// Bytes of the image file.
     pub image_len: usize,
 }
 
-/// Builds and signs an image and writes it to `options.out`.
+/// Builds and signs an image per payload and writes them, one after the other, to
+/// `options.out`. Two payloads must be linked for different slots.
 pub fn build_image(options: &BuildOptions) -> Result<Built, ImageToolError> {
     let node = options
         .ecu
         .diag_node_number()
         .ok_or(ImageToolError::NotAnEcu(options.ecu))?;
+    let bad = |path: &Path, reason: String| ImageToolError::Payload {
+        path: path.to_path_buf(),
+        reason,
+    };
+    match options.payloads.as_slice() {
+        [] => return Err(bad(Path::new(""), "no payload given".into())),
+        [_] | [_, _] => {}
+        [.., third] => {
+            return Err(bad(
+                third,
+                "at most two payloads, one per slot (A and B)".into(),
+            ))
+        }
+    }
+    if options.payloads.len() == 2 && options.slot.is_some() {
+        return Err(bad(
+            &options.payloads[0],
+            "--slot is for one raw binary; two payloads must be ELF files, which say their slot"
+                .into(),
+        ));
+    }
     // The key first: a bad key should not wait for a large payload to be read.
     let key = read_signing_key(&options.key)?;
-    let bytes = read_file(&options.payload, "the payload")?;
-    let (payload, kind) =
-        extract_payload(&bytes, F446RE_LOAD_ADDRESS, MAX_PAYLOAD_LEN).map_err(|reason| {
-            ImageToolError::Payload {
-                path: options.payload.clone(),
-                reason,
-            }
-        })?;
-    let mut builder = ImageBuilder::new(node, options.version, Vec::new());
-    builder.variant = options.variant;
-    builder.build_id = options
-        .build_id
-        .unwrap_or_else(|| default_build_id(&payload));
-    if let Some(text) = &options.part_number {
-        builder.part_number = PartNumber::new(text).map_err(ImageToolError::Build)?;
+    let mut file = Vec::new();
+    let mut images = Vec::new();
+    let mut slots = Vec::new();
+    for path in &options.payloads {
+        let bytes = read_file(path, "the payload")?;
+        if options.payloads.len() == 2 && !bytes.starts_with(&elf::ELFMAG) {
+            return Err(bad(
+                path,
+                "a raw binary does not say which slot it is linked for: give ELF files for a two-slot release".into(),
+            ));
+        }
+        let slot = payload_slot(&bytes, options.slot).map_err(|reason| bad(path, reason))?;
+        if slots.contains(&slot) {
+            return Err(bad(
+                path,
+                format!(
+                    "both payloads are linked for slot {}: a release holds one image per slot",
+                    slot.letter()
+                ),
+            ));
+        }
+        slots.push(slot);
+        let (payload, kind) = extract_payload(&bytes, slot.vector_table(), MAX_PAYLOAD_LEN)
+            .map_err(|reason| bad(path, reason))?;
+        let mut builder = ImageBuilder::new(node, options.version, Vec::new());
+        builder.variant = options.variant;
+        builder.load_address = slot.vector_table();
+        builder.build_id = options
+            .build_id
+            .unwrap_or_else(|| default_build_id(&payload));
+        if let Some(text) = &options.part_number {
+            builder.part_number = PartNumber::new(text).map_err(ImageToolError::Build)?;
+        }
+        builder.payload = payload;
+        let header = builder.header().map_err(ImageToolError::Build)?;
+        file.extend_from_slice(&builder.sign(&key).map_err(ImageToolError::Build)?);
+        images.push((header, kind));
     }
-    builder.payload = payload;
-    let header = builder.header().map_err(ImageToolError::Build)?;
-    let image = builder.sign(&key).map_err(ImageToolError::Build)?;
-    fs::write(&options.out, &image).map_err(|source| ImageToolError::Io {
+    fs::write(&options.out, &file).map_err(|source| ImageToolError::Io {
         context: format!("cannot write the image '{}'", options.out.display()),
         source,
     })?;
     Ok(Built {
-        header,
-        kind,
-        image_len: image.len(),
+        images,
+        image_len: file.len(),
     })
 }
 
@@ -507,7 +587,7 @@ pub enum SignatureCheck {
 pub struct Inspection {
     /// The header.
     pub header: ImageHeader,
-    /// Bytes in the file.
+    /// Bytes of the file this image takes (up to the next image of a release, or the end).
     pub file_len: u64,
     /// The signature check.
     pub signature: SignatureCheck,
@@ -545,9 +625,24 @@ impl Inspection {
     }
 }
 
-/// Inspects the image in `bytes`; checks its signature when `public_key` is given. `Err`
-/// when the header does not parse.
+/// Inspects the images in `bytes` (one, or a release's two one after the other); checks
+/// their signatures when `public_key` is given. `Err` when the first header does not
+/// parse. A file that is not a well-formed set is inspected as one image, so its length
+/// problems are reported against the first header.
 pub fn inspect(
+    bytes: &[u8],
+    public_key: Option<&[u8; PUBLIC_KEY_LEN]>,
+) -> Result<Vec<Inspection>, ImageError> {
+    match ImageSet::parse(bytes) {
+        Ok(set) => set
+            .iter()
+            .map(|(image, _)| inspect_one(image, public_key))
+            .collect(),
+        Err(_) => Ok(vec![inspect_one(bytes, public_key)?]),
+    }
+}
+
+fn inspect_one(
     bytes: &[u8],
     public_key: Option<&[u8; PUBLIC_KEY_LEN]>,
 ) -> Result<Inspection, ImageError> {
@@ -568,7 +663,7 @@ pub fn inspect(
 }
 
 /// Reads and inspects an image file.
-pub fn inspect_file(path: &Path, key: Option<&Path>) -> Result<Inspection, ImageToolError> {
+pub fn inspect_file(path: &Path, key: Option<&Path>) -> Result<Vec<Inspection>, ImageToolError> {
     let public_key = key.map(read_public_key).transpose()?;
     let bytes = read_file(path, "the image")?;
     inspect(&bytes, public_key.as_ref()).map_err(|source| ImageToolError::NotAnImage {
@@ -583,7 +678,7 @@ impl fmt::Display for Inspection {
         let header = &self.header;
         write!(
             f,
-            "Sizes:          header {HEADER_LEN} + payload {} + signature {SIGNATURE_LEN} = {} bytes; file {} bytes",
+            "Sizes:          header {HEADER_LEN} + payload {} + signature {SIGNATURE_LEN} = {} bytes; {} bytes in the file",
             header.payload_len,
             header.image_len(),
             self.file_len
@@ -593,16 +688,20 @@ impl fmt::Display for Inspection {
         } else {
             writeln!(f, " (MISMATCH)")?;
         }
+        let linked = match header.slot() {
+            Some(slot) => format!("linked for slot {}", slot.letter()),
+            None => "linked for NEITHER slot (A 0x08020200, B 0x08040200)".to_string(),
+        };
         if header.image_len() <= u64::from(SLOT_LEN) {
             writeln!(
                 f,
-                "Slot:           fits the F446RE active slot ({} of {SLOT_LEN} bytes)",
+                "Slot:           {linked}; fits an F446RE slot ({} of {SLOT_LEN} bytes)",
                 header.image_len()
             )?;
         } else {
             writeln!(
                 f,
-                "Slot:           TOO LARGE for the F446RE active slot ({} of {SLOT_LEN} bytes)",
+                "Slot:           {linked}; TOO LARGE for an F446RE slot ({} of {SLOT_LEN} bytes)",
                 header.image_len()
             )?;
         }
@@ -733,7 +832,7 @@ mod tests {
 
     #[test]
     fn elf_segments_are_laid_out_from_the_load_address() {
-        let load = F446RE_LOAD_ADDRESS;
+        let load = ImageSlot::A.vector_table();
         let file = elf_with(&[(load, &[1, 2, 3, 4]), (load + 8, &[9, 9])], elf::EM_ARM);
         let (payload, kind) = extract_payload(&file, load, MAX_PAYLOAD_LEN).unwrap();
         assert_eq!(payload, [1, 2, 3, 4, 0xFF, 0xFF, 0xFF, 0xFF, 9, 9]);
@@ -742,7 +841,7 @@ mod tests {
 
     #[test]
     fn elf_segments_outside_the_slot_are_refused() {
-        let load = F446RE_LOAD_ADDRESS;
+        let load = ImageSlot::A.vector_table();
         let bootloader = elf_with(&[(0x0800_0000, &[1, 2, 3, 4])], elf::EM_ARM);
         let error = extract_payload(&bootloader, load, MAX_PAYLOAD_LEN).unwrap_err();
         assert!(
@@ -776,7 +875,7 @@ mod tests {
 
     #[test]
     fn raw_payloads_must_fit_the_slot() {
-        let load = F446RE_LOAD_ADDRESS;
+        let load = ImageSlot::A.vector_table();
         let (payload, kind) = extract_payload(&[1, 2, 3], load, MAX_PAYLOAD_LEN).unwrap();
         assert_eq!(
             (payload.as_slice(), kind),
@@ -789,5 +888,24 @@ mod tests {
             .unwrap_err()
             .contains("empty"));
         assert_eq!(MAX_PAYLOAD_LEN, 128 * 1024 - 576);
+    }
+
+    #[test]
+    fn the_slot_of_a_payload_is_where_its_elf_is_linked() {
+        let a = elf_with(&[(ImageSlot::A.vector_table(), &[0; 8])], elf::EM_ARM);
+        let b = elf_with(&[(ImageSlot::B.vector_table(), &[0; 8])], elf::EM_ARM);
+        assert_eq!(payload_slot(&a, None), Ok(ImageSlot::A));
+        assert_eq!(payload_slot(&b, None), Ok(ImageSlot::B));
+        assert_eq!(payload_slot(&b, Some(ImageSlot::B)), Ok(ImageSlot::B));
+        let error = payload_slot(&b, Some(ImageSlot::A)).unwrap_err();
+        assert!(error.contains("linked for slot B"), "{error}");
+        let elsewhere = elf_with(&[(0x0801_0000, &[0; 8])], elf::EM_ARM);
+        let error = payload_slot(&elsewhere, None).unwrap_err();
+        assert!(error.contains("not for slot A"), "{error}");
+        assert_eq!(payload_slot(&[1, 2, 3], None), Ok(ImageSlot::A));
+        assert_eq!(
+            payload_slot(&[1, 2, 3], Some(ImageSlot::B)),
+            Ok(ImageSlot::B)
+        );
     }
 }

@@ -8,7 +8,9 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use autoplug_can::Node;
-use autoplug_image::{SigningKey, F446RE_LOAD_ADDRESS};
+use autoplug_image::{ImageSlot, SigningKey};
+
+const F446RE_LOAD_ADDRESS: u32 = ImageSlot::A.vector_table();
 use autoplug_middleware::cli::{run, Cli};
 use autoplug_middleware::names::ECUS;
 use clap::Parser;
@@ -244,8 +246,8 @@ fn image_build_and_inspect_round_trip() {
         "Payload length: 10000 bytes",
         "Load address:   0x08020200",
         "Part number:    AP-CRUISE-0001",
-        "header 512 + payload 10000 + signature 64 = 10576 bytes; file 10576 bytes (matches)",
-        "fits the F446RE active slot",
+        "header 512 + payload 10000 + signature 64 = 10576 bytes; 10576 bytes in the file (matches)",
+        "linked for slot A; fits an F446RE slot",
         "Signature:      valid",
     ] {
         assert!(text.contains(expected), "{expected:?} in\n{text}");
@@ -482,7 +484,37 @@ fn image_build_takes_an_elf_file() {
     ])
     .unwrap_err();
     assert!(error.contains("cruise.elf"), "{error}");
-    assert!(error.contains("lies outside the slot"), "{error}");
+    assert!(error.contains("not for slot A"), "{error}");
+
+    // A release for both slots: the slot-A and slot-B builds, one file.
+    let slot_b = path(dir.path(), "cruise-b.elf");
+    let b = ImageSlot::B.vector_table();
+    fs::write(&firmware, elf(&[(F446RE_LOAD_ADDRESS, &[0xAA; 16])])).unwrap();
+    fs::write(&slot_b, elf(&[(b, &[0xBB; 16])])).unwrap();
+    let release = path(dir.path(), "cruise-release.img");
+    let build = |payloads: &[&str], out: &str| {
+        let mut args = vec!["image", "build", "--ecu", "cruise", "--version", "1.5.0"];
+        for payload in payloads {
+            args.extend(["--payload", payload]);
+        }
+        args.extend(["--key", &secret, "--out", out]);
+        run_args(&args)
+    };
+    let text = build(&[&slot_b, &firmware], &release).unwrap();
+    assert!(text.contains("2 image(s)"), "{text}");
+    assert!(text.contains("slot B: payload 16 bytes"), "{text}");
+    assert!(text.contains("slot A: payload 16 bytes"), "{text}");
+    let text = run_args(&["image", "inspect", &release, "--key", &public]).unwrap();
+    assert!(text.contains("--- image 1 of 2"), "{text}");
+    assert!(text.contains("Load address:   0x08040200"), "{text}");
+    assert!(text.contains("Load address:   0x08020200"), "{text}");
+    assert_eq!(text.matches("Signature:      valid").count(), 2, "{text}");
+    // Two builds for one slot make no release.
+    let error = build(&[&firmware, &firmware], &release).unwrap_err();
+    assert!(
+        error.contains("both payloads are linked for slot A"),
+        "{error}"
+    );
 }
 
 #[test]

@@ -151,8 +151,8 @@ where
         }
     }
 
-    /// The tester asked for a reset: the bootloader runs (swapping or reverting images
-    /// as the flash says), then the application starts afresh with the installed
+    /// The tester asked for a reset: the bootloader runs (starting a new image on trial
+    /// or reverting one, as the boot record says), then the application starts afresh with the installed
     /// software: its logic rebuilt, RAM (DTCs included) cleared, outputs at rest.
     fn reset(&mut self, t_us: u64) {
         let boot = self.diag.boot(t_us);

@@ -1,14 +1,14 @@
 //! The diagnostic half of a virtual ECU: the same UDS stack (`autoplug_uds::DiagNode`) and
 //! update logic as the firmware, over a simulated F446 flash (`autoplug_flash::SimFlash`)
-//! with the datasheet's erase and program times, and embassy-boot's own bootloader logic at
-//! every reset.
+//! with the datasheet's erase and program times, and the bootloader's own slot choice
+//! (`autoplug_flash::ab`) at every reset.
 //!
 //! A host cannot execute the ARM code of an image, so a virtual ECU takes its behaviour
 //! after an update from the signed image's header: the software variant (standard or the
 //! faulty demonstration software) picks the logic it runs, the version and part number
-//! are what it reports. Everything else — the download, the checks, the swap, the revert
-//! of an image that does not confirm itself, the time all of it takes — is what the board
-//! does.
+//! are what it reports. Everything else — the download into the slot not running, the
+//! checks, the trial start, the revert of an image that does not confirm itself, the time
+//! all of it takes — is what the board does.
 //!
 //! Flash operations stall the core on the F446 (code runs from the flash being
 //! programmed): while a virtual ECU is stalled it neither steps its logic nor sends, and of
@@ -18,16 +18,16 @@ use std::cell::RefCell;
 
 use autoplug_can::{Frame, Node, VehicleSpeedMsg, DIAG_FUNCTIONAL_REQUEST_ID};
 use autoplug_ecu::{Dtcs, Instant};
+use autoplug_flash::ab::{self, BootAction, BootState, ImageSlot};
 use autoplug_flash::sim::{state_twin, SimFlash, SlotPartition};
-use autoplug_flash::{ACTIVE, BOOT_SWAP_BUFFER_SIZE, DFU, SECTORS, WRITE_SIZE};
+use autoplug_flash::{SLOT_ERASE_SIZE, WRITE_SIZE};
 use autoplug_image::{
     dev, floor, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant,
-    Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
+    Version, HEADER_LEN, NUCLEO_F446RE,
 };
 use autoplug_uds::security::SeedSource;
 use autoplug_uds::{Backend, DiagNode, FlashError, Identification, DEV_SECURITY_SECRET};
 use autoplug_vin::Vin;
-use embassy_boot::{AlignedBuffer, BlockingFirmwareState, BootLoader, BootLoaderConfig, State};
 use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
 
 /// Frames the bxCAN receive FIFO holds while the core is stalled; one more is lost.
@@ -61,8 +61,8 @@ pub fn part_number(node: Node) -> PartNumber {
     PartNumber::new(name).expect("a valid part number")
 }
 
-/// A signed image for `node`, as the project's build would make it: the development key,
-/// a deterministic payload of `payload_len` bytes (contents do not matter on a host).
+/// A signed release for `node`, as the project's build would make it: one image per slot
+/// (slot A's, then slot B's, in one file: `autoplug_image::ImageSet`), the development key.
 pub fn build_image(
     node: Node,
     version: Version,
@@ -70,28 +70,55 @@ pub fn build_image(
     payload_len: usize,
     key: &SigningKey,
 ) -> Vec<u8> {
+    ImageSlot::ALL
+        .iter()
+        .flat_map(|&slot| build_slot_image(node, slot, version, variant, payload_len, key))
+        .collect()
+}
+
+/// A signed image for `node` linked for `slot`: a deterministic payload of `payload_len`
+/// bytes (at least 8) that starts like an application linked there (initial stack pointer,
+/// a reset handler in the slot), which is all a host can check of it; the rest does not
+/// matter on a host.
+pub fn build_slot_image(
+    node: Node,
+    slot: ImageSlot,
+    version: Version,
+    variant: SoftwareVariant,
+    payload_len: usize,
+    key: &SigningKey,
+) -> Vec<u8> {
     let number = node.diag_node_number().expect("an ECU");
-    let payload: Vec<u8> = (0..payload_len)
+    let mut payload: Vec<u8> = (0..payload_len.max(8))
         .map(|i| (i as u32).wrapping_mul(2_654_435_761).to_le_bytes()[3] ^ number)
         .collect();
+    payload[..4].copy_from_slice(&INITIAL_STACK_POINTER.to_le_bytes());
+    payload[4..8].copy_from_slice(&(slot.vector_table() + RESET_HANDLER_OFFSET).to_le_bytes());
     let mut builder = ImageBuilder::new(number, version, payload);
     builder.variant = variant;
     builder.part_number = part_number(node);
-    builder.load_address = F446RE_LOAD_ADDRESS;
+    builder.load_address = slot.vector_table();
     builder.build_id[0] = number;
     builder.build_id[1..5].copy_from_slice(&u32::from(version.patch).to_le_bytes());
+    builder.build_id[5] = slot.number();
     builder.sign(key).expect("a valid image")
 }
+
+/// The vector table of a virtual image: the top of the F446's 128 KiB SRAM as the initial
+/// stack pointer, and a Thumb reset handler just past the vector table (452 bytes).
+const INITIAL_STACK_POINTER: u32 = 0x2002_0000;
+const RESET_HANDLER_OFFSET: u32 = 0x1C5;
 
 /// What a virtual ECU runs after a (re)start.
 #[derive(Debug)]
 pub struct Boot {
-    /// The header of the image in the active slot.
+    /// The header of the image in the slot started.
     pub header: ImageHeader,
-    /// The bootloader's state before it acted (Swap: a new image was swapped in and must
-    /// confirm itself; Revert... see embassy-boot).
-    pub state: State,
-    /// Simulated time the bootloader took (erases and copies), µs.
+    /// The slot started.
+    pub slot: ImageSlot,
+    /// What the bootloader did (a trial start of a new image, a revert, ...).
+    pub action: BootAction,
+    /// Simulated flash time the bootloader took (its boot record), µs.
     pub took_us: u64,
 }
 
@@ -111,8 +138,10 @@ pub struct VirtualDiag {
     software_version: String,
     /// The car's VIN, as the end of the line wrote it into every ECU.
     vin: Vin,
-    /// Set after a boot into a swapped image: it confirms itself after its self-test.
-    unconfirmed: bool,
+    /// The slot the application runs from.
+    running: ImageSlot,
+    /// How its image stands (on trial: it confirms itself after its self-test).
+    boot_state: BootState,
     /// The core is stalled (flash busy) or resetting until then, µs.
     stalled_until_us: u64,
     /// Frames accepted during the current stall.
@@ -132,7 +161,7 @@ pub struct VirtualDiag {
 
 impl VirtualDiag {
     /// An ECU fresh from the factory: the development-signed `variant` image of `version`
-    /// in its active slot, booted, holding the car's `vin`. `seed` is the car's: its serial
+    /// in slot A, booted, holding the car's `vin`. `seed` is the car's: its serial
     /// numbers and the secret its security seeds are drawn from (a simulation has no
     /// entropy source, and a run must replay exactly), so two cars with other seeds never
     /// share a seed, and no start of one car repeats an earlier start's seeds.
@@ -144,10 +173,17 @@ impl VirtualDiag {
         seed: u64,
     ) -> Self {
         let key = SigningKey::from_seed(dev::SIGNING_SEED);
-        let image = build_image(node, version, variant, FACTORY_PAYLOAD_LEN, &key);
+        let image = build_slot_image(
+            node,
+            ImageSlot::A,
+            version,
+            variant,
+            FACTORY_PAYLOAD_LEN,
+            &key,
+        );
         let mut flash = SimFlash::new(seed ^ u64::from(node.diag_node_number().unwrap_or(0)));
         flash
-            .program(ACTIVE.start, &pad_to_words(&image))
+            .program(ImageSlot::A.region().start, &pad_to_words(&image))
             .expect("factory programming");
         let flash = RefCell::new(flash);
         write_floor(&flash, version).expect("factory floor");
@@ -168,7 +204,8 @@ impl VirtualDiag {
             serial: format!("AP{number:02X}{:08X}", (seed as u32) ^ u32::from(number)),
             software_version: String::new(),
             vin,
-            unconfirmed: false,
+            running: ImageSlot::A,
+            boot_state: BootState::Confirmed,
             stalled_until_us: 0,
             stalled_frames: 0,
             overruns: 0,
@@ -297,18 +334,14 @@ impl VirtualDiag {
     /// The self-test passed (CAN up, control loop running): an image booted unconfirmed
     /// confirms itself and raises the version floor to its own version.
     pub fn self_test_passed(&mut self, t_us: u64) {
-        if !self.unconfirmed || self.stalled(t_us) {
+        if self.boot_state != BootState::Trial || self.stalled(t_us) {
             return;
         }
         let before = busy_us(&self.flash);
-        let mut aligned = [0u8; WRITE_SIZE];
-        let confirmed = state_twin(&self.flash).is_ok_and(|mut twin| {
-            BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
-                .mark_booted()
-                .is_ok()
-        });
+        let confirmed = state_twin(&self.flash)
+            .is_ok_and(|mut twin| ab::confirm(&mut twin, self.running).is_ok());
         if confirmed {
-            self.unconfirmed = false;
+            self.boot_state = BootState::Confirmed;
             if self.installed.version > self.floor
                 && write_floor(&self.flash, self.installed.version).is_ok()
             {
@@ -332,7 +365,12 @@ impl VirtualDiag {
 
     /// Whether the running image still has to confirm itself.
     pub fn unconfirmed(&self) -> bool {
-        self.unconfirmed
+        self.boot_state == BootState::Trial
+    }
+
+    /// The slot the application runs from.
+    pub fn running_slot(&self) -> ImageSlot {
+        self.running
     }
 
     /// When the application last started, µs.
@@ -340,38 +378,35 @@ impl VirtualDiag {
         self.booted_at_us
     }
 
-    /// A reset: the bootloader runs embassy-boot's `prepare_boot` over the flash (a swap
-    /// or a revert takes seconds), then the application starts with what the active slot
-    /// holds. The caller rebuilds the ECU's logic for [`VirtualDiag::installed`]'s variant.
+    /// A reset: the bootloader chooses the slot to start (`autoplug_flash::ab::choose`, a
+    /// trial start of a marked image or the revert of one that did not confirm itself, each
+    /// a record in the flash), then the application starts with what that slot holds. The
+    /// caller rebuilds the ECU's logic for [`VirtualDiag::installed`]'s variant.
     pub fn boot(&mut self, t_us: u64) -> Boot {
         let before = busy_us(&self.flash);
-        let state = match state_twin(&self.flash) {
-            Ok(mut twin) => {
-                let mut bootloader = BootLoader::new(BootLoaderConfig {
-                    active: SlotPartition::active(&self.flash),
-                    dfu: SlotPartition::dfu(&self.flash),
-                    state: twin.boot_state(),
-                });
-                let mut buffer = AlignedBuffer([0; BOOT_SWAP_BUFFER_SIZE]);
-                // A bootloader error leaves the active slot as it is: boot what is there.
-                bootloader
-                    .prepare_boot(buffer.as_mut())
-                    .unwrap_or(State::Boot)
-            }
-            Err(_) => State::Boot,
+        let choice = match state_twin(&self.flash) {
+            Ok(mut twin) => ab::choose(&mut twin, |slot| startable(&self.flash, slot)),
+            // The real bootloader starts slot A when it cannot read the state copies.
+            Err(_) => ab::BootChoice {
+                slot: ImageSlot::A,
+                action: BootAction::Fallback,
+            },
         };
         let took_us = busy_us(&self.flash) - before;
         let mut header = [0u8; HEADER_LEN];
         self.flash
             .borrow()
-            .read(ACTIVE.start, &mut header)
-            .expect("the active slot is in the flash");
-        // The bootloader never puts a partial image in the active slot (the power-cut
-        // test of autoplug-flash): a header that does not parse would be a bug.
-        self.installed = ImageHeader::parse(&header).expect("a complete image in the active slot");
+            .read(choice.slot.region().start, &mut header)
+            .expect("the slot is in the flash");
+        // Only a verified image is ever marked for a start, and the factory's is signed
+        // (the power-cut tests of autoplug-flash): a header that does not parse is a bug.
+        self.installed = ImageHeader::parse(&header).expect("a complete image in the slot started");
         self.software_version = self.installed.version.to_string();
-        let now_state = boot_state(&self.flash);
-        self.unconfirmed = now_state == State::Swap;
+        self.running = choice.slot;
+        self.boot_state = state_twin(&self.flash)
+            .ok()
+            .and_then(|mut twin| ab::state(&mut twin, choice.slot).ok())
+            .unwrap_or(BootState::Confirmed);
         // What the application reads of its persistent state at the start: the floor, and
         // the seed epoch, raised for this start before any seed is drawn.
         self.floor = read_floor(&self.flash).unwrap_or(self.floor);
@@ -383,19 +418,20 @@ impl VirtualDiag {
         self.stalled_frames = 0;
         self.stalled_until_us = t_us + took_us + BOOT_TIME_US;
         self.booted_at_us = self.stalled_until_us;
-        if state != State::Boot {
+        if choice.action != BootAction::Normal {
             autoplug_log::info!(
-                "{}: bootloader {:?} in {} ms, running {} {}",
+                "{}: bootloader {:?}: slot {}, running {} {}",
                 self.node.name(),
-                state,
-                took_us / 1000,
+                choice.action,
+                choice.slot.letter(),
                 self.installed.variant,
                 self.installed.version
             );
         }
         Boot {
             header: self.installed,
-            state,
+            slot: choice.slot,
+            action: choice.action,
             took_us,
         }
     }
@@ -424,6 +460,8 @@ macro_rules! backend {
             serial: &$diag.serial,
             vin: &$diag.vin,
             floor: $diag.floor,
+            running: $diag.running,
+            boot_state: $diag.boot_state,
             key: $diag.key,
             seeds: &mut $diag.seeds,
             own_motion: $diag.own_motion,
@@ -443,6 +481,8 @@ struct EcuBackend<'a> {
     serial: &'a str,
     vin: &'a Vin,
     floor: Version,
+    running: ImageSlot,
+    boot_state: BootState,
     key: [u8; 32],
     seeds: &'a mut SeedSource,
     own_motion: bool,
@@ -458,10 +498,9 @@ impl EcuBackend<'_> {
         result
     }
 
-    /// Whether the running image is confirmed: not just swapped in (embassy-boot's
-    /// `verify_booted`: Boot, and Revert after a rollback, both count).
-    fn image_confirmed(&self) -> bool {
-        boot_state(self.flash) != State::Swap
+    /// The slot downloads go to: the one not running.
+    fn dfu_slot(&self) -> ImageSlot {
+        self.running.other()
     }
 }
 
@@ -473,6 +512,7 @@ impl Backend for EcuBackend<'_> {
             serial_number: self.serial.as_bytes(),
             hardware_version: b"NUCLEO-F446RE",
             vin: self.vin.as_bytes(),
+            boot_slot: Some((self.running, self.boot_state)),
         }
     }
 
@@ -507,8 +547,8 @@ impl Backend for EcuBackend<'_> {
             node: self.node.diag_node_number().unwrap_or(0),
             hardware_id: NUCLEO_F446RE,
             version_floor: self.floor,
-            max_image_len: ACTIVE.size,
-            load_address: F446RE_LOAD_ADDRESS,
+            max_image_len: self.dfu_slot().region().size,
+            load_address: self.dfu_slot().vector_table(),
         }
     }
 
@@ -517,44 +557,45 @@ impl Backend for EcuBackend<'_> {
     }
 
     fn dfu_erase_steps(&self, len: u32) -> u32 {
-        len.min(DFU.size).div_ceil(SECTORS[7].size)
+        len.min(self.dfu_slot().region().size)
+            .div_ceil(SLOT_ERASE_SIZE)
     }
 
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
-        // embassy-boot's rule: only a confirmed image may download the next one (else the
-        // bootloader would take the new one for a failed swap and revert).
-        if !self.image_confirmed() {
-            return Err(FlashError);
-        }
-        let sector = SECTORS[7].size;
+        let (running, target) = (self.running, self.dfu_slot());
         self.timed(|flash| {
-            SlotPartition::dfu(flash)
-                .erase(step * sector, (step + 1) * sector)
+            if step == 0 {
+                // Refused while the running image is on trial; withdraws an earlier
+                // download's trial mark of the slot before it is erased.
+                let mut twin = state_twin(flash).map_err(|_| FlashError)?;
+                ab::prepare_download(&mut twin, running, target).map_err(|_| FlashError)?;
+            }
+            SlotPartition::slot(flash, target)
+                .erase(step * SLOT_ERASE_SIZE, (step + 1) * SLOT_ERASE_SIZE)
                 .map_err(|_| FlashError)
         })
     }
 
     fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
+        let target = self.dfu_slot();
         self.timed(|flash| {
-            SlotPartition::dfu(flash)
+            SlotPartition::slot(flash, target)
                 .write(offset, data)
                 .map_err(|_| FlashError)
         })
     }
 
     fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError> {
-        SlotPartition::dfu(self.flash)
+        SlotPartition::slot(self.flash, self.dfu_slot())
             .read(offset, out)
             .map_err(|_| FlashError)
     }
 
     fn mark_updated(&mut self) -> Result<(), FlashError> {
+        let (running, target) = (self.running, self.dfu_slot());
         self.timed(|flash| {
-            let mut aligned = [0u8; WRITE_SIZE];
             let mut twin = state_twin(flash).map_err(|_| FlashError)?;
-            BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
-                .mark_updated()
-                .map_err(|_| FlashError)
+            ab::mark_trial(&mut twin, running, target).map_err(|_| FlashError)
         })
     }
 }
@@ -570,14 +611,24 @@ fn pad_to_words(image: &[u8]) -> Vec<u8> {
     padded
 }
 
-/// embassy-boot's state as the application reads it (Boot if it cannot be read).
-fn boot_state(flash: &RefCell<SimFlash>) -> State {
-    let mut aligned = [0u8; WRITE_SIZE];
-    state_twin(flash).map_or(State::Boot, |mut twin| {
-        BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
-            .get_state()
-            .unwrap_or(State::Boot)
-    })
+/// Whether `slot` holds something the bootloader would start: a vector table linked for it
+/// (what `autoplug_flash::ab::plausible_vector_table` checks on the ECU).
+fn startable(flash: &RefCell<SimFlash>, slot: ImageSlot) -> bool {
+    let mut table = [0u8; 8];
+    let read = flash.borrow().read(slot.vector_table(), &mut table).is_ok();
+    let word =
+        |at: usize| u32::from_le_bytes([table[at], table[at + 1], table[at + 2], table[at + 3]]);
+    read && ab::plausible_vector_table(slot, word(0), word(4))
+}
+
+/// How the image in `running` stands as the application reads it (confirmed if the state
+/// cannot be read).
+#[cfg(test)]
+fn boot_state(flash: &RefCell<SimFlash>, running: ImageSlot) -> BootState {
+    state_twin(flash)
+        .ok()
+        .and_then(|mut twin| ab::state(&mut twin, running).ok())
+        .unwrap_or(BootState::Confirmed)
 }
 
 /// The version floor kept in the persistent state.
@@ -781,7 +832,11 @@ mod tests {
                     "fill {fill_copy}, cut at {k}: count {kept} below {stored}"
                 );
                 assert_eq!(read_floor(&after.diag.flash), Some(FACTORY_VERSION));
-                assert_eq!(boot_state(&after.diag.flash), State::Boot);
+                assert_eq!(
+                    boot_state(&after.diag.flash, ImageSlot::A),
+                    BootState::Confirmed
+                );
+                assert_eq!(after.diag.running_slot(), ImageSlot::A);
             }
         }
     }

@@ -5,7 +5,7 @@
 //! |---|---|
 //! | session setup | functional 0x10 03 (extended), 0x85 02 (DTC setting off), 0x28 03 01 (normal communication off); physical 0x10 02 (programming) |
 //! | security | 0x27 01 (seed), 0x27 02 (key = `key_for(secret, node, seed)`) |
-//! | erase | 0x31 01 FF00 44 (slot address, image length): the sectors the image needs, answered after a series of 0x78 |
+//! | erase | 0x22 F1A0 (the slot the ECU runs: the image goes to the other one); 0x31 01 FF00 44 (slot address, image length): the sectors the image needs, answered after a series of 0x78 |
 //! | transfer | 0x34 00 44 (slot address, image length); 0x36 blocks of the announced length; 0x37 |
 //! | check | 0x31 01 FF01 (the ECU verifies the signature and marks the image) |
 //! | reset and wait | 0x11 01; TesterPresent (0x3E 00) until the ECU answers again |
@@ -16,6 +16,10 @@
 //! is silent. A functional TesterPresent (0x3E 80) goes every 2 s throughout, so no ECU's
 //! S3 timer ends its session meanwhile.
 //!
+//! The ECU runs its image in place from slot A or slot B and writes an update to the other
+//! slot, so the image must be linked for that one: the file may hold a release's images for
+//! both slots ([`autoplug_image::ImageSet`]), and the job sends the one the ECU will write.
+//!
 //! When a step fails, the restore phase still runs (its own failures are only noted), so
 //! the car is left with communication and DTC setting on and every ECU in its default
 //! session; the job then ends with the first failure.
@@ -24,8 +28,9 @@ use std::fmt;
 
 use autoplug_can::Node;
 use autoplug_ecu::Instant;
-use autoplug_image::F446RE_ACTIVE_SLOT;
+use autoplug_image::{BootState, ImageSet, ImageSlot};
 use autoplug_uds::security::{key_for, SEED_LEN};
+use autoplug_uds::server::did;
 
 use super::{hex_bytes, label, Job, Response, Tester, TesterConfig, UdsError};
 use crate::names::ecu_name;
@@ -98,6 +103,8 @@ pub struct PhaseTiming {
 pub struct FlashReport {
     /// The ECU flashed.
     pub ecu: Node,
+    /// The slot the image went to (`None` before the ECU said which it runs).
+    pub slot: Option<ImageSlot>,
     /// Bytes of the image.
     pub image_len: u64,
     /// Data bytes per TransferData block (the ECU's maxNumberOfBlockLength less 2); 0
@@ -134,7 +141,7 @@ impl FlashReport {
 
 impl fmt::Display for FlashReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(
+        write!(
             f,
             "{}: {} bytes, {} blocks of up to {} bytes",
             label(self.ecu),
@@ -142,6 +149,10 @@ impl fmt::Display for FlashReport {
             self.blocks,
             self.block_len
         )?;
+        match self.slot {
+            Some(slot) => writeln!(f, ", into slot {}", slot.letter())?,
+            None => writeln!(f)?,
+        }
         writeln!(f, "{:<16} {:>11}", "phase", "time")?;
         for timing in &self.phases {
             write!(
@@ -258,14 +269,15 @@ pub struct Progress {
 pub struct FlashConfig {
     /// The ECU to flash.
     pub ecu: Node,
-    /// The signed image file, downloaded as it is.
+    /// The signed image file: one image, downloaded as it is, or a release's images for
+    /// both slots one after the other, of which the one for the slot the ECU writes goes.
     pub image: Vec<u8>,
     /// The SecurityAccess secret shared with the ECUs.
     pub security_secret: Vec<u8>,
     /// P2, P2*, functional window, TesterPresent interval.
     pub tester: TesterConfig,
-    /// How long after ECUReset the ECU may take to answer again (the bootloader swaps the
-    /// image first), µs.
+    /// How long after ECUReset the ECU may take to answer again (the bootloader may
+    /// record a trial start or a revert first, the application then starts), µs.
     pub reset_timeout_us: u64,
     /// Time from the reset's response to the first TesterPresent probe, and between probes
     /// that got no answer, µs.
@@ -301,6 +313,7 @@ enum Step {
     Programming,
     Seed,
     Key,
+    ReadSlot,
     Erase,
     RequestDownload,
     TransferData,
@@ -321,7 +334,7 @@ impl Step {
                 Phase::SessionSetup
             }
             Step::Seed | Step::Key => Phase::Security,
-            Step::Erase => Phase::Erase,
+            Step::ReadSlot | Step::Erase => Phase::Erase,
             Step::RequestDownload | Step::TransferData | Step::TransferExit => Phase::Transfer,
             Step::Check => Phase::Check,
             Step::Reset | Step::AwaitReturn => Phase::ResetAndWait,
@@ -337,6 +350,7 @@ impl Step {
             Step::Programming => "0x10 02 (programming session)",
             Step::Seed => "0x27 01 (request seed)",
             Step::Key => "0x27 02 (send key)",
+            Step::ReadSlot => "0x22 F1A0 (the running image slot)",
             Step::Erase => "0x31 01 FF00 (erase memory)",
             Step::RequestDownload => "0x34 (request download)",
             Step::TransferData => "0x36 (transfer data)",
@@ -373,6 +387,11 @@ pub struct FlashJob {
     phases: Vec<PhaseTiming>,
     notes: Vec<String>,
     key: [u8; 16],
+    /// The image going to the ECU: until the ECU said which slot it runs, the first of the
+    /// file; then the one for the other slot.
+    image: Vec<u8>,
+    /// The slot it goes to, once known.
+    target: Option<ImageSlot>,
     block_len: usize,
     offset: usize,
     counter: u8,
@@ -390,12 +409,41 @@ pub struct FlashJob {
 /// addressAndLengthFormatIdentifier 0x44, the slot's address and the image's length: the
 /// record RequestDownload and the erase routine both carry. `None` for a length UDS cannot
 /// announce (0, or 4 GiB and more).
-fn slot_and_length(image_len: usize) -> Option<[u8; 9]> {
+fn slot_and_length(slot: ImageSlot, image_len: usize) -> Option<[u8; 9]> {
     let len = u32::try_from(image_len).ok().filter(|&len| len > 0)?;
     let mut record = [0x44; 9];
-    record[1..5].copy_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    record[1..5].copy_from_slice(&slot.region().start.to_be_bytes());
     record[5..].copy_from_slice(&len.to_be_bytes());
     Some(record)
+}
+
+/// The image of `file` for `target` while the ECU runs `running`, or why there is none. A
+/// file that is not a set of images goes as it is: the ECU says what is wrong with it.
+fn image_for(file: &[u8], running: ImageSlot, target: ImageSlot) -> Result<Vec<u8>, String> {
+    let Ok(set) = ImageSet::parse(file) else {
+        return Ok(file.to_vec());
+    };
+    if let Some((image, _)) = set.for_slot(target) {
+        return Ok(image.to_vec());
+    }
+    let linked: Vec<String> = set
+        .iter()
+        .map(|(_, header)| match header.slot() {
+            Some(slot) => format!("slot {}", slot.letter()),
+            None => format!("0x{:08X}", header.load_address),
+        })
+        .collect();
+    if set.iter().any(|(_, header)| header.slot() == Some(running)) {
+        return Err(format!(
+            "the ECU runs slot {} and writes the update to slot {}, but the file holds only an image linked for {}: flash a release with the slot-{} build (`autoplug image build` puts both in one file)",
+            running.letter(),
+            target.letter(),
+            linked.join(" and "),
+            target.letter()
+        ));
+    }
+    // Linked for neither slot: the ECU refuses it with the load address it expects.
+    Ok(set.first_image().to_vec())
 }
 
 impl FlashJob {
@@ -425,6 +473,9 @@ impl FlashJob {
             probe_at: None,
             return_deadline: None,
             reset_at: None,
+            image: ImageSet::parse(&config.image)
+                .map_or_else(|_| config.image.clone(), |set| set.first_image().to_vec()),
+            target: None,
             failure: None,
             result: None,
             observer: None,
@@ -449,7 +500,7 @@ impl FlashJob {
         Progress {
             phase: self.step.phase(),
             transferred: self.transferred() as u64,
-            total: self.config.image.len() as u64,
+            total: self.image.len() as u64,
         }
     }
 
@@ -461,7 +512,7 @@ impl FlashJob {
                 done += sent.saturating_sub(2).min(block);
             }
         }
-        done.min(self.config.image.len())
+        done.min(self.image.len())
     }
 
     fn report_progress(&mut self) {
@@ -495,7 +546,8 @@ impl FlashJob {
     fn report(&self, now: Instant) -> FlashReport {
         FlashReport {
             ecu: self.config.ecu,
-            image_len: self.config.image.len() as u64,
+            slot: self.target,
+            image_len: self.image.len() as u64,
             block_len: self.block_len,
             blocks: self.blocks,
             phases: self.phases.clone(),
@@ -520,20 +572,26 @@ impl FlashJob {
                 request.extend_from_slice(&self.key);
                 tester.request_echoing(now, ecu, &request, 1)
             }
+            Step::ReadSlot => {
+                let [high, low] = did::BOOT_SLOT.to_be_bytes();
+                tester.request(now, ecu, &[0x22, high, low])
+            }
             Step::Erase => {
                 // With the image's length (addressAndLengthFormatIdentifier 0x44): the ECU
                 // erases only the sectors the image needs.
                 let mut request = vec![0x31, 0x01, 0xFF, 0x00];
-                if let Some(record) = slot_and_length(self.config.image.len()) {
+                let slot = self.target.unwrap_or(ImageSlot::A);
+                if let Some(record) = slot_and_length(slot, self.image.len()) {
                     request.extend_from_slice(&record);
                 }
                 tester.request_echoing(now, ecu, &request, 3)
             }
             Step::RequestDownload => {
-                let record = slot_and_length(self.config.image.len()).ok_or_else(|| {
+                let slot = self.target.unwrap_or(ImageSlot::A);
+                let record = slot_and_length(slot, self.image.len()).ok_or_else(|| {
                     FlashFailure::Invalid(format!(
                         "an image of {} bytes cannot be downloaded (1 byte to 4 GiB)",
-                        self.config.image.len()
+                        self.image.len()
                     ))
                 })?;
                 let mut request = vec![0x34, 0x00];
@@ -541,10 +599,10 @@ impl FlashJob {
                 tester.request(now, ecu, &request)
             }
             Step::TransferData => {
-                let end = (self.offset + self.block_len).min(self.config.image.len());
+                let end = (self.offset + self.block_len).min(self.image.len());
                 let mut request = Vec::with_capacity(2 + end - self.offset);
                 request.extend_from_slice(&[0x36, self.counter]);
-                request.extend_from_slice(&self.config.image[self.offset..end]);
+                request.extend_from_slice(&self.image[self.offset..end]);
                 tester.request_echoing(now, ecu, &request, 1)
             }
             Step::TransferExit => tester.request(now, ecu, &[0x37]),
@@ -663,15 +721,35 @@ impl FlashJob {
                 };
                 if seed.iter().all(|&b| b == 0) {
                     // ISO 14229-1: an all-zero seed means "already unlocked".
-                    return Ok(Step::Erase);
+                    return Ok(Step::ReadSlot);
                 }
                 self.key = key_for(&self.config.security_secret, self.node_number, &seed);
                 Ok(Step::Key)
             }
             Step::Key => match response {
-                [0x67, 0x02, ..] => Ok(Step::Erase),
+                [0x67, 0x02, ..] => Ok(Step::ReadSlot),
                 _ => Err(unexpected(0x27, "67 02")),
             },
+            Step::ReadSlot => {
+                let [high, low] = did::BOOT_SLOT.to_be_bytes();
+                let Some((running, state)) = response
+                    .strip_prefix(&[0x62, high, low])
+                    .and_then(autoplug_uds::parse_boot_slot)
+                else {
+                    return Err(unexpected(0x22, "62 F1 A0, the slot and its state"));
+                };
+                if state == BootState::Trial {
+                    return Err(FlashFailure::Invalid(format!(
+                        "the ECU runs a new image in slot {} that has not confirmed itself yet (its self-test runs after a start): try again once it has",
+                        running.letter()
+                    )));
+                }
+                let target = running.other();
+                self.image = image_for(&self.config.image, running, target)
+                    .map_err(FlashFailure::Invalid)?;
+                self.target = Some(target);
+                Ok(Step::Erase)
+            }
             Step::Erase | Step::Check => {
                 let id: &[u8] = if step == Step::Erase {
                     &[0xFF, 0x00]
@@ -715,12 +793,12 @@ impl FlashJob {
             }
             Step::TransferData => match response {
                 [0x76, counter, ..] if *counter == self.counter => {
-                    self.offset = (self.offset + self.block_len).min(self.config.image.len());
+                    self.offset = (self.offset + self.block_len).min(self.image.len());
                     self.blocks += 1;
                     // The block sequence counter wraps 0xFF → 0x00 (ISO 14229-1 14.4).
                     self.counter = self.counter.wrapping_add(1);
                     self.retries_left = self.config.transfer_retries;
-                    Ok(if self.offset >= self.config.image.len() {
+                    Ok(if self.offset >= self.image.len() {
                         Step::TransferExit
                     } else {
                         Step::TransferData
@@ -881,7 +959,7 @@ impl fmt::Debug for FlashJob {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("FlashJob")
             .field("ecu", &self.config.ecu)
-            .field("image_len", &self.config.image.len())
+            .field("image_len", &self.image.len())
             .field("step", &self.step)
             .field("offset", &self.offset)
             .finish_non_exhaustive()
@@ -909,6 +987,7 @@ mod tests {
     fn a_report_shows_every_phase_and_the_throughput() {
         let report = FlashReport {
             ecu: Node::Cruise,
+            slot: Some(ImageSlot::B),
             image_len: 65_536,
             block_len: 4093,
             blocks: 17,
@@ -935,5 +1014,6 @@ mod tests {
         assert!(text.contains("32768 bytes/s (32.0 KiB/s)"), "{text}");
         assert!(text.contains("2 x response pending"), "{text}");
         assert!(text.contains("note: something"), "{text}");
+        assert!(text.contains("into slot B"), "{text}");
     }
 }

@@ -1,5 +1,6 @@
 //! A simulated AutoPlug bus for the tester's tests: the nine ECUs' diagnostic stacks
-//! (`autoplug_uds::DiagNode`) on backends with an in-memory DFU partition, one classic CAN
+//! (`autoplug_uds::DiagNode`) on backends with an in-memory DFU slot (each ECU runs slot A,
+//! so downloads go to slot B), one classic CAN
 //! bus with arbitration and frame times at 500 kbit/s, and simulated time. Deterministic:
 //! no clock, no threads, fixed seeds.
 //!
@@ -20,7 +21,8 @@ use std::time::{Duration, Instant as WallInstant};
 use autoplug_can::{Frame, Node, VehicleSpeedMsg};
 use autoplug_ecu::{Dtcs, Instant};
 use autoplug_image::{
-    Expectations, ImageBuilder, PartNumber, SigningKey, Version, F446RE_LOAD_ADDRESS, NUCLEO_F446RE,
+    BootState, Expectations, ImageBuilder, ImageSlot, PartNumber, SigningKey, Version,
+    NUCLEO_F446RE,
 };
 use autoplug_middleware::names::ECUS;
 use autoplug_middleware::tester::Job;
@@ -30,16 +32,19 @@ use autoplug_virtual_car::socketcand::SocketcandServer;
 
 /// The seed of the key every simulated ECU trusts.
 pub const SIGNING_SEED: [u8; 32] = [7; 32];
-/// The F446's DFU partition: two 128 KiB sectors.
-pub const DFU_LEN: usize = 256 * 1024;
+/// The F446's DFU slot (the image slot not running): one 128 KiB sector.
+pub const DFU_LEN: usize = 128 * 1024;
 const SECTOR_LEN: usize = 128 * 1024;
-/// The active slot, the largest image.
+/// An image slot, the largest image.
 pub const SLOT_LEN: u32 = 128 * 1024;
+/// The slot the simulated ECUs run; downloads go to the other.
+pub const RUNNING_SLOT: ImageSlot = ImageSlot::A;
 /// DS10693 typical times.
 const SECTOR_ERASE_US: u64 = 1_000_000;
 const WORD_PROGRAM_US: u64 = 16;
-/// How long an ECU takes from its reset to answering again (the bootloader's swap).
-pub const DEFAULT_BOOT_US: u64 = 3_000_000;
+/// How long an ECU takes from its reset to answering again (the bootloader's boot record
+/// and the application's start).
+pub const DEFAULT_BOOT_US: u64 = 20_000;
 
 /// An ECU's backend: identification, vehicle speed, DTCs, an in-memory DFU partition.
 pub struct MemEcu {
@@ -89,6 +94,7 @@ impl Backend for MemEcu {
             serial_number: &self.serial_number,
             hardware_version: b"NUCLEO-F446RE",
             vin: b"JA3AP47H0YF000042",
+            boot_slot: Some((RUNNING_SLOT, BootState::Confirmed)),
         }
     }
 
@@ -121,7 +127,7 @@ impl Backend for MemEcu {
             hardware_id: NUCLEO_F446RE,
             version_floor: Version::new(1, 0, 0),
             max_image_len: SLOT_LEN,
-            load_address: F446RE_LOAD_ADDRESS,
+            load_address: RUNNING_SLOT.other().vector_table(),
         }
     }
 
@@ -508,12 +514,18 @@ impl SimBus {
 /// A signed image of `payload_len` bytes for `node`, signed with the key the ECUs trust
 /// unless `seed` says otherwise.
 pub fn image_for(node: Node, payload_len: usize, seed: [u8; 32]) -> Vec<u8> {
+    image_for_slot(node, RUNNING_SLOT.other(), payload_len, seed)
+}
+
+/// A signed image for `node` linked for `slot`.
+pub fn image_for_slot(node: Node, slot: ImageSlot, payload_len: usize, seed: [u8; 32]) -> Vec<u8> {
     let payload: Vec<u8> = (0..payload_len).map(|i| (i * 7 + i / 251) as u8).collect();
     let mut builder = ImageBuilder::new(
         node.diag_node_number().expect("an ECU"),
         Version::new(1, 3, 0),
         payload,
     );
+    builder.load_address = slot.vector_table();
     builder.build_id = [0xB1; 16];
     builder.part_number = PartNumber::new("AP-TEST-0001").expect("a valid part number");
     builder

@@ -1,7 +1,8 @@
 //! The ECU side of firmware upgrades on the F446: the UDS server's [`Backend`] over the
-//! MCU's own flash (DFU slot, embassy-boot's state sector, the ECU data sector), the
-//! identification of the running image, the self-test that confirms a new image, and a
-//! watchdog that outlasts the long flash operations.
+//! MCU's own flash (the image slot not running, the two-copy persistent state with the boot
+//! record and the ECU data records), the identification of the running image, the
+//! self-test that confirms a new image, and a watchdog that outlasts the long flash
+//! operations.
 //!
 //! Erasing a 128 KiB sector stalls the core for about a second (the code runs from the
 //! flash being erased), far beyond the control loop's watchdog timeout: the watchdog is
@@ -11,14 +12,12 @@ use core::cell::RefCell;
 
 use autoplug_can::Node;
 use autoplug_ecu::Dtcs;
+use autoplug_flash::ab::{self, BootState, ImageSlot};
 use autoplug_flash::twin::Twin;
-use autoplug_flash::{ACTIVE, DFU, LARGE_SECTORS, SLOT_ERASE_SIZE, SMALL_SECTORS, STATE_COPIES};
-use autoplug_image::{
-    dev, floor, Expectations, ImageHeader, Version, F446RE_LOAD_ADDRESS, HEADER_LEN, NUCLEO_F446RE,
-};
+use autoplug_flash::{LARGE_SECTORS, SLOT_ERASE_SIZE, SMALL_SECTORS, STATE_COPIES};
+use autoplug_image::{dev, floor, Expectations, ImageHeader, Version, HEADER_LEN, NUCLEO_F446RE};
 use autoplug_uds::security::SeedSource;
 use autoplug_uds::{Backend, FlashError, Identification};
-use embassy_boot::{BlockingFirmwareState, State};
 use embassy_embedded_hal::flash::partition::BlockingPartition;
 use embassy_stm32::flash::{Bank1Region1, Bank1Region3, Blocking};
 use embassy_stm32::pac;
@@ -36,6 +35,10 @@ const UNSIGNED_VERSION: Version = Version::new(0, 0, 0);
 pub struct EcuFlash {
     small: Mutex<NoopRawMutex, RefCell<Bank1Region1<'static, Blocking>>>,
     large: Mutex<NoopRawMutex, RefCell<Bank1Region3<'static, Blocking>>>,
+    /// The slot this code runs from.
+    running: ImageSlot,
+    /// What the boot record says of it, read at start and after a confirmation.
+    boot_state: BootState,
     header: Option<ImageHeader>,
     version_text: [u8; 16],
     version_len: usize,
@@ -44,14 +47,17 @@ pub struct EcuFlash {
 }
 
 impl EcuFlash {
-    /// Reads what the active slot holds and the stored version floor.
+    /// Reads what the running slot holds, the boot record and the stored version floor.
     pub fn new(
         small: Bank1Region1<'static, Blocking>,
         large: Bank1Region3<'static, Blocking>,
     ) -> Self {
+        let running = running_slot();
         let mut flash = Self {
             small: Mutex::new(RefCell::new(small)),
             large: Mutex::new(RefCell::new(large)),
+            running,
+            boot_state: BootState::Confirmed,
             header: None,
             version_text: [0; 16],
             version_len: 0,
@@ -61,16 +67,21 @@ impl EcuFlash {
         let mut bytes = [0u8; HEADER_LEN];
         let read = flash.large.lock(|r| {
             r.borrow_mut()
-                .blocking_read(ACTIVE.start - LARGE_SECTORS.start, &mut bytes)
+                .blocking_read(running.region().start - LARGE_SECTORS.start, &mut bytes)
         });
         flash.header = read.ok().and_then(|()| ImageHeader::parse(&bytes).ok());
+        flash.boot_state = flash
+            .with_twin(|twin| ab::state(twin, running).ok())
+            .flatten()
+            .unwrap_or(BootState::Confirmed);
         let version = flash.header.map_or(UNSIGNED_VERSION, |h| h.version);
         flash.version_len = write_version(&mut flash.version_text, version);
         flash.floor = flash.read_floor().unwrap_or(UNSIGNED_VERSION);
         match &flash.header {
             Some(h) => defmt::info!(
-                "running image {=str} {=u8}.{=u8}.{=u16} (variant {=u8}), version floor {=u8}.{=u8}.{=u16}",
+                "running image {=str} from slot {=char} {=u8}.{=u8}.{=u16} (variant {=u8}), version floor {=u8}.{=u8}.{=u16}",
                 h.part_number.as_str(),
+                running.letter(),
                 h.version.major,
                 h.version.minor,
                 h.version.patch,
@@ -79,22 +90,18 @@ impl EcuFlash {
                 flash.floor.minor,
                 flash.floor.patch
             ),
-            None => defmt::warn!("no image header in the active slot: flashed by a probe?"),
+            None => defmt::warn!(
+                "no image header in slot {=char}: flashed by a probe?",
+                running.letter()
+            ),
         }
         flash
     }
 
-    /// The bootloader's state as the application sees it (Swap: this image was just
-    /// swapped in and has not confirmed itself yet).
-    pub fn boot_state(&self) -> State {
-        let mut aligned = [0u8; 4];
-        self.with_twin(|twin| {
-            BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
-                .get_state()
-                .ok()
-        })
-        .flatten()
-        .unwrap_or(State::Boot)
+    /// What the boot record says of the running image (Trial: started once after an
+    /// update and not confirmed yet; the next reset reverts it).
+    pub fn boot_state(&self) -> BootState {
+        self.boot_state
     }
 
     /// Raises the seed epoch kept in flash and returns the new one: every start draws its
@@ -114,14 +121,12 @@ impl EcuFlash {
 
     /// Confirms the running image after its self-test and raises the version floor to it.
     pub fn confirm(&mut self) -> bool {
-        let mut aligned = [0u8; 4];
-        let confirmed = stretched(|| {
-            self.with_twin(|twin| {
-                BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
-                    .mark_booted()
-                    .is_ok()
-            })
-        }) == Some(true);
+        let running = self.running;
+        let confirmed =
+            stretched(|| self.with_twin(|twin| ab::confirm(twin, running).is_ok())) == Some(true);
+        if confirmed {
+            self.boot_state = BootState::Confirmed;
+        }
         if let Some(version) = self.header.map(|h| h.version) {
             if confirmed && version > self.floor && stretched(|| self.write_floor(version)).is_ok()
             {
@@ -131,8 +136,8 @@ impl EcuFlash {
         confirmed
     }
 
-    /// Runs `op` on the two-copy persistent state (embassy-boot's state and the ECU
-    /// data records); `None` if the copies cannot be read.
+    /// Runs `op` on the two-copy persistent state (the boot record and the ECU data
+    /// records); `None` if the copies cannot be read.
     fn with_twin<T>(&self, op: impl FnOnce(&mut Twin<SmallRegion<'_>>) -> T) -> Option<T> {
         let copies = STATE_COPIES.map(|copy| {
             BlockingPartition::new(&self.small, copy.start - SMALL_SECTORS.start, copy.size)
@@ -153,6 +158,23 @@ impl EcuFlash {
         self.with_twin(|twin| twin.write_record(floor::KIND, floor::to_payload(version)))
             .and_then(Result::ok)
             .ok_or(FlashError)
+    }
+
+    /// The offset in the 128 KiB sectors (flash region 3) of `offset` in the slot a
+    /// download goes to: the one not running.
+    fn dfu_offset(&self, offset: u32) -> u32 {
+        self.running.other().region().start - LARGE_SECTORS.start + offset
+    }
+}
+
+/// The slot this code runs from: where its own functions lie (an image is linked for one
+/// slot and runs in place there).
+fn running_slot() -> ImageSlot {
+    let here = running_slot as fn() -> ImageSlot as usize as u32;
+    if ImageSlot::B.region().contains(here) {
+        ImageSlot::B
+    } else {
+        ImageSlot::A
     }
 }
 
@@ -263,6 +285,7 @@ impl Backend for FirmwareBackend<'_> {
             hardware_version: b"NUCLEO-F446RE",
             // Not yet written at the end of the line: F190 is not answered.
             vin: b"",
+            boot_slot: Some((self.flash.running, self.flash.boot_state)),
         }
     }
 
@@ -301,8 +324,8 @@ impl Backend for FirmwareBackend<'_> {
             node: self.node.diag_node_number().unwrap_or(0),
             hardware_id: NUCLEO_F446RE,
             version_floor: self.flash.floor,
-            max_image_len: ACTIVE.size,
-            load_address: F446RE_LOAD_ADDRESS,
+            max_image_len: self.flash.running.other().region().size,
+            load_address: self.flash.running.other().vector_table(),
         }
     }
 
@@ -311,19 +334,24 @@ impl Backend for FirmwareBackend<'_> {
     }
 
     fn dfu_erase_steps(&self, len: u32) -> u32 {
-        len.min(DFU.size).div_ceil(SLOT_ERASE_SIZE)
+        len.min(self.flash.running.other().region().size)
+            .div_ceil(SLOT_ERASE_SIZE)
     }
 
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError> {
-        // embassy-boot's rule (`verify_booted`): only a confirmed image may download the
-        // next one; Revert, after a rollback, counts as confirmed.
-        if self.flash.boot_state() == State::Swap {
-            return Err(FlashError);
-        }
-        let from = DFU.start - LARGE_SECTORS.start + step * SLOT_ERASE_SIZE;
-        let large = &self.flash.large;
+        let flash = &*self.flash;
+        let (running, target) = (flash.running, flash.running.other());
+        let from = flash.dfu_offset(step * SLOT_ERASE_SIZE);
         stretched(|| {
-            large.lock(|r| {
+            if step == 0 {
+                // Refused while the running image is on trial; withdraws an earlier
+                // download's trial mark of the slot before it is erased.
+                flash
+                    .with_twin(|twin| ab::prepare_download(twin, running, target).is_ok())
+                    .filter(|&prepared| prepared)
+                    .ok_or(FlashError)?;
+            }
+            flash.large.lock(|r| {
                 r.borrow_mut()
                     .blocking_erase(from, from + SLOT_ERASE_SIZE)
                     .map_err(|_| FlashError)
@@ -332,7 +360,7 @@ impl Backend for FirmwareBackend<'_> {
     }
 
     fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError> {
-        let at = DFU.start - LARGE_SECTORS.start + offset;
+        let at = self.flash.dfu_offset(offset);
         self.flash.large.lock(|r| {
             r.borrow_mut()
                 .blocking_write(at, data)
@@ -341,7 +369,7 @@ impl Backend for FirmwareBackend<'_> {
     }
 
     fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError> {
-        let at = DFU.start - LARGE_SECTORS.start + offset;
+        let at = self.flash.dfu_offset(offset);
         self.flash.large.lock(|r| {
             r.borrow_mut()
                 .blocking_read(at, out)
@@ -351,13 +379,9 @@ impl Backend for FirmwareBackend<'_> {
 
     fn mark_updated(&mut self) -> Result<(), FlashError> {
         let flash = &*self.flash;
-        let mut aligned = [0u8; 4];
+        let (running, target) = (flash.running, flash.running.other());
         stretched(|| {
-            flash.with_twin(|twin| {
-                BlockingFirmwareState::new(twin.boot_state(), &mut aligned)
-                    .mark_updated()
-                    .map_err(|_| FlashError)
-            })
+            flash.with_twin(|twin| ab::mark_trial(twin, running, target).map_err(|_| FlashError))
         })
         .unwrap_or(Err(FlashError))
     }

@@ -11,9 +11,9 @@
 
 use autoplug_can::Frame;
 use autoplug_ecu::{EcuLogic, Instant};
+use autoplug_flash::ab::BootState;
 use autoplug_uds::security::SeedSource;
 use autoplug_uds::{DiagNode, ResetKind, DEV_SECURITY_SECRET};
-use embassy_boot::State;
 use embassy_executor::Spawner;
 use embassy_futures::select::{select3, Either3};
 use embassy_stm32::can::{Can, CanRx, CanTx};
@@ -61,7 +61,7 @@ pub struct Platform {
 /// ISO-TP timing and the programming slices want about a millisecond.
 const DIAG_POLL_US: u64 = 1_000;
 
-/// Control steps (with frames sent) before a freshly swapped-in image confirms itself.
+/// Control steps (with frames sent) before a newly started image on trial confirms itself.
 const SELF_TEST_STEPS: u32 = 10;
 
 /// Time for the last response to leave before a reset the tester asked for.
@@ -144,7 +144,7 @@ struct LoopState<E, B> {
     ecu_flash: EcuFlash,
     seeds: SeedSource,
     watchdog: IndependentWatchdog<'static, IWDG>,
-    /// A freshly swapped-in image that has not passed its self-test yet.
+    /// A new image started on trial that has not passed its self-test yet.
     unconfirmed: bool,
     dtc_log_every_steps: u32,
     steps: u32,
@@ -187,7 +187,7 @@ where
     ) -> Self {
         let layout = Flash::new_blocking(flash).into_blocking_regions();
         let ecu_flash = EcuFlash::new(layout.bank1_region1, layout.bank1_region3);
-        let unconfirmed = ecu_flash.boot_state() == State::Swap;
+        let unconfirmed = ecu_flash.boot_state() == BootState::Trial;
         // defmt's unwrap, not `expect` (see above).
         let diag = defmt::unwrap!(DiagNode::new(E::NODE, DEV_SECURITY_SECRET, now()));
         let seeds = entropy::seed_source(ecu_flash.next_seed_epoch());

@@ -9,12 +9,13 @@
 //! | 2       | `0x0800_8000` | 16 KiB  | persistent state, copy A ([`STATE_COPY_A`])       |
 //! | 3       | `0x0800_C000` | 16 KiB  | persistent state, copy B ([`STATE_COPY_B`])       |
 //! | 4       | `0x0801_0000` | 64 KiB  | spare ([`SPARE`])                                 |
-//! | 5       | `0x0802_0000` | 128 KiB | active slot ([`ACTIVE`])                          |
-//! | 6–7     | `0x0804_0000` | 256 KiB | DFU slot ([`DFU`])                                |
+//! | 5       | `0x0802_0000` | 128 KiB | image slot A ([`SLOT_A`])                         |
+//! | 6       | `0x0804_0000` | 128 KiB | image slot B ([`SLOT_B`])                         |
+//! | 7       | `0x0806_0000` | 128 KiB | spare ([`SPARE_HIGH`])                            |
 //!
-//! The invariants embassy-boot 0.7 checks at run time (`assert_partitions` and the asserts of
-//! `BootLoader::prepare_boot`) are checked here at compile time, so a map that would make the
-//! bootloader panic at the first reset does not build.
+//! Images run in place from either slot ([`crate::ab`]): an image is linked for one slot, and
+//! an update writes the slot that is not running. One slot per 128 KiB sector keeps an update
+//! to one sector erase.
 
 /// First address of the main flash memory (RM0390, "Embedded flash memory").
 pub const FLASH_BASE: u32 = 0x0800_0000;
@@ -36,8 +37,7 @@ pub const LARGE_SECTOR_SIZE: u32 = 128 * 1024;
 pub const WRITE_SIZE: usize = 4;
 
 /// Value of an erased byte (stm32-metapac: `erase_value: 255` for the F446; the NOR cells
-/// erase to all ones). embassy-boot's `STATE_ERASE_VALUE` is 0xFF unless its
-/// `flash-erase-zero` feature is on, which this part must not enable.
+/// erase to all ones): what an erased slot, record or header reads as.
 pub const ERASE_VALUE: u8 = 0xFF;
 
 /// One erase sector of the flash.
@@ -231,9 +231,9 @@ pub const BOOTLOADER: Region = Region {
     size: 2 * SMALL_SECTOR_SIZE,
 };
 
-/// The ECU's persistent state, copy A: sector 2. embassy-boot's state (swap magic and copy
-/// progress) and the ECU data records (version floor, failed SecurityAccess attempts, seed
-/// epoch) live in one of the two copies, written alternately ([`crate::twin`]).
+/// The ECU's persistent state, copy A: sector 2. Its records (the boot record of
+/// [`crate::ab`], the version floor, failed SecurityAccess attempts, the seed epoch) live
+/// in one of the two copies, written alternately ([`crate::twin`]).
 pub const STATE_COPY_A: Region = Region {
     start: 0x0800_8000,
     size: SMALL_SECTOR_SIZE,
@@ -254,17 +254,23 @@ pub const SPARE: Region = Region {
     size: MEDIUM_SECTOR_SIZE,
 };
 
-/// The active slot: sector 5. A signed image starts here with its header.
-pub const ACTIVE: Region = Region {
+/// Image slot A: sector 5. A signed image starts here with its header; a new board runs
+/// it.
+pub const SLOT_A: Region = Region {
     start: 0x0802_0000,
     size: LARGE_SECTOR_SIZE,
 };
 
-/// The DFU slot: sectors 6–7. The updater writes the new image here; embassy-boot's swap
-/// needs one page more than the active slot.
-pub const DFU: Region = Region {
+/// Image slot B: sector 6, the same size as [`SLOT_A`].
+pub const SLOT_B: Region = Region {
     start: 0x0804_0000,
-    size: 2 * LARGE_SECTOR_SIZE,
+    size: LARGE_SECTOR_SIZE,
+};
+
+/// Sector 7, unused: room for a third slot or a larger image layout.
+pub const SPARE_HIGH: Region = Region {
+    start: 0x0806_0000,
+    size: LARGE_SECTOR_SIZE,
 };
 
 /// The 16 KiB sectors 0–3: embassy-stm32's flash region 1 of the F446 (`bank1_region1`),
@@ -275,20 +281,21 @@ pub const SMALL_SECTORS: Region = Region {
 };
 
 /// The 128 KiB sectors 5–7: embassy-stm32's flash region 3 of the F446 (`bank1_region3`),
-/// whose offsets count from its start. The active and DFU slots are in it.
+/// whose offsets count from its start. Both image slots are in it.
 pub const LARGE_SECTORS: Region = Region {
     start: FLASH_BASE + 4 * SMALL_SECTOR_SIZE + MEDIUM_SECTOR_SIZE,
     size: 3 * LARGE_SECTOR_SIZE,
 };
 
 /// Every partition of the map with a name for messages, in address order.
-pub const PARTITIONS: [(&str, Region); 6] = [
+pub const PARTITIONS: [(&str, Region); 7] = [
     ("bootloader", BOOTLOADER),
     ("state copy A", STATE_COPY_A),
     ("state copy B", STATE_COPY_B),
     ("spare", SPARE),
-    ("active slot", ACTIVE),
-    ("DFU slot", DFU),
+    ("slot A", SLOT_A),
+    ("slot B", SLOT_B),
+    ("spare (sector 7)", SPARE_HIGH),
 ];
 
 /// The named partition holding `address`, if any.
@@ -306,52 +313,11 @@ pub const fn partition_of(address: u32) -> Option<(&'static str, Region)> {
 /// Size of the signed image's header at the start of a slot.
 pub const IMAGE_HEADER_SIZE: u32 = 512;
 
-/// The application's vector table: right after the image header in the active slot. The
-/// application's linker script puts its FLASH origin here and the bootloader jumps here.
-pub const APP_VECTOR_TABLE: u32 = ACTIVE.start + IMAGE_HEADER_SIZE;
-
-/// Erase size of the slot partitions ([`ACTIVE`], [`DFU`]): the 128 KiB sectors.
+/// Erase size of the image slots ([`SLOT_A`], [`SLOT_B`]): the 128 KiB sectors.
 pub const SLOT_ERASE_SIZE: u32 = LARGE_SECTOR_SIZE;
 
 /// Erase size of the state copies ([`STATE_COPIES`]): the 16 KiB sectors.
 pub const SMALL_ERASE_SIZE: u32 = SMALL_SECTOR_SIZE;
-
-/// embassy-boot's page, its unit of swapping: the larger of the active and DFU partitions'
-/// erase sizes (`BootLoader::PAGE_SIZE`).
-pub const BOOT_PAGE_SIZE: u32 = if ACTIVE_ERASE > DFU_ERASE {
-    ACTIVE_ERASE
-} else {
-    DFU_ERASE
-};
-
-/// Write size of the state partition (embassy-boot's `STATE::WRITE_SIZE`): one magic or
-/// progress word.
-pub const STATE_WRITE_SIZE: u32 = WRITE_SIZE as u32;
-
-/// Size of the RAM buffer the bootloader hands to `BootLoader::prepare_boot` (the
-/// `BUFFER_SIZE` of `embassy_boot_stm32::BootLoader::prepare`). Every copy during a swap goes
-/// through it, one write per buffer, so it sets how many flash writes a 128 KiB page copy
-/// takes (32). embassy-boot asserts that it divides the page, is a multiple of the write sizes
-/// and holds a state word; 4 KiB of the F446's 128 KiB SRAM is cheap for a bootloader.
-pub const BOOT_SWAP_BUFFER_SIZE: usize = 4096;
-
-/// How many state words embassy-boot 0.7 needs for an active slot of `active_size` bytes
-/// with pages of `page_size` bytes: magic, progress validity, and a swap and a revert
-/// progress word for each of the two copies per page (`assert_partitions`).
-pub const fn state_words_needed(active_size: u32, page_size: u32) -> u32 {
-    2 + 4 * (active_size / page_size)
-}
-
-// The erase sizes of the slots, for the page computation (None is a build error below).
-const ACTIVE_ERASE: u32 = unwrap_size(ACTIVE.uniform_erase_size());
-const DFU_ERASE: u32 = unwrap_size(DFU.uniform_erase_size());
-
-const fn unwrap_size(size: Option<u32>) -> u32 {
-    match size {
-        Some(size) => size,
-        None => panic!("a slot must be made of sectors of one size"),
-    }
-}
 
 // The sector table tiles the flash exactly, in order.
 // embassy-stm32's regions are where the sectors say, and hold the partitions the
@@ -362,7 +328,7 @@ const _: () = {
     assert!(
         SMALL_SECTORS.contains_region(STATE_COPY_A) && SMALL_SECTORS.contains_region(STATE_COPY_B)
     );
-    assert!(LARGE_SECTORS.contains_region(ACTIVE) && LARGE_SECTORS.contains_region(DFU));
+    assert!(LARGE_SECTORS.contains_region(SLOT_A) && LARGE_SECTORS.contains_region(SLOT_B));
 };
 
 const _: () = {
@@ -406,38 +372,23 @@ const _: () = {
     assert!(BOOTLOADER.start == FLASH_BASE);
 };
 
-// What embassy-boot 0.7 asserts at run time, at compile time.
+// The slots: one sector each, the same size, so any image fits either; the state copies:
+// one erase unit each (what `Twin::open` checks).
 const _: () = {
-    // Each partition has one erase size (its `NorFlash::ERASE_SIZE`).
-    assert!(ACTIVE_ERASE == SLOT_ERASE_SIZE && DFU_ERASE == SLOT_ERASE_SIZE);
-    // Each state copy is one erase unit, the same size (what `Twin::open` checks).
+    assert!(matches!(SLOT_A.uniform_erase_size(), Some(SLOT_ERASE_SIZE)));
+    assert!(SLOT_A.size == SLOT_ERASE_SIZE && SLOT_B.size == SLOT_ERASE_SIZE);
     assert!(matches!(
         STATE_COPY_A.uniform_erase_size(),
         Some(SMALL_ERASE_SIZE)
     ));
     assert!(STATE_COPY_A.size == SMALL_ERASE_SIZE && STATE_COPY_B.size == SMALL_ERASE_SIZE);
-    // Page size is a multiple of the slots' write and erase sizes.
-    assert!(BOOT_PAGE_SIZE % WRITE_SIZE as u32 == 0);
-    assert!(BOOT_PAGE_SIZE % SLOT_ERASE_SIZE == 0);
-    // Slots are whole pages, and the DFU slot is at least one page bigger than the active.
-    assert!(ACTIVE.size % BOOT_PAGE_SIZE == 0 && DFU.size % BOOT_PAGE_SIZE == 0);
-    assert!(DFU.size >= ACTIVE.size + BOOT_PAGE_SIZE);
-    // The state partition holds the magic, the validity word and all progress words.
-    assert!(
-        state_words_needed(ACTIVE.size, BOOT_PAGE_SIZE)
-            <= crate::twin::BOOT_STATE_LEN / STATE_WRITE_SIZE
-    );
-    // The swap buffer divides the page, holds a state word, and is whole write units.
-    assert!(BOOT_PAGE_SIZE % BOOT_SWAP_BUFFER_SIZE as u32 == 0);
-    assert!(BOOT_SWAP_BUFFER_SIZE >= STATE_WRITE_SIZE as usize);
-    assert!(BOOT_SWAP_BUFFER_SIZE % WRITE_SIZE == 0);
 };
 
 // The image layout: the vector table follows the header, and is aligned as VTOR needs. The
 // F446 has 16 system + 97 interrupt vectors (452 bytes), so VTOR wants 512-byte alignment.
 const _: () = {
-    assert!(APP_VECTOR_TABLE == ACTIVE.start + IMAGE_HEADER_SIZE);
-    assert!(APP_VECTOR_TABLE % 512 == 0);
+    assert!((SLOT_A.start + IMAGE_HEADER_SIZE) % 512 == 0);
+    assert!((SLOT_B.start + IMAGE_HEADER_SIZE) % 512 == 0);
     assert!(IMAGE_HEADER_SIZE % WRITE_SIZE as u32 == 0);
 };
 
@@ -484,10 +435,9 @@ mod tests {
         assert_eq!(indices(STATE_COPY_A), [2]);
         assert_eq!(indices(STATE_COPY_B), [3]);
         assert_eq!(indices(SPARE), [4]);
-        assert_eq!(indices(ACTIVE), [5]);
-        assert_eq!(indices(DFU), [6, 7]);
-        assert_eq!(APP_VECTOR_TABLE, 0x0802_0200);
-        assert_eq!(BOOT_PAGE_SIZE, 128 * 1024);
+        assert_eq!(indices(SLOT_A), [5]);
+        assert_eq!(indices(SLOT_B), [6]);
+        assert_eq!(indices(SPARE_HIGH), [7]);
     }
 
     #[test]
@@ -508,14 +458,14 @@ mod tests {
 
     #[test]
     fn region_helpers() {
-        assert_eq!(ACTIVE.offset_of(APP_VECTOR_TABLE), Some(IMAGE_HEADER_SIZE));
-        assert_eq!(ACTIVE.offset_of(DFU.start), None);
-        assert!(DFU.overlaps(&Region {
+        assert_eq!(SLOT_A.offset_of(0x0802_0200), Some(IMAGE_HEADER_SIZE));
+        assert_eq!(SLOT_A.offset_of(SLOT_B.start), None);
+        assert!(SLOT_B.overlaps(&Region {
             start: 0x0805_0000,
             size: 4
         }));
-        assert!(!DFU.overlaps(&ACTIVE));
-        // Sectors 3 and 4 differ in size: no single erase size, as embassy-boot would need.
+        assert!(!SLOT_B.overlaps(&SLOT_A));
+        // Sectors 3 and 4 differ in size: no single erase size, as a partition needs.
         let mixed = Region {
             start: 0x0800_C000,
             size: SMALL_SECTOR_SIZE + MEDIUM_SECTOR_SIZE,
@@ -528,13 +478,6 @@ mod tests {
         };
         assert!(!unaligned.is_sector_aligned());
         assert!(unaligned.sectors().is_empty());
-        assert_eq!(DFU.uniform_erase_size(), Some(SLOT_ERASE_SIZE));
-    }
-
-    #[test]
-    fn state_partition_has_room_to_spare() {
-        // Magic, validity, 2 swap + 2 revert progress words for the one-page active slot.
-        assert_eq!(state_words_needed(ACTIVE.size, BOOT_PAGE_SIZE), 6);
-        assert_eq!(crate::twin::BOOT_STATE_LEN / STATE_WRITE_SIZE, 256);
+        assert_eq!(SLOT_B.uniform_erase_size(), Some(SLOT_ERASE_SIZE));
     }
 }

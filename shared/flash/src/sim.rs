@@ -59,8 +59,8 @@ use embedded_storage::nor_flash::{
 };
 
 use crate::map::{
-    partition_of, Region, Sector, ACTIVE, DFU, ERASE_VALUE, FLASH, FLASH_BASE, SECTORS,
-    SLOT_ERASE_SIZE, SMALL_ERASE_SIZE, STATE_COPIES, WRITE_SIZE,
+    partition_of, Region, Sector, ERASE_VALUE, FLASH, FLASH_BASE, SECTORS, SLOT_ERASE_SIZE,
+    SMALL_ERASE_SIZE, STATE_COPIES, WRITE_SIZE,
 };
 use crate::timing::{sector_erase_time, WORD_PROGRAM_TIME};
 use crate::twin::{Twin, TwinError};
@@ -454,7 +454,7 @@ impl SimFlash {
         self.trace.as_deref().unwrap_or(&[])
     }
 
-    /// The last error an erase or program returned (embassy-boot keeps only its kind).
+    /// The last error an erase or program returned (a `NorFlash` user sees only its kind).
     pub fn last_error(&self) -> Option<&FlashError> {
         self.last_error.as_ref()
     }
@@ -628,7 +628,7 @@ impl SimFlash {
 
 /// A partition of a shared [`SimFlash`] with the erase size `ERASE_SIZE` of its sectors,
 /// implementing embedded-storage's NOR flash traits with offsets relative to the partition
-/// (as embassy-boot's partitions expect).
+/// (as embedded-storage's partitions have them).
 ///
 /// Several handles share one flash through a `RefCell`; each access borrows it only for the
 /// call, so the bootloader's three partitions and the updater's two can coexist.
@@ -638,7 +638,7 @@ pub struct SimPartition<'a, const ERASE_SIZE: u32> {
     region: Region,
 }
 
-/// A partition of 128 KiB sectors: the active and DFU slots.
+/// A partition of 128 KiB sectors: an image slot.
 pub type SlotPartition<'a> = SimPartition<'a, SLOT_ERASE_SIZE>;
 
 /// A partition of 16 KiB sectors: the boot state and the ECU data.
@@ -684,17 +684,12 @@ impl<'a, const ERASE_SIZE: u32> SimPartition<'a, ERASE_SIZE> {
 
 // The map's compile-time checks make these regions match their partition types.
 impl<'a> SlotPartition<'a> {
-    /// The active slot ([`ACTIVE`]).
-    pub fn active(flash: &'a RefCell<SimFlash>) -> Self {
+    /// Image slot `slot` ([`crate::SLOT_A`], [`crate::SLOT_B`]).
+    pub fn slot(flash: &'a RefCell<SimFlash>, slot: crate::ab::ImageSlot) -> Self {
         SimPartition {
             flash,
-            region: ACTIVE,
+            region: slot.region(),
         }
-    }
-
-    /// The DFU slot ([`DFU`]).
-    pub fn dfu(flash: &'a RefCell<SimFlash>) -> Self {
-        SimPartition { flash, region: DFU }
     }
 }
 
@@ -769,7 +764,16 @@ const _: () = {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::map::{BOOTLOADER, LARGE_SECTOR_SIZE, MEDIUM_SECTOR_SIZE, SMALL_SECTOR_SIZE, SPARE};
+    use crate::ab::ImageSlot;
+    use crate::map::{
+        BOOTLOADER, LARGE_SECTOR_SIZE, MEDIUM_SECTOR_SIZE, SLOT_A, SLOT_B, SMALL_SECTOR_SIZE, SPARE,
+    };
+
+    /// Sectors 6–7: a two-sector partition of the large sectors.
+    const UPPER: Region = Region {
+        start: SLOT_B.start,
+        size: 2 * LARGE_SECTOR_SIZE,
+    };
     use crate::timing::{
         LARGE_SECTOR_ERASE_TIME, MEDIUM_SECTOR_ERASE_TIME, SMALL_SECTOR_ERASE_TIME,
     };
@@ -919,16 +923,16 @@ mod tests {
         );
         // Empty ranges and zero-length writes do nothing.
         flash
-            .erase(ACTIVE.start, ACTIVE.start)
+            .erase(SLOT_A.start, SLOT_A.start)
             .expect("empty erase");
-        flash.program(ACTIVE.start, &[]).expect("empty program");
+        flash.program(SLOT_A.start, &[]).expect("empty program");
         assert_eq!(flash.operations(), 0);
     }
 
     #[test]
     fn busy_time_follows_the_datasheet() {
         let mut flash = SimFlash::new(1);
-        flash.program(ACTIVE.start, &[0; 4096]).expect("program");
+        flash.program(SLOT_A.start, &[0; 4096]).expect("program");
         assert_eq!(flash.last_busy(), Duration::from_micros(16 * 1024));
         flash
             .erase(BOOTLOADER.start, BOOTLOADER.end())
@@ -958,11 +962,11 @@ mod tests {
         let old: Vec<u8> = (0..LARGE_SECTOR_SIZE)
             .map(|i| (i % 251) as u8 & 0x7F)
             .collect();
-        flash.program(ACTIVE.start, &old).expect("program");
+        flash.program(SLOT_A.start, &old).expect("program");
         flash.cut_power_at(0);
         assert_eq!(flash.pending_cut(), Some(0));
         assert_eq!(
-            flash.erase(ACTIVE.start, ACTIVE.end()),
+            flash.erase(SLOT_A.start, SLOT_A.end()),
             Err(FlashError::PowerLost)
         );
         assert!(!flash.is_powered());
@@ -982,11 +986,11 @@ mod tests {
         // Unpowered: erases and programs fail and change nothing; reads work.
         assert_eq!(flash.erase_sector(5), Err(FlashError::PowerLost));
         assert_eq!(
-            flash.program(DFU.start, &[0; 4]),
+            flash.program(UPPER.start, &[0; 4]),
             Err(FlashError::PowerLost)
         );
         assert_eq!(sector_contents(&flash, 5), left);
-        assert_eq!(word(&flash, DFU.start), 0xFFFF_FFFF);
+        assert_eq!(word(&flash, UPPER.start), 0xFFFF_FFFF);
         assert_eq!(flash.stats().interrupted, 1);
         assert_eq!(flash.operations(), 2, "refused operations are not counted");
 
@@ -1003,10 +1007,13 @@ mod tests {
                 .flat_map(|i| (i.wrapping_mul(0x0101_0101) & 0x7F7F_7F7F).to_le_bytes())
                 .collect();
             flash.cut_power_at(0);
-            assert_eq!(flash.program(DFU.start, &data), Err(FlashError::PowerLost));
+            assert_eq!(
+                flash.program(UPPER.start, &data),
+                Err(FlashError::PowerLost)
+            );
             let left = flash
                 .contents(Region {
-                    start: DFU.start,
+                    start: UPPER.start,
                     size: 4096,
                 })
                 .expect("range")
@@ -1047,15 +1054,15 @@ mod tests {
     #[test]
     fn the_cut_is_counted_from_when_it_is_armed() {
         let mut flash = SimFlash::new(3);
-        flash.program(ACTIVE.start, &[0; 4]).expect("op 0");
+        flash.program(SLOT_A.start, &[0; 4]).expect("op 0");
         flash.cut_power_at(2);
         flash
-            .program(ACTIVE.start + 4, &[0; 4])
+            .program(SLOT_A.start + 4, &[0; 4])
             .expect("first after arming");
         assert_eq!(flash.pending_cut(), Some(1));
         // An erase over two sectors is two operations: the cut hits the second sector.
         assert_eq!(
-            flash.erase(DFU.start, DFU.end()),
+            flash.erase(UPPER.start, UPPER.end()),
             Err(FlashError::PowerLost)
         );
         assert!(
@@ -1075,12 +1082,12 @@ mod tests {
     fn runs_are_reproducible_from_the_seed() {
         let run = |seed| {
             let mut flash = SimFlash::new(seed);
-            flash.program(ACTIVE.start, &[0x55; 8192]).expect("program");
+            flash.program(SLOT_A.start, &[0x55; 8192]).expect("program");
             flash.cut_power_at(0);
             let _ = flash.erase_sector(5);
             flash.restore_power();
             flash.cut_power_at(0);
-            let _ = flash.program(DFU.start, &[0; 4096]);
+            let _ = flash.program(UPPER.start, &[0; 4096]);
             flash.contents(FLASH).expect("whole flash").to_vec()
         };
         assert_eq!(run(11), run(11));
@@ -1091,7 +1098,7 @@ mod tests {
     fn the_trace_names_each_operation() {
         let mut flash = SimFlash::new(1);
         flash.record_trace(true);
-        flash.erase(DFU.start, DFU.end()).expect("erase");
+        flash.erase(UPPER.start, UPPER.end()).expect("erase");
         flash
             .program(STATE_COPIES[0].start + 4, &[0; 4])
             .expect("program");
@@ -1099,8 +1106,8 @@ mod tests {
         assert_eq!(
             trace,
             [
-                "erase of sector 6 (DFU slot, 128 KiB at 0x0804_0000)",
-                "erase of sector 7 (DFU slot, 128 KiB at 0x0806_0000)",
+                "erase of sector 6 (slot B, 128 KiB at 0x0804_0000)",
+                "erase of sector 7 (spare (sector 7), 128 KiB at 0x0806_0000)",
                 "program of 4 bytes at 0x0800_8004 (state copy A + 0x4)",
             ]
         );
@@ -1115,7 +1122,7 @@ mod tests {
         assert_eq!(<SmallPartition as NorFlash>::ERASE_SIZE, 16 * 1024);
         assert_eq!(<SlotPartition as NorFlash>::WRITE_SIZE, 4);
 
-        let mut dfu = SlotPartition::dfu(&flash);
+        let mut dfu = SlotPartition::new(&flash, UPPER).expect("sectors 6-7");
         assert_eq!(dfu.capacity(), 256 * 1024);
         dfu.write(0x2_0000, &[0xA5; 8])
             .expect("write in the second sector");
@@ -1131,13 +1138,13 @@ mod tests {
         assert_eq!(
             out,
             FlashError::OutOfBounds {
-                region: DFU,
+                region: UPPER,
                 offset: 0x3_FFFC,
                 len: 8
             }
         );
         assert_eq!(out.kind(), NorFlashErrorKind::OutOfBounds);
-        assert!(out.to_string().contains("DFU slot"), "{out}");
+        assert!(out.to_string().contains("slot B"), "{out}");
         assert_eq!(
             dfu.read(0x4_0000, &mut buf).map_err(|e| e.kind()),
             Err(NorFlashErrorKind::OutOfBounds)
@@ -1158,13 +1165,14 @@ mod tests {
         let [mut a, b] = SmallPartition::state_copies(&flash);
         a.erase(0, 0x4000).expect("one 16 KiB sector");
         assert_eq!([a.region(), b.region()], STATE_COPIES);
-        assert_eq!(SlotPartition::active(&flash).region(), ACTIVE);
+        assert_eq!(SlotPartition::slot(&flash, ImageSlot::A).region(), SLOT_A);
+        assert_eq!(SlotPartition::slot(&flash, ImageSlot::B).region(), SLOT_B);
     }
 
     #[test]
     fn a_partition_must_match_its_sectors() {
         let flash = RefCell::new(SimFlash::new(1));
-        assert!(SlotPartition::new(&flash, ACTIVE).is_ok());
+        assert!(SlotPartition::new(&flash, SLOT_A).is_ok());
         assert!(SmallPartition::new(&flash, STATE_COPIES[0]).is_ok());
         let error = SlotPartition::new(&flash, SPARE).expect_err("64 KiB sector");
         assert_eq!(

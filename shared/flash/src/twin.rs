@@ -1,51 +1,40 @@
 //! The ECU's persistent state in two sectors, so that no power cut can lose it.
 //!
-//! What an ECU keeps across resets — embassy-boot's state (swap magic and copy progress)
-//! and the ECU data records (anti-rollback floor, failed SecurityAccess attempts, the seed
-//! epoch) — lives in one of two copies, each a whole erase sector ([`crate::STATE_COPIES`]).
+//! What an ECU keeps across resets — the boot record ([`crate::ab`]: which image slot is
+//! confirmed, which on trial), the anti-rollback floor, failed SecurityAccess attempts, the
+//! seed epoch — lives as records in one of two copies, each a whole erase sector ([`crate::STATE_COPIES`]).
 //! A copy is valid once its header is programmed; of two valid copies the one with the
 //! higher sequence number is current.
 //!
 //! | offset | bytes | what |
 //! |---|---|---|
 //! | 0 | 12 | header: magic, sequence number, check word (written last) |
-//! | 16 | [`BOOT_STATE_LEN`] | embassy-boot's state partition ([`BootState`]) |
 //! | [`RECORDS_START`] | the rest | records of [`RECORD_LEN`] bytes, appended |
 //!
-//! Whatever would erase the state — embassy-boot erasing its partition, or the record area
-//! running full — instead prepares the *other* copy: erase it, program the latest record of
-//! each kind (and, when records overflowed, the state words as they are), and only then its
+//! When the record area runs full, the store prepares the *other* copy instead of erasing
+//! the current one: erase it, program the latest record of each kind, and only then its
 //! header with the next sequence number. A cut anywhere before the header's last word
 //! leaves the current copy untouched and current; once the header is complete, the new copy
-//! is. embassy-boot 0.7 erases its one state sector in place, and a cut in that erase can
-//! leave words that make the next reset swap again and lose the rollback of an unconfirmed
-//! image (the power-cut sweep of `tests/power_cut.rs` found it); over a [`BootState`] that
-//! erase can no longer be torn. This is ST's two-page EEPROM emulation (AN3969) applied to
-//! the boot state as well; no crate offers it over embedded-storage for embassy-boot, so it
-//! is written here.
+//! is. This is ST's two-page EEPROM emulation (AN3969); no crate offers it over
+//! embedded-storage with the power-cut behaviour tested here, so it is written here.
 //!
 //! Record writes are single programs into erased words: a cut leaves a record that fails
 //! its check and is skipped, and the previous record of its kind stands.
 
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
 
 /// Bytes of a copy's header (three words written, one spare).
 pub const HEADER_LEN: u32 = 16;
-/// Bytes of embassy-boot's state partition inside a copy: room for 254 progress words,
-/// 4 pages of copy progress per word, far more than the one-page slots need
-/// (`crate::state_words_needed`).
-pub const BOOT_STATE_LEN: u32 = 1024;
 /// Offset of the first record in a copy.
-pub const RECORDS_START: u32 = HEADER_LEN + BOOT_STATE_LEN;
+pub const RECORDS_START: u32 = HEADER_LEN;
 /// Bytes of one record: kind (2), payload (4), check, a zero byte.
 pub const RECORD_LEN: u32 = 8;
 /// Record kinds a switch carries over at most.
 pub const MAX_KINDS: usize = 8;
 
-/// "APst": a copy of AutoPlug state, format 1.
-const MAGIC: u32 = u32::from_le_bytes(*b"APst");
+/// "APs2": a copy of AutoPlug state, format 2 (format 1 had embassy-boot's state partition
+/// between header and records; its copies do not read as format 2).
+const MAGIC: u32 = u32::from_le_bytes(*b"APs2");
 /// Mixed into the check word, so that neither an erased nor a zeroed header passes.
 const CHECK_KEY: u32 = 0x5AC3_A53C;
 /// The value of an erased byte (the F446's NOR cells erase to ones).
@@ -118,7 +107,7 @@ pub enum TwinError<E> {
     /// The copies do not fit the layout: different sizes, too small, not one erase unit
     /// each, or a write unit larger than a word.
     Geometry,
-    /// An access outside the boot state partition, or not on its write unit.
+    /// A record kind of 0xFFFF, which reads as erased.
     OutOfBounds,
     /// More record kinds than a switch carries ([`MAX_KINDS`]).
     TooManyKinds,
@@ -139,7 +128,7 @@ impl<E: core::fmt::Debug> core::fmt::Display for TwinError<E> {
         match self {
             Self::Flash(e) => write!(f, "flash error {e:?}"),
             Self::Geometry => f.write_str("the state copies do not fit the layout"),
-            Self::OutOfBounds => f.write_str("access outside the boot state partition"),
+            Self::OutOfBounds => f.write_str("a record kind that reads as erased"),
             Self::TooManyKinds => f.write_str("more record kinds than a copy carries"),
         }
     }
@@ -205,11 +194,6 @@ impl<F: NorFlash> Twin<F> {
     /// The copies, back.
     pub fn into_copies(self) -> [F; 2] {
         self.copies
-    }
-
-    /// embassy-boot's state partition, for its bootloader and firmware updater.
-    pub fn boot_state(&mut self) -> BootState<'_, F> {
-        BootState { twin: self }
     }
 
     fn slots(&self) -> u32 {
@@ -286,7 +270,7 @@ impl<F: NorFlash> Twin<F> {
                     .write(RECORDS_START + free * RECORD_LEN, &record)
                     .map_err(TwinError::Flash)
             }
-            _ => self.switch(true, Some(record)),
+            _ => self.switch(Some(record)),
         }
     }
 
@@ -315,11 +299,9 @@ impl<F: NorFlash> Twin<F> {
         )
     }
 
-    /// Makes the other copy current: erased boot state (or the current one's words when
-    /// `keep_boot_state`), the latest record of each kind, `extra` last.
+    /// Makes the other copy current: the latest record of each kind, `extra` last.
     fn switch(
         &mut self,
-        keep_boot_state: bool,
         extra: Option<[u8; RECORD_LEN as usize]>,
     ) -> Result<(), TwinError<F::Error>> {
         let mut records = [[ERASED; RECORD_LEN as usize]; MAX_KINDS];
@@ -344,21 +326,6 @@ impl<F: NorFlash> Twin<F> {
             self.copies[target]
                 .write(RECORDS_START + slot as u32 * RECORD_LEN, record)
                 .map_err(TwinError::Flash)?;
-        }
-        if let (true, Some(current)) = (keep_boot_state, self.current) {
-            // The words embassy-boot wrote, as they read (a torn progress word stays torn:
-            // embassy-boot reads it the same way in either copy).
-            let mut word = [0u8; 4];
-            for at in (0..BOOT_STATE_LEN).step_by(4) {
-                self.copies[current.index]
-                    .read(HEADER_LEN + at, &mut word)
-                    .map_err(TwinError::Flash)?;
-                if word != [ERASED; 4] {
-                    self.copies[target]
-                        .write(HEADER_LEN + at, &word)
-                        .map_err(TwinError::Flash)?;
-                }
-            }
         }
         self.copies[target]
             .write(0, &header_bytes(sequence))
@@ -386,70 +353,4 @@ fn keep_latest<E>(
     *slot = record;
     *count += 1;
     Ok(())
-}
-
-/// embassy-boot's state partition inside the current copy: reads and writes go to it, and
-/// erasing it (the only erase embassy-boot does: the whole partition) switches copies.
-#[derive(Debug)]
-pub struct BootState<'a, F> {
-    twin: &'a mut Twin<F>,
-}
-
-impl<F: NorFlash> ErrorType for BootState<'_, F> {
-    type Error = TwinError<F::Error>;
-}
-
-impl<F: NorFlash> ReadNorFlash for BootState<'_, F> {
-    const READ_SIZE: usize = 1;
-
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        let end = offset as usize + bytes.len();
-        if end > BOOT_STATE_LEN as usize {
-            return Err(TwinError::OutOfBounds);
-        }
-        match self.twin.current {
-            Some(current) => self.twin.copies[current.index]
-                .read(HEADER_LEN + offset, bytes)
-                .map_err(TwinError::Flash),
-            None => {
-                bytes.fill(ERASED);
-                Ok(())
-            }
-        }
-    }
-
-    fn capacity(&self) -> usize {
-        BOOT_STATE_LEN as usize
-    }
-}
-
-impl<F: NorFlash> NorFlash for BootState<'_, F> {
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    /// The whole partition: embassy-boot only ever erases all of it.
-    const ERASE_SIZE: usize = BOOT_STATE_LEN as usize;
-
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        if from != 0 || to != BOOT_STATE_LEN {
-            return Err(TwinError::OutOfBounds);
-        }
-        self.twin.switch(false, None)
-    }
-
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        let end = offset as usize + bytes.len();
-        if end > BOOT_STATE_LEN as usize
-            || offset as usize % F::WRITE_SIZE != 0
-            || bytes.len() % F::WRITE_SIZE != 0
-        {
-            return Err(TwinError::OutOfBounds);
-        }
-        if self.twin.current.is_none() {
-            // The first write on a new board: the first copy, empty, comes first.
-            self.twin.switch(false, None)?;
-        }
-        let current = self.twin.current.ok_or(TwinError::Geometry)?;
-        self.twin.copies[current.index]
-            .write(HEADER_LEN + offset, bytes)
-            .map_err(TwinError::Flash)
-    }
 }

@@ -1,19 +1,19 @@
-//! The two-copy persistent state over the simulated F446 flash: records and embassy-boot's
-//! state survive a power cut at every flash operation, including the switch between copies.
+//! The two-copy persistent state over the simulated F446 flash: its records survive a power
+//! cut at every flash operation, including the switch between copies.
 
 use core::cell::RefCell;
 
+use autoplug_flash::ab::BOOT_RECORD;
 use autoplug_flash::sim::{state_twin, SimFlash};
 use autoplug_flash::twin::{
-    RecordKind, BOOT_STATE_LEN, FLOOR_RECORD, KEY_FAILURES_RECORD, RECORDS_START, RECORD_LEN,
-    SEED_EPOCH_RECORD,
+    RecordKind, FLOOR_RECORD, KEY_FAILURES_RECORD, RECORDS_START, RECORD_LEN, SEED_EPOCH_RECORD,
 };
 use autoplug_flash::{SMALL_SECTOR_SIZE, STATE_COPIES};
-use embedded_storage::nor_flash::{NorFlash, ReadNorFlash};
 
 const FLOOR: RecordKind = FLOOR_RECORD;
 const ATTEMPTS: RecordKind = KEY_FAILURES_RECORD;
 const EPOCH: RecordKind = SEED_EPOCH_RECORD;
+const BOOT: RecordKind = BOOT_RECORD;
 
 /// Record slots of one copy.
 const SLOTS: u32 = (SMALL_SECTOR_SIZE - RECORDS_START) / RECORD_LEN;
@@ -31,22 +31,13 @@ fn write(flash: &RefCell<SimFlash>, kind: RecordKind, value: u32) -> Result<(), 
         .map_err(|e| e.to_string())
 }
 
-fn state_word(flash: &RefCell<SimFlash>, at: u32) -> [u8; 4] {
-    let mut twin = state_twin(flash).expect("open");
-    let mut word = [0; 4];
-    twin.boot_state().read(at, &mut word).expect("read");
-    word
-}
-
 #[test]
 fn a_new_board_reads_erased_and_the_first_write_creates_copy_a() {
     let flash = RefCell::new(SimFlash::new(1));
     let mut twin = state_twin(&flash).expect("open");
     assert_eq!(twin.sequence(), None);
     assert_eq!(twin.read_record(FLOOR), Ok(None));
-    let mut word = [0; 4];
-    twin.boot_state().read(0, &mut word).expect("read");
-    assert_eq!(word, [0xFF; 4]);
+    assert_eq!(twin.read_record(BOOT), Ok(None));
     assert_eq!(flash.borrow().operations(), 0, "reading writes nothing");
 
     twin.write_record(FLOOR, 7u32.to_le_bytes()).expect("write");
@@ -72,47 +63,6 @@ fn the_latest_record_of_each_kind_survives_a_full_copy() {
 }
 
 #[test]
-fn erasing_the_boot_state_switches_copies_and_keeps_the_records() {
-    let flash = RefCell::new(SimFlash::new(3));
-    write(&flash, EPOCH, 41).expect("epoch");
-    {
-        let mut twin = state_twin(&flash).expect("open");
-        let mut state = twin.boot_state();
-        state.write(0, &[0xF0; 4]).expect("magic");
-        state.write(4, &[0; 4]).expect("validity");
-        assert_eq!(state.capacity(), BOOT_STATE_LEN as usize);
-        assert!(state.write(2, &[0; 4]).is_err(), "unaligned");
-        assert!(state.write(BOOT_STATE_LEN, &[0; 4]).is_err(), "outside");
-        assert!(state.erase(0, 4).is_err(), "only the whole partition");
-    }
-    assert_eq!(state_word(&flash, 0), [0xF0; 4]);
-    let mut twin = state_twin(&flash).expect("open");
-    let before = twin.current_copy();
-    twin.boot_state().erase(0, BOOT_STATE_LEN).expect("erase");
-    assert_ne!(twin.current_copy(), before);
-    assert_eq!(state_word(&flash, 0), [0xFF; 4]);
-    assert_eq!(state_word(&flash, 4), [0xFF; 4]);
-    assert_eq!(record(&flash, EPOCH), Some(41));
-}
-
-#[test]
-fn state_words_move_with_the_records_when_a_copy_runs_full() {
-    let flash = RefCell::new(SimFlash::new(4));
-    {
-        let mut twin = state_twin(&flash).expect("open");
-        twin.boot_state().write(0, &[0xD0; 4]).expect("magic");
-        twin.boot_state().write(12, &[0; 4]).expect("progress");
-    }
-    for n in 0..SLOTS + 1 {
-        write(&flash, ATTEMPTS, n).expect("attempts");
-    }
-    assert_eq!(state_twin(&flash).expect("open").sequence(), Some(2));
-    assert_eq!(state_word(&flash, 0), [0xD0; 4]);
-    assert_eq!(state_word(&flash, 4), [0xFF; 4]);
-    assert_eq!(state_word(&flash, 12), [0; 4]);
-}
-
-#[test]
 fn copies_that_do_not_fit_the_layout_are_refused() {
     use autoplug_flash::sim::SimPartition;
     use autoplug_flash::twin::{Twin, TwinError};
@@ -133,28 +83,23 @@ fn copies_that_do_not_fit_the_layout_are_refused() {
 #[derive(Clone, Copy, Debug)]
 enum Step {
     Record(RecordKind, u32),
-    StateWord(u32, [u8; 4]),
-    EraseState,
 }
 
-/// What the store must read after each step: the value of each kind and of a few state
-/// words.
+/// What the store must read after each step: the value of each kind.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Seen {
     floor: Option<u32>,
     attempts: Option<u32>,
     epoch: Option<u32>,
-    words: [[u8; 4]; 3],
+    boot: Option<u32>,
 }
-
-const WATCHED_WORDS: [u32; 3] = [0, 4, 8];
 
 fn seen(flash: &RefCell<SimFlash>) -> Seen {
     Seen {
         floor: record(flash, FLOOR),
         attempts: record(flash, ATTEMPTS),
         epoch: record(flash, EPOCH),
-        words: WATCHED_WORDS.map(|at| state_word(flash, at)),
+        boot: record(flash, BOOT),
     }
 }
 
@@ -162,51 +107,34 @@ fn run(flash: &RefCell<SimFlash>, step: Step) -> Result<(), String> {
     let mut twin = state_twin(flash).map_err(|e| e.to_string())?;
     match step {
         Step::Record(kind, value) => twin.write_record(kind, value.to_le_bytes()),
-        Step::StateWord(at, word) => twin.boot_state().write(at, &word),
-        Step::EraseState => twin.boot_state().erase(0, BOOT_STATE_LEN),
     }
     .map_err(|e| e.to_string())
 }
 
-/// A life of the store: state words and erases as embassy-boot does them, records of three
-/// kinds, and enough attempt records to run a copy full (a switch carrying state words).
+/// A life of the store: records of four kinds, the boot record among them, and enough
+/// attempt records to run a copy full twice (switches carrying the others).
 fn workload() -> Vec<Step> {
     let mut steps = vec![
         Step::Record(FLOOR, 0x0001_0000),
         Step::Record(EPOCH, 1),
-        Step::StateWord(4, [0; 4]),
-        Step::EraseState,
-        Step::StateWord(0, [0xF0; 4]),
+        Step::Record(BOOT, 0x0000_FF00),
     ];
     for n in 0..SLOTS + 2 {
         steps.push(Step::Record(ATTEMPTS, n % 4));
+        if n == SLOTS / 2 {
+            steps.push(Step::Record(BOOT, 0x0000_0100));
+        }
     }
     steps.extend([
-        Step::StateWord(8, [0; 4]),
         Step::Record(FLOOR, 0x0002_0000),
-        Step::StateWord(4, [0; 4]),
-        Step::EraseState,
-        Step::StateWord(0, [0xD0; 4]),
+        Step::Record(BOOT, 0x0000_0101),
         Step::Record(EPOCH, 2),
     ]);
+    for n in 0..SLOTS {
+        steps.push(Step::Record(ATTEMPTS, n % 3));
+    }
+    steps.push(Step::Record(BOOT, 0x0000_FF01));
     steps
-}
-
-/// Whether `now` is `before` but for the word `step` programs, which a cut left between its
-/// old and new value (some of the bits to clear cleared): embassy-boot reads such a word
-/// as not written, as on a single sector.
-fn torn_word(step: Step, now: &Seen, before: &Seen, after: &Seen) -> bool {
-    let Step::StateWord(at, _) = step else {
-        return false;
-    };
-    let Some(w) = WATCHED_WORDS.iter().position(|&a| a == at) else {
-        return false;
-    };
-    let between = |n: u8, old: u8, new: u8| n & !old == 0 && n & new == new;
-    let mut expected = *now;
-    expected.words[w] = before.words[w];
-    expected == *before
-        && (0..4).all(|b| between(now.words[w][b], before.words[w][b], after.words[w][b]))
 }
 
 /// A power cut at every flash operation of the workload, with several seeds for what the
@@ -243,10 +171,7 @@ fn a_power_cut_at_any_operation_loses_nothing() {
                 cuts += 1;
                 let now = seen(&cut);
                 let what = format!("seed {seed}, step {i} ({step:?}), cut at its operation {k}");
-                if now != views[i]
-                    && now != views[i + 1]
-                    && !torn_word(step, &now, &views[i], &views[i + 1])
-                {
+                if now != views[i] && now != views[i + 1] {
                     failures.push(format!(
                         "{what}: read {now:?}, expected {:?} or {:?}",
                         views[i],

@@ -5,8 +5,8 @@ use std::fmt;
 use zeroize::Zeroize;
 
 use crate::{
-    ImageError, ImageHeader, PartNumber, SoftwareVariant, Version, BUILD_ID_LEN,
-    F446RE_LOAD_ADDRESS, HEADER_LEN, MAX_PAYLOAD_LEN, NUCLEO_F446RE, PUBLIC_KEY_LEN, SIGNATURE_LEN,
+    ImageError, ImageHeader, ImageSlot, PartNumber, SoftwareVariant, Version, BUILD_ID_LEN,
+    HEADER_LEN, MAX_PAYLOAD_LEN, NUCLEO_F446RE, PUBLIC_KEY_LEN, SIGNATURE_LEN,
 };
 
 /// First word of a secret key file.
@@ -339,8 +339,8 @@ pub struct ImageBuilder {
 
 impl ImageBuilder {
     /// An image of `payload` for ECU `node` at `version`: standard software for the
-    /// NUCLEO-F446RE at [`F446RE_LOAD_ADDRESS`], zero build id, no part number. Set the
-    /// other fields directly.
+    /// NUCLEO-F446RE linked for slot A ([`ImageSlot::vector_table`]), zero build id, no part
+    /// number. Set the other fields directly.
     pub fn new(node: u8, version: Version, payload: Vec<u8>) -> Self {
         Self {
             node,
@@ -349,13 +349,13 @@ impl ImageBuilder {
             version,
             build_id: [0; BUILD_ID_LEN],
             part_number: PartNumber::default(),
-            load_address: F446RE_LOAD_ADDRESS,
+            load_address: ImageSlot::A.vector_table(),
             payload,
         }
     }
 
     /// The header of the image; refused when the payload is longer than
-    /// [`MAX_PAYLOAD_LEN`] (the image length must fit a `u32`, embassy-boot's length type).
+    /// [`MAX_PAYLOAD_LEN`] (the image length must fit a `u32`, the download's length type).
     pub fn header(&self) -> Result<ImageHeader, ImageError> {
         let payload_len = u32::try_from(self.payload.len())
             .ok()

@@ -6,17 +6,17 @@
 //! header (512 bytes) ‖ payload (payload_len bytes) ‖ signature (64 bytes)
 //! ```
 //!
-//! It is downloaded whole into the ECU's DFU partition. After embassy-boot's A/B swap the
-//! active slot (0x0802_0000 on the F446RE) begins with the header, so the application's
-//! vector table — the first byte of the payload — sits at slot start + 512 (0x0802_0200,
-//! the header's `load_address`).
+//! It is downloaded whole into the image slot the ECU is not running, and runs in place
+//! there: the slot (0x0802_0000 or 0x0804_0000 on the F446RE, `autoplug_flash::ab`) begins
+//! with the header, so the application's vector table — the first byte of the payload —
+//! sits at slot start + 512, the header's `load_address`. An application is linked for one
+//! slot, so a release carries one image per slot; a file may hold both, one after the
+//! other ([`ImageSet`]), and the tester sends the one for the slot the ECU will write.
 //!
-//! The signature is Ed25519 over the 64-byte message `SHA-512(header ‖ payload)`. That is
-//! exactly what embassy-boot 0.7's `FirmwareUpdater::verify_and_mark_updated(public_key,
-//! signature, 512 + payload_len)` checks with its `ed25519-salty` feature, and this crate
-//! uses the same `salty` crate, so an image that [`verify`] accepts also passes the
-//! bootloader's check. The signed part covers the whole header, so the target ECU,
-//! hardware id, version and build id cannot be changed without breaking the signature.
+//! The signature is Ed25519 over the 64-byte message `SHA-512(header ‖ payload)`, checked
+//! with the `salty` crate on the ECU. The signed part covers the whole header, so the
+//! target ECU, hardware id, version, load address and build id cannot be changed without
+//! breaking the signature.
 //!
 //! # Header layout (all integers little-endian)
 //!
@@ -42,15 +42,13 @@
 //!
 //! # On the ECU
 //!
-//! Once the image is in the DFU partition: read its first 512 bytes and
+//! Once the image is in the slot it was downloaded to: read its first 512 bytes and
 //! [`ImageHeader::parse`] them; [`ImageHeader::check`] them against the ECU's
 //! [`Expectations`] (a hostile header can only make this refuse, and it bounds
 //! `payload_len` by the partition before anything is read with it); feed the first
 //! `512 + payload_len` bytes to a [`StreamVerifier`] and [`finish`](StreamVerifier::finish)
 //! it with the 64 bytes that follow. The signature covers the header that was checked, so
-//! the checks now hold for an authenticated header. embassy-boot's
-//! `verify_and_mark_updated(key, signature, 512 + payload_len)` performs the same
-//! signature check.
+//! the checks now hold for an authenticated header.
 //!
 //! # Features
 //!
@@ -65,6 +63,8 @@ use core::fmt;
 use core::str::FromStr;
 
 pub mod floor;
+mod set;
+pub use set::{ImageSet, SetError, SetImage, MAX_SET_IMAGES};
 #[cfg(feature = "std")]
 mod host;
 #[cfg(feature = "std")]
@@ -90,7 +90,7 @@ pub const PUBLIC_KEY_LEN: usize = 32;
 /// Header plus signature: the length of an image with an empty payload.
 pub const OVERHEAD_LEN: usize = HEADER_LEN + SIGNATURE_LEN;
 /// The largest payload the host tool builds: the image length then still fits a `u32`
-/// (embassy-boot's length type). Parsing does not enforce it; [`ImageHeader::check`]
+/// (the download's length type). Parsing does not enforce it; [`ImageHeader::check`]
 /// against the slot size refuses far smaller payloads.
 pub const MAX_PAYLOAD_LEN: u32 = u32::MAX - OVERHEAD_LEN as u32;
 
@@ -101,11 +101,10 @@ pub const MAX_PAYLOAD_LEN: u32 = u32::MAX - OVERHEAD_LEN as u32;
 /// around that chip (1 = NUCLEO-F446RE).
 pub const NUCLEO_F446RE: u32 = 0x0421_0001;
 
-/// Start of the active slot on the F446RE, where the header lands after the A/B swap (the
-/// flash map, `autoplug-flash`, is where it is written).
-pub const F446RE_ACTIVE_SLOT: u32 = autoplug_flash::ACTIVE.start;
-/// Where an F446RE application's vector table is: the active slot plus the header.
-pub const F446RE_LOAD_ADDRESS: u32 = autoplug_flash::APP_VECTOR_TABLE;
+/// The F446RE's two image slots (the flash map, `autoplug-flash`, is where they are
+/// written): an image's load address is its slot's [`ImageSlot::vector_table`]; and how
+/// the image in a slot stands (confirmed, on trial, reverted).
+pub use autoplug_flash::ab::{BootState, ImageSlot};
 
 // The flash map reserves room for exactly this format's header in front of the vector table.
 const _: () = assert!(autoplug_flash::IMAGE_HEADER_SIZE as usize == HEADER_LEN);
@@ -700,7 +699,7 @@ impl ImageHeader {
         out
     }
 
-    /// Length of the signed part, header and payload: embassy-boot's `update_len`.
+    /// Length of the signed part, header and payload.
     ///
     /// A `u64` because a hostile header may claim a payload close to `u32::MAX`; after
     /// [`ImageHeader::check`] it fits the slot and so a `u32`.
@@ -711,6 +710,11 @@ impl ImageHeader {
     /// Length of the whole image: header, payload and signature.
     pub const fn image_len(&self) -> u64 {
         self.signed_len() + SIGNATURE_LEN as u64
+    }
+
+    /// The F446RE slot the image is linked for (`None` for a load address of neither).
+    pub const fn slot(&self) -> Option<ImageSlot> {
+        ImageSlot::at_vector_table(self.load_address)
     }
 
     /// Whether this image may be installed on the ECU described by `expected`: its node,
@@ -788,10 +792,10 @@ pub struct Expectations {
     pub hardware_id: u32,
     /// The lowest version this ECU installs (anti-rollback); stored on the ECU.
     pub version_floor: Version,
-    /// The largest image (header + payload + signature) the DFU partition holds.
+    /// The largest image (header + payload + signature) the slot holds.
     pub max_image_len: u32,
-    /// Where the payload runs on this ECU: active slot start + 512, e.g.
-    /// [`F446RE_LOAD_ADDRESS`].
+    /// Where the payload will run on this ECU: the start of the slot it is written to
+    /// + 512 ([`ImageSlot::vector_table`]).
     pub load_address: u32,
 }
 
@@ -807,7 +811,7 @@ const GROUP_ORDER: [u8; 32] = [
 
 /// Whether the signature's scalar `s` is below L. salty does not check this, so a second
 /// encoding `s + L` of a valid signature would also pass; RFC 8032 refuses it, and so do
-/// we (our signer never produces one, so this refuses nothing embassy-boot needs).
+/// we (our signer never produces one, so this refuses no image of ours).
 fn scalar_is_canonical(signature: &[u8; SIGNATURE_LEN]) -> bool {
     let s = &signature[32..];
     for i in (0..32).rev() {
@@ -818,8 +822,7 @@ fn scalar_is_canonical(signature: &[u8; SIGNATURE_LEN]) -> bool {
     false
 }
 
-/// Ed25519 check of `signature` over `message` (the SHA-512 digest of the signed part),
-/// as embassy-boot's `ed25519-salty` does it.
+/// Ed25519 check of `signature` over `message` (the SHA-512 digest of the signed part).
 fn check_signature(
     message: &[u8; 64],
     signature: &[u8; SIGNATURE_LEN],
@@ -899,8 +902,7 @@ pub fn verify<'a>(
 }
 
 /// Verifies an image chunk by chunk, for an ECU whose image sits in flash and does not fit
-/// in RAM: feed it header and payload (the first `512 + payload_len` bytes, embassy-boot's
-/// `update_len`) in any chunking, then [`finish`](Self::finish) with the signature that
+/// in RAM: feed it header and payload (the first `512 + payload_len` bytes) in any chunking, then [`finish`](Self::finish) with the signature that
 /// follows them. Same digest and check as [`verify`].
 ///
 /// The caller decides how many bytes to feed, from a header it parsed and

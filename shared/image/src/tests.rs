@@ -1,5 +1,5 @@
-//! Behaviour of the format: round trip, every refusal, streaming, embassy-boot
-//! compatibility and key files. Keys come from fixed seeds, so every run is the same
+//! Behaviour of the format: round trip, every refusal, streaming, an independent salty
+//! check and key files. Keys come from fixed seeds, so every run is the same
 //! (only `generate_gives_distinct_working_keys` reads the OS random source).
 
 use super::*;
@@ -7,7 +7,7 @@ use proptest::prelude::*;
 
 const CRUISE: u8 = 0x0D;
 const ABS: u8 = 0x0E;
-/// A DFU partition size for the tests: 128 KiB.
+/// An image slot size for the tests: 128 KiB.
 const SLOT: u32 = 128 * 1024;
 
 fn key() -> SigningKey {
@@ -40,7 +40,7 @@ fn expectations() -> Expectations {
         hardware_id: NUCLEO_F446RE,
         version_floor: Version::new(1, 2, 3),
         max_image_len: SLOT,
-        load_address: F446RE_LOAD_ADDRESS,
+        load_address: ImageSlot::A.vector_table(),
     }
 }
 
@@ -259,15 +259,16 @@ proptest! {
     }
 }
 
-// --- embassy-boot compatibility --------------------------------------------------------
+// --- an independent check ---------------------------------------------------------------
 
 #[test]
-fn plain_salty_verifies_the_signature_like_embassy_boot() {
+fn plain_salty_verifies_the_signature_over_any_chunking() {
     let image = image();
     let n = image.len();
     let update_len = n - 64;
-    // embassy-boot 0.7 `verify_and_mark_updated` with `ed25519-salty`: SHA-512 of the first
-    // `update_len` bytes read through a 2-byte chunk buffer, then `PublicKey::verify`.
+    // salty's own API, without this crate's verifier: SHA-512 of the first `update_len`
+    // bytes fed through a 2-byte chunk buffer (as a reader of flash may), then
+    // `PublicKey::verify`.
     let mut hasher = salty::Sha512::new();
     for chunk in image[..update_len].chunks(2) {
         hasher.update(chunk);
@@ -284,7 +285,6 @@ fn plain_salty_verifies_the_signature_like_embassy_boot() {
     let pk_bytes = key().public_key();
     let public_key = salty::PublicKey::try_from(&pk_bytes).unwrap();
     let sig_bytes: [u8; 64] = image[update_len..].try_into().unwrap();
-    // embassy-boot writes `try_from`, which is this infallible `From` in salty 0.3.
     let signature = salty::Signature::from(&sig_bytes);
     assert!(public_key.verify(&message, &signature).is_ok());
     // And a payload change is caught by the same check.
@@ -449,7 +449,7 @@ fn an_image_for_other_hardware_is_refused() {
 #[test]
 fn an_image_linked_elsewhere_is_refused() {
     let mut b = builder();
-    b.load_address = F446RE_ACTIVE_SLOT;
+    b.load_address = ImageSlot::A.region().start;
     assert_eq!(
         b.header().unwrap().check(&expectations()),
         Err(ImageError::WrongLoadAddress {

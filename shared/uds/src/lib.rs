@@ -8,11 +8,11 @@
 //! | 0x11 | hard (0x01) and soft (0x03) reset, after the response | all | — |
 //! | 0x14 | clear all DTCs (group 0xFFFFFF) | all | — |
 //! | 0x19 | DTCs: 0x01 count by status mask, 0x02 by status mask, 0x0A all stored | all | — |
-//! | 0x22 | F186 session, F187 part number, F189 software version, F18C serial, F191 hardware version, the ECU's live data | all | — |
+//! | 0x22 | F186 session, F187 part number, F189 software version, F18C serial, F191 hardware version, F1A0 running image slot and its state, the ECU's live data | all | — |
 //! | 0x27 | seed 0x01 / key 0x02: HMAC-SHA-512 of node ‖ seed; 3 wrong keys lock for 10 s, counted in flash before the key is checked and kept across resets | extended, programming | — |
 //! | 0x28 | normal messages: rx/tx on/off | extended, programming | — |
 //! | 0x3E | tester present | all | — |
-//! | 0x31 | start FF00 erase (the DFU slot), FF01 check the downloaded image (signature, ECU, hardware, version floor, length) and mark it for the swap | programming | yes |
+//! | 0x31 | start FF00 erase (the DFU slot: the image slot not running), FF01 check the downloaded image (signature, ECU, hardware, load address, version floor, length) and mark it for a trial start | programming | yes |
 //! | 0x34/0x36/0x37 | download an image to the slot address, 4093 data bytes per block | programming | yes |
 //! | 0x85 | DTC setting on/off | extended, programming | — |
 //!
@@ -29,7 +29,7 @@
 //! | shorter than a header and a signature | 0x31 FF01 | 0x72 general programming failure |
 //! | any byte changed, unsigned, signed with another key | 0x31 FF01 | 0x72 general programming failure |
 //!
-//! Nothing is marked for the swap unless FF01 succeeded, so the running firmware stays.
+//! Nothing is marked for a trial start unless FF01 succeeded, so the running firmware stays.
 #![no_std]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
@@ -48,8 +48,9 @@ pub use node::{DiagNode, STANDSTILL_WINDOW_US};
 pub const DEV_SECURITY_SECRET: &[u8] = b"AutoPlug development security secret";
 pub use nrc::Nrc;
 pub use server::{
-    Backend, Config, FlashError, Identification, Reply, ResetKind, Server, Session, MAX_BLOCK_LEN,
-    ROUTINE_CHECK_PROGRAMMING_DEPENDENCIES, ROUTINE_ERASE_MEMORY,
+    boot_slot_bytes, parse_boot_slot, Backend, Config, FlashError, Identification, Reply,
+    ResetKind, Server, Session, MAX_BLOCK_LEN, ROUTINE_CHECK_PROGRAMMING_DEPENDENCIES,
+    ROUTINE_ERASE_MEMORY,
 };
 
 #[cfg(test)]

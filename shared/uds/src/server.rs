@@ -6,7 +6,8 @@
 
 use autoplug_ecu::{status, Dtc, Dtcs, Instant};
 use autoplug_image::{
-    Expectations, ImageError, ImageHeader, StreamVerifier, HEADER_LEN, SIGNATURE_LEN,
+    BootState, Expectations, ImageError, ImageHeader, ImageSlot, StreamVerifier, HEADER_LEN,
+    SIGNATURE_LEN,
 };
 
 use crate::nrc::{sid, Nrc};
@@ -73,6 +74,26 @@ pub struct Identification<'a> {
     /// F190: the vehicle's VIN (17 characters), as the ECU was told it at the end of the
     /// line; empty while it has none (F190 is then not answered).
     pub vin: &'a [u8],
+    /// F1A0: the image slot the ECU runs and how that image stands (`None` on an ECU
+    /// without slots: F1A0 is then not answered).
+    pub boot_slot: Option<(ImageSlot, BootState)>,
+}
+
+/// The two data bytes of DID F1A0: the running slot's number (A 0, B 1) and its state
+/// ([`BootState::number`]: 0 confirmed, 1 on trial, 2 reverted).
+pub const fn boot_slot_bytes(slot: ImageSlot, state: BootState) -> [u8; 2] {
+    [slot.number(), state.number()]
+}
+
+/// What DID F1A0's data bytes say; `None` for bytes no ECU sends.
+pub fn parse_boot_slot(bytes: &[u8]) -> Option<(ImageSlot, BootState)> {
+    match bytes {
+        [slot, state] => Some((
+            ImageSlot::from_number(*slot)?,
+            BootState::from_number(*state)?,
+        )),
+        _ => None,
+    }
 }
 
 /// A flash operation failed (the backend logs the detail).
@@ -121,18 +142,19 @@ pub trait Backend {
     fn image_expectations(&self) -> Expectations;
     /// The key images are signed with.
     fn public_key(&self) -> [u8; 32];
-    /// Number of erase steps (one step: one sector, from the start of the DFU partition)
-    /// that cover its first `len` bytes. Only those are erased before a download: the
-    /// bootloader erases the rest of the partition itself before it copies into it.
+    /// Number of erase steps (one step: one sector, from the start of the DFU slot, the
+    /// image slot the ECU is not running) that cover its first `len` bytes. Only those are
+    /// erased before a download.
     fn dfu_erase_steps(&self, len: u32) -> u32;
-    /// Erases step `step` of the DFU partition (the core may stall for a second).
+    /// Erases step `step` of the DFU slot (the core may stall for a second). The first
+    /// step also withdraws an earlier download's trial mark of that slot.
     fn dfu_erase(&mut self, step: u32) -> Result<(), FlashError>;
-    /// Programs `data` at `offset` in the DFU partition (erased before). Both are whole
-    /// 32-bit flash words: multiples of 4.
+    /// Programs `data` at `offset` in the DFU slot (erased before). Both are whole 32-bit
+    /// flash words: multiples of 4.
     fn dfu_write(&mut self, offset: u32, data: &[u8]) -> Result<(), FlashError>;
-    /// Reads the DFU partition.
+    /// Reads the DFU slot.
     fn dfu_read(&mut self, offset: u32, out: &mut [u8]) -> Result<(), FlashError>;
-    /// Marks the verified image in the DFU partition for the swap at the next reset.
+    /// Marks the verified image in the DFU slot for a trial start at the next reset.
     fn mark_updated(&mut self) -> Result<(), FlashError>;
     /// The OBD-II mode 01 PIDs this ECU owns (not counting the support bitmaps);
     /// [`crate::DiagNode`] answers them from the ECU's own frames.
@@ -194,6 +216,9 @@ pub mod did {
     pub const HARDWARE_VERSION: u16 = 0xF191;
     /// Vehicle identification number (ISO 3779, 17 characters).
     pub const VIN: u16 = 0xF190;
+    /// The running image slot and its state (2 bytes, [`super::boot_slot_bytes`]); in
+    /// ISO 14229-1's vehicle-manufacturer-specific identification range F1A0–F1EF.
+    pub const BOOT_SLOT: u16 = 0xF1A0;
 }
 
 /// Bytes of TransferData payload per block a tester may send: the 4095 bytes of an ISO-TP
@@ -201,7 +226,7 @@ pub mod did {
 /// length including those two bytes.
 pub const MAX_BLOCK_LEN: u16 = 4095;
 
-/// Bytes of the DFU partition read per [`Server::resume`] call while checking an image.
+/// Bytes of the DFU slot read per [`Server::resume`] call while checking an image.
 const CHECK_CHUNK: usize = 1024;
 
 /// Programming granularity: slices of a block end on this many bytes (the F4 programs
@@ -219,7 +244,7 @@ enum Security {
 enum Programming {
     /// Nothing erased since the last download (or since power-up).
     Idle,
-    /// The first `len` bytes of the DFU partition are erased: a download of up to that
+    /// The first `len` bytes of the DFU slot are erased: a download of up to that
     /// many bytes may start.
     Erased { len: u32 },
     /// A download is under way.
@@ -232,7 +257,7 @@ enum Programming {
     },
     /// All bytes are in: the image may be checked.
     Downloaded { size: u32 },
-    /// The image verified and is marked for the swap.
+    /// The image verified and is marked for its trial start.
     Verified,
 }
 
@@ -703,12 +728,16 @@ impl Server {
             let room = out.len().checked_sub(len + 2).ok_or(Nrc::ResponseTooLong)?;
             let data = &mut out[len + 2..];
             let ident = backend.identification();
+            let boot_slot = ident
+                .boot_slot
+                .map(|(slot, state)| boot_slot_bytes(slot, state));
             let fixed: Option<&[u8]> = match did {
                 did::PART_NUMBER => Some(ident.part_number),
                 did::SOFTWARE_VERSION => Some(ident.software_version),
                 did::SERIAL_NUMBER => Some(ident.serial_number),
                 did::HARDWARE_VERSION => Some(ident.hardware_version),
                 did::VIN if !ident.vin.is_empty() => Some(ident.vin),
+                did::BOOT_SLOT => boot_slot.as_ref().map(|bytes| bytes.as_slice()),
                 did::ACTIVE_SESSION => Some(match self.session {
                     Session::Default => &[0x01],
                     Session::Programming => &[0x02],
@@ -1150,8 +1179,8 @@ fn image_refusal_nrc(error: &ImageError) -> Nrc {
     }
 }
 
-/// The address a download names: the start of the active slot, where the image will run
-/// after the swap (the DFU partition it is written to is the ECU's business).
+/// The address a download names: the start of the slot the image is written to and will
+/// run from (its load address less the header).
 fn slot_address(expected: &Expectations) -> u32 {
     expected.load_address - HEADER_LEN as u32
 }

@@ -8,8 +8,7 @@ use std::vec::Vec;
 
 use autoplug_ecu::{Dtc, DtcSystem, Dtcs, Instant};
 use autoplug_image::{
-    Expectations, ImageBuilder, SigningKey, Version, F446RE_ACTIVE_SLOT, F446RE_LOAD_ADDRESS,
-    NUCLEO_F446RE,
+    BootState, Expectations, ImageBuilder, ImageSlot, SigningKey, Version, NUCLEO_F446RE,
 };
 use proptest::prelude::*;
 
@@ -61,6 +60,9 @@ impl TestEcu {
     }
 }
 
+/// Where the test ECU's downloads go: slot A (it runs slot B).
+const DOWNLOAD_SLOT: u32 = ImageSlot::A.region().start;
+
 impl Backend for TestEcu {
     fn identification(&self) -> Identification<'_> {
         Identification {
@@ -69,6 +71,8 @@ impl Backend for TestEcu {
             serial_number: b"0D0000000042",
             hardware_version: b"NUCLEO-F446RE",
             vin: b"JA3AP47H0YF000042",
+            // It runs slot B, so downloads go to slot A, where `ImageBuilder` links.
+            boot_slot: Some((ImageSlot::B, BootState::Confirmed)),
         }
     }
     fn read_live_data(&mut self, did: u16, out: &mut [u8]) -> Option<usize> {
@@ -109,7 +113,7 @@ impl Backend for TestEcu {
             hardware_id: NUCLEO_F446RE,
             version_floor: self.floor,
             max_image_len: SLOT as u32,
-            load_address: F446RE_LOAD_ADDRESS,
+            load_address: ImageSlot::A.vector_table(),
         }
     }
     fn public_key(&self) -> [u8; 32] {
@@ -247,7 +251,7 @@ impl Bench {
     /// the first negative response, if any.
     fn download(&mut self, image: &[u8]) -> Result<(), Vec<u8>> {
         let mut request = vec![0x34, 0x00, 0x44];
-        request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+        request.extend_from_slice(&DOWNLOAD_SLOT.to_be_bytes());
         request.extend_from_slice(&(image.len() as u32).to_be_bytes());
         let response = self.request(&request);
         if response[0] == 0x7F {
@@ -366,6 +370,19 @@ fn identification_and_live_data() {
     let mut expected = vec![0x62, 0xF1, 0x90];
     expected.extend_from_slice(b"JA3AP47H0YF000042");
     assert_eq!(bench.request(&[0x22, 0xF1, 0x90]), expected);
+    // The running slot and its state.
+    assert_eq!(bench.request(&[0x22, 0xF1, 0xA0]), [0x62, 0xF1, 0xA0, 1, 0]);
+    assert_eq!(
+        crate::parse_boot_slot(&[1, 0]),
+        Some((ImageSlot::B, BootState::Confirmed))
+    );
+    assert_eq!(
+        crate::parse_boot_slot(&[0, 1]),
+        Some((ImageSlot::A, BootState::Trial))
+    );
+    assert_eq!(crate::parse_boot_slot(&[2, 0]), None);
+    assert_eq!(crate::parse_boot_slot(&[0, 3]), None);
+    assert_eq!(crate::parse_boot_slot(&[0]), None);
     let _ = did::PART_NUMBER;
 }
 
@@ -490,14 +507,14 @@ fn a_download_must_fit_what_the_erase_made_room_for() {
     // Erase for an image of 1000 bytes: one sector is erased, and the download of the
     // larger image is refused (uploadDownloadNotAccepted), not written.
     let mut erase = vec![0x31, 0x01, 0xFF, 0x00, 0x44];
-    erase.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    erase.extend_from_slice(&DOWNLOAD_SLOT.to_be_bytes());
     erase.extend_from_slice(&1000u32.to_be_bytes());
     assert_eq!(bench.request(&erase), [0x71, 0x01, 0xFF, 0x00, 0x00]);
     assert!(image.len() > 1000);
     assert_eq!(bench.download(&image), Err(vec![0x7F, 0x34, 0x70]));
     // Erased for the image's own size, it goes in.
     let mut erase = vec![0x31, 0x01, 0xFF, 0x00, 0x44];
-    erase.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    erase.extend_from_slice(&DOWNLOAD_SLOT.to_be_bytes());
     erase.extend_from_slice(&(image.len() as u32).to_be_bytes());
     assert_eq!(bench.request(&erase), [0x71, 0x01, 0xFF, 0x00, 0x00]);
     bench.download(&image).expect("accepted");
@@ -546,7 +563,7 @@ fn programming_needs_the_session_security_and_an_erase() {
 }
 
 /// Runs a download of `image` after a fresh erase; returns the refusal (the negative
-/// response) and checks that nothing was marked for the swap.
+/// response) and checks that nothing was marked for a trial start.
 fn refusal_of(image: &[u8]) -> Vec<u8> {
     let mut bench = Bench::new();
     bench.enter_programming();
@@ -647,7 +664,7 @@ fn blocks_of_any_length_are_programmed_as_whole_words() {
     bench.erase();
     let image = good_image();
     let mut request = vec![0x34, 0x00, 0x44];
-    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&DOWNLOAD_SLOT.to_be_bytes());
     request.extend_from_slice(&(image.len() as u32).to_be_bytes());
     bench.request(&request);
     let sizes = [301usize, 7, 1, 203, 1000, 3333];
@@ -676,7 +693,7 @@ fn transfer_blocks_are_counted() {
     bench.erase();
     let image = good_image();
     let mut request = vec![0x34, 0x00, 0x44];
-    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&DOWNLOAD_SLOT.to_be_bytes());
     request.extend_from_slice(&(image.len() as u32).to_be_bytes());
     bench.request(&request);
     let block = |counter: u8, data: &[u8]| [&[0x36, counter][..], data].concat();
@@ -714,7 +731,7 @@ fn blocks_are_programmed_in_slices_while_the_next_one_arrives() {
     bench.erase();
     let image = good_image();
     let mut request = vec![0x34, 0x00, 0x44];
-    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&DOWNLOAD_SLOT.to_be_bytes());
     request.extend_from_slice(&(image.len() as u32).to_be_bytes());
     bench.request(&request);
     let mut block = vec![0x36, 0x01];
@@ -923,7 +940,7 @@ fn a_download_over_iso_tp_frames_reaches_the_dfu_partition() {
     );
     let image = good_image();
     let mut request = vec![0x34, 0x00, 0x44];
-    request.extend_from_slice(&F446RE_ACTIVE_SLOT.to_be_bytes());
+    request.extend_from_slice(&DOWNLOAD_SLOT.to_be_bytes());
     request.extend_from_slice(&(image.len() as u32).to_be_bytes());
     assert_eq!(ask(&mut wire, &request), [0x74, 0x20, 0x0F, 0xFF]);
     for (i, block) in image.chunks(4093).enumerate() {
