@@ -276,16 +276,11 @@ pub fn prepare_download<F: NorFlash>(
     running: ImageSlot,
     target: ImageSlot,
 ) -> Result<(), AbError<F::Error>> {
-    if target == running {
-        return Err(AbError::SlotInUse(target));
-    }
-    if state(twin, running)? == BootState::Trial {
-        return Err(AbError::Unconfirmed);
-    }
+    may_write(twin, running, target)?;
     let record = read(twin)?;
-    let marked_here = matches!(record.and_then(|r| r.trial), Some((slot, _)) if slot == target);
-    let confirmed_elsewhere = record.is_some_and(|r| r.confirmed == running);
-    if marked_here || !confirmed_elsewhere {
+    let marked_there = matches!(record.and_then(|r| r.trial), Some((slot, _)) if slot == target);
+    let confirmed_here = record.is_some_and(|r| r.confirmed == running);
+    if marked_there || !confirmed_here {
         // Whatever the record said, the running slot is the good one.
         write(
             twin,
@@ -299,9 +294,10 @@ pub fn prepare_download<F: NorFlash>(
     Ok(())
 }
 
-/// Marks `target`, downloaded and verified while `running` runs, for a trial at the next
-/// reset.
-pub fn mark_trial<F: NorFlash>(
+/// The application may write `target` while `running` runs: not the running slot, and
+/// not while the running image is on trial (it could still be reverted to the slot a
+/// download would erase).
+fn may_write<F: NorFlash>(
     twin: &mut Twin<F>,
     running: ImageSlot,
     target: ImageSlot,
@@ -312,6 +308,17 @@ pub fn mark_trial<F: NorFlash>(
     if state(twin, running)? == BootState::Trial {
         return Err(AbError::Unconfirmed);
     }
+    Ok(())
+}
+
+/// Marks `target`, downloaded and verified while `running` runs, for a trial at the next
+/// reset.
+pub fn mark_trial<F: NorFlash>(
+    twin: &mut Twin<F>,
+    running: ImageSlot,
+    target: ImageSlot,
+) -> Result<(), AbError<F::Error>> {
+    may_write(twin, running, target)?;
     write(
         twin,
         BootRecord {
