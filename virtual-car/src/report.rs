@@ -35,18 +35,31 @@ pub fn run(scenario: &Scenario) -> RunRecord {
 
 /// Runs a scenario, calling `each_tick` after every tick (for pacing and for serving the
 /// bus to tools), and records it.
-pub fn run_with(scenario: &Scenario, mut each_tick: impl FnMut(&mut VirtualCar)) -> RunRecord {
+pub fn run_with(scenario: &Scenario, each_tick: impl FnMut(&mut VirtualCar)) -> RunRecord {
+    run_observed(scenario, each_tick, |_| {})
+}
+
+/// [`run_with`], also handing every trace row to `each_row` as it is recorded.
+fn run_observed(
+    scenario: &Scenario,
+    mut each_tick: impl FnMut(&mut VirtualCar),
+    mut each_row: impl FnMut(&TraceRow),
+) -> RunRecord {
     let mut car = VirtualCar::new(scenario);
     let rows = (scenario.duration_s * 1e6 / TRACE_PERIOD_US as f64).ceil() as usize + 1;
     let mut trace = Vec::with_capacity(rows);
     while !car.finished() {
         if car.time_us() % TRACE_PERIOD_US == 0 {
-            trace.push(car.trace_row());
+            let row = car.trace_row();
+            each_row(&row);
+            trace.push(row);
         }
         car.tick();
         each_tick(&mut car);
     }
-    trace.push(car.trace_row());
+    let row = car.trace_row();
+    each_row(&row);
+    trace.push(row);
     let summary = Summary::compute(scenario, &trace, &car);
     let log = car.log().to_vec();
     RunRecord {
@@ -445,6 +458,11 @@ pub const TRACE_COLUMNS: &str = "t_s,x_m,y_m,heading_rad,speed_kmh,yaw_rate_rad_
 /// Writes the trace as CSV.
 pub fn write_trace(out: &mut impl Write, trace: &[TraceRow]) -> io::Result<()> {
     writeln!(out, "{TRACE_COLUMNS}")?;
+    write_trace_rows(out, trace)
+}
+
+/// Writes rows of `trace.csv` (no header).
+fn write_trace_rows(out: &mut impl Write, trace: &[TraceRow]) -> io::Result<()> {
     // Each row is put together in one buffer, numbers by `decimal::push_fixed` (what
     // `{:.N}` writes, faster), then written at once.
     let mut line = Vec::with_capacity(512);
@@ -644,35 +662,111 @@ pub fn write_outputs(dir: &Path, record: &RunRecord) -> io::Result<()> {
     write_reports(dir, record)
 }
 
-/// Writes trace.csv, summary.json and the plots into `dir`: everything but the bus log,
-/// for callers that stream the bus log while the run goes ([`run_streaming`]).
+/// Writes trace.csv, summary.json and the plots into `dir`: everything but the bus log.
 pub fn write_reports(dir: &Path, record: &RunRecord) -> io::Result<()> {
     fs::create_dir_all(dir)?;
     let mut trace = BufWriter::new(fs::File::create(dir.join("trace.csv"))?);
     write_trace(&mut trace, &record.trace)?;
     trace.flush()?;
-    fs::write(dir.join("summary.json"), record.summary.to_json())?;
-    for (name, plot) in plots(&record.trace) {
-        fs::write(dir.join(name), plot.to_svg())?;
-    }
-    Ok(())
+    write_summary_and_plots(dir, record)
 }
 
-/// Runs a scenario, writing each tick's frames to `bus_log` as they happen (so a long run
-/// does not hold its bus log in memory) and handing them to `each_tick` with the car.
-/// The returned record has an empty `log`.
-pub fn run_streaming(
+/// Writes summary.json and the plots into `dir`, for callers that streamed the bus log and
+/// the trace while the run went ([`run_streaming`]).
+pub fn write_summary_and_plots(dir: &Path, record: &RunRecord) -> io::Result<()> {
+    fs::create_dir_all(dir)?;
+    fs::write(dir.join("summary.json"), record.summary.to_json())?;
+    let plots = plots(&record.trace);
+    let write = |part: &[(&str, Plot)]| -> io::Result<()> {
+        for (name, plot) in part {
+            fs::write(dir.join(name), plot.to_svg())?;
+        }
+        Ok(())
+    };
+    // Each plot renders thousands of points: half of them on a second core.
+    let (first, second) = plots.split_at(plots.len() / 2);
+    std::thread::scope(|scope| {
+        let other = scope.spawn(|| write(first));
+        let mine = write(second);
+        match other.join() {
+            Ok(theirs) => theirs.and(mine),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
+
+/// Frames (or trace rows) the simulation hands the writer at a time: one channel operation
+/// per about half a second of bus traffic instead of one per tick.
+const WRITER_BATCH: usize = 512;
+
+/// Batches queued for the writer at most: memory stays bounded if the disk is slow.
+const WRITER_QUEUE: usize = 16;
+
+/// What the simulation hands the writer thread.
+enum Batch {
+    Frames(Vec<LoggedFrame>),
+    Rows(Vec<TraceRow>),
+}
+
+/// Runs a scenario, writing each tick's frames to `bus_log` and each trace row to `trace`
+/// (as `trace.csv`) as they happen, so a long run does not hold its bus log in memory, and
+/// handing the frames to `each_tick` with the car. The returned record has an empty `log`
+/// (its trace is complete, for the summary and the plots). Both files are formatted and
+/// written on a thread of its own beside the simulation, in batches through a bounded
+/// queue; a write error ends the writing and is returned once the run is over.
+pub fn run_streaming<W: Write + Send, T: Write + Send>(
     scenario: &Scenario,
-    bus_log: &mut impl Write,
+    bus_log: &mut W,
+    trace: &mut T,
     mut each_tick: impl FnMut(&mut VirtualCar, &[LoggedFrame]),
 ) -> io::Result<RunRecord> {
-    let mut result = Ok(());
-    let record = run_with(scenario, |car| {
-        let frames = car.take_log();
-        if result.is_ok() {
-            result = write_bus_log(bus_log, &frames);
+    std::thread::scope(|scope| {
+        let (batches, queue) = std::sync::mpsc::sync_channel::<Batch>(WRITER_QUEUE);
+        let writer = scope.spawn(move || -> io::Result<()> {
+            write_trace(trace, &[])?;
+            for batch in queue {
+                match batch {
+                    Batch::Frames(frames) => write_bus_log(bus_log, &frames)?,
+                    Batch::Rows(rows) => write_trace_rows(trace, &rows)?,
+                }
+            }
+            Ok(())
+        });
+        // A failed send means the writer stopped on an error, reported below.
+        let send = |batch| {
+            let _ = batches.send(batch);
+        };
+        let mut frames_batch = Vec::with_capacity(WRITER_BATCH);
+        let mut rows_batch = Vec::with_capacity(WRITER_BATCH);
+        let record = run_observed(
+            scenario,
+            |car| {
+                let frames = car.take_log();
+                each_tick(car, &frames);
+                frames_batch.extend_from_slice(&frames);
+                if frames_batch.len() >= WRITER_BATCH {
+                    send(Batch::Frames(std::mem::replace(
+                        &mut frames_batch,
+                        Vec::with_capacity(WRITER_BATCH),
+                    )));
+                }
+            },
+            |row| {
+                rows_batch.push(*row);
+                if rows_batch.len() >= WRITER_BATCH {
+                    send(Batch::Rows(std::mem::replace(
+                        &mut rows_batch,
+                        Vec::with_capacity(WRITER_BATCH),
+                    )));
+                }
+            },
+        );
+        send(Batch::Frames(frames_batch));
+        send(Batch::Rows(rows_batch));
+        drop(batches);
+        match writer.join() {
+            Ok(written) => written.map(|()| record),
+            Err(panic) => std::panic::resume_unwind(panic),
         }
-        each_tick(car, &frames);
-    });
-    result.map(|()| record)
+    })
 }

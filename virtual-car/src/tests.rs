@@ -437,21 +437,37 @@ fn plots_are_svg_with_every_series() {
 }
 
 #[test]
-fn the_streamed_bus_log_is_the_recorded_one() {
-    use crate::report::{run, run_streaming, write_bus_log};
+fn the_streamed_bus_log_and_trace_are_the_recorded_ones() {
+    use crate::report::{run, run_streaming, write_bus_log, write_trace};
     let s = Scenario::parse(
         "name = \"stream\"\nduration_s = 1.5\n[driver]\naccelerator = 30.0\n",
         "stream",
     )
     .unwrap();
+    let whole = run(&s);
     let mut recorded = Vec::new();
-    write_bus_log(&mut recorded, &run(&s).log).unwrap();
-    let mut streamed = Vec::new();
+    write_bus_log(&mut recorded, &whole.log).unwrap();
+    let mut recorded_trace = Vec::new();
+    write_trace(&mut recorded_trace, &whole.trace).unwrap();
+    let (mut streamed, mut streamed_trace) = (Vec::new(), Vec::new());
     let mut frames_seen = 0;
-    let record = run_streaming(&s, &mut streamed, |_, frames| frames_seen += frames.len()).unwrap();
+    let record = run_streaming(&s, &mut streamed, &mut streamed_trace, |_, frames| {
+        frames_seen += frames.len()
+    })
+    .unwrap();
     assert!(record.log.is_empty(), "streamed runs keep no log in memory");
     assert!(recorded.len() > 1000);
     assert_eq!(streamed, recorded);
+    // 151 rows and the header, written in batches beside the run.
+    assert_eq!(
+        String::from_utf8(streamed_trace.clone())
+            .unwrap()
+            .lines()
+            .count(),
+        152
+    );
+    assert_eq!(streamed_trace, recorded_trace);
+    assert_eq!(record.trace, whole.trace);
     assert_eq!(
         frames_seen,
         String::from_utf8(recorded).unwrap().lines().count()
