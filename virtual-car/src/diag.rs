@@ -106,7 +106,7 @@ pub fn build_slot_image(
 
 /// The vector table of a virtual image: the top of the F446's 128 KiB SRAM as the initial
 /// stack pointer, and a Thumb reset handler just past the vector table (452 bytes).
-const INITIAL_STACK_POINTER: u32 = 0x2002_0000;
+const INITIAL_STACK_POINTER: u32 = autoplug_flash::SRAM_START + autoplug_flash::SRAM_SIZE;
 const RESET_HANDLER_OFFSET: u32 = 0x1C5;
 
 /// What a virtual ECU runs after a (re)start.

@@ -40,7 +40,7 @@
 
 use embedded_storage::nor_flash::NorFlash;
 
-use crate::map::{Region, IMAGE_HEADER_SIZE, SLOT_A, SLOT_B};
+use crate::map::{Region, IMAGE_HEADER_SIZE, SLOT_A, SLOT_B, SRAM_SIZE, SRAM_START};
 use crate::twin::{RecordKind, Twin, TwinError};
 
 /// The record kind of the boot record.
@@ -443,10 +443,9 @@ pub fn choose<F: NorFlash>(
 /// application linked for `slot`: the stack pointer in the F446's SRAM and word aligned, the
 /// reset handler a Thumb address inside the slot. An erased or half-written slot fails.
 pub const fn plausible_vector_table(slot: ImageSlot, initial_sp: u32, reset: u32) -> bool {
-    const SRAM_START: u32 = 0x2000_0000;
-    const SRAM_END: u32 = 0x2002_0000;
     let region = slot.region();
-    let sp_ok = initial_sp > SRAM_START && initial_sp <= SRAM_END && initial_sp % 4 == 0;
+    let sp_ok =
+        initial_sp > SRAM_START && initial_sp <= SRAM_START + SRAM_SIZE && initial_sp % 4 == 0;
     let code = reset & !1;
     let reset_ok = reset & 1 == 1 && code >= slot.vector_table() && code < region.end();
     sp_ok && reset_ok
@@ -478,7 +477,7 @@ mod tests {
     }
 
     #[test]
-    fn records_no_version_writes_are_refused() {
+    fn payloads_no_version_writes_are_not_boot_records() {
         for payload in [
             [2, 0xFF, 0, 0],
             [0, 0, 0, 0],

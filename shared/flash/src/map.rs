@@ -310,6 +310,13 @@ pub const fn partition_of(address: u32) -> Option<(&'static str, Region)> {
     None
 }
 
+/// First address of the F446RE's SRAM (RM0390, memory map): where an application's stack
+/// and data live, and where a vector table's initial stack pointer must point.
+pub const SRAM_START: u32 = 0x2000_0000;
+
+/// Size of the F446RE's SRAM (SRAM1 and SRAM2 as one block), bytes.
+pub const SRAM_SIZE: u32 = 128 * 1024;
+
 /// Size of the signed image's header at the start of a slot.
 pub const IMAGE_HEADER_SIZE: u32 = 512;
 

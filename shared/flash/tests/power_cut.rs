@@ -50,7 +50,8 @@ fn seeded_bytes(seed: u64, len: usize) -> Vec<u8> {
 fn image_for(seed: u64, slot: ImageSlot) -> Vec<u8> {
     let mut bytes = seeded_bytes(seed, IMAGE_LEN);
     let table = IMAGE_HEADER_SIZE as usize;
-    bytes[table..table + 4].copy_from_slice(&0x2002_0000u32.to_le_bytes());
+    let stack_top = autoplug_flash::SRAM_START + autoplug_flash::SRAM_SIZE;
+    bytes[table..table + 4].copy_from_slice(&stack_top.to_le_bytes());
     bytes[table + 4..table + 8].copy_from_slice(&(slot.vector_table() + 0x401).to_le_bytes());
     bytes.resize(bytes.len().div_ceil(WRITE_SIZE) * WRITE_SIZE, ERASE_VALUE);
     bytes
