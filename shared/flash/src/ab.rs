@@ -477,7 +477,7 @@ mod tests {
     }
 
     #[test]
-    fn payloads_no_version_writes_are_not_boot_records() {
+    fn malformed_payloads_are_not_boot_records() {
         for payload in [
             [2, 0xFF, 0, 0],
             [0, 0, 0, 0],
