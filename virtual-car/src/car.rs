@@ -517,6 +517,13 @@ impl VirtualCar {
         std::mem::take(&mut self.log)
     }
 
+    /// [`VirtualCar::take_log`] into `frames` (cleared first): the two buffers swap, so a
+    /// caller draining the log every tick allocates nothing once both have grown.
+    pub fn swap_log(&mut self, frames: &mut Vec<LoggedFrame>) {
+        frames.clear();
+        std::mem::swap(&mut self.log, frames);
+    }
+
     /// The cruise ECU's last decision.
     pub fn cruise_status(&self) -> ecu_cruise::Status {
         self.ecus.cruise.ecu.status()

@@ -738,10 +738,11 @@ pub fn run_streaming<W: Write + Send, T: Write + Send>(
         };
         let mut frames_batch = Vec::with_capacity(WRITER_BATCH);
         let mut rows_batch = Vec::with_capacity(WRITER_BATCH);
+        let mut frames = Vec::new();
         let record = run_observed(
             scenario,
             |car| {
-                let frames = car.take_log();
+                car.swap_log(&mut frames);
                 each_tick(car, &frames);
                 frames_batch.extend_from_slice(&frames);
                 if frames_batch.len() >= WRITER_BATCH {
