@@ -712,13 +712,16 @@ enum Batch {
 /// (as `trace.csv`) as they happen, so a long run does not hold its bus log in memory, and
 /// handing the frames to `each_tick` with the car. The returned record has an empty `log`
 /// (its trace is complete, for the summary and the plots). Both files are formatted and
-/// written on a thread of its own beside the simulation, in batches through a bounded
-/// queue; a write error ends the writing and is returned once the run is over.
+/// written (and flushed) on a thread of its own beside the simulation, in batches through
+/// a bounded queue; a write error ends the writing and is returned once the run is over.
+/// `after_run` gets the record as soon as the simulation ends, while the writer finishes
+/// (the summary and the plots need only the record).
 pub fn run_streaming<W: Write + Send, T: Write + Send>(
     scenario: &Scenario,
     bus_log: &mut W,
     trace: &mut T,
     mut each_tick: impl FnMut(&mut VirtualCar, &[LoggedFrame]),
+    after_run: impl FnOnce(&RunRecord) -> io::Result<()>,
 ) -> io::Result<RunRecord> {
     std::thread::scope(|scope| {
         let (batches, queue) = std::sync::mpsc::sync_channel::<Batch>(WRITER_QUEUE);
@@ -730,7 +733,8 @@ pub fn run_streaming<W: Write + Send, T: Write + Send>(
                     Batch::Rows(rows) => write_trace_rows(trace, &rows)?,
                 }
             }
-            Ok(())
+            bus_log.flush()?;
+            trace.flush()
         });
         // A failed send means the writer stopped on an error, reported below.
         let send = |batch| {
@@ -765,8 +769,10 @@ pub fn run_streaming<W: Write + Send, T: Write + Send>(
         send(Batch::Frames(frames_batch));
         send(Batch::Rows(rows_batch));
         drop(batches);
+        // While the writer catches up with the last batches.
+        let finished = after_run(&record);
         match writer.join() {
-            Ok(written) => written.map(|()| record),
+            Ok(written) => written.and(finished).map(|()| record),
             Err(panic) => std::panic::resume_unwind(panic),
         }
     })

@@ -451,10 +451,19 @@ fn the_streamed_bus_log_and_trace_are_the_recorded_ones() {
     write_trace(&mut recorded_trace, &whole.trace).unwrap();
     let (mut streamed, mut streamed_trace) = (Vec::new(), Vec::new());
     let mut frames_seen = 0;
-    let record = run_streaming(&s, &mut streamed, &mut streamed_trace, |_, frames| {
-        frames_seen += frames.len()
-    })
+    let mut handed_over = None;
+    let record = run_streaming(
+        &s,
+        &mut streamed,
+        &mut streamed_trace,
+        |_, frames| frames_seen += frames.len(),
+        |record| {
+            handed_over = Some(record.trace.len());
+            Ok(())
+        },
+    )
     .unwrap();
+    assert_eq!(handed_over, Some(record.trace.len()));
     assert!(record.log.is_empty(), "streamed runs keep no log in memory");
     assert!(recorded.len() > 1000);
     assert_eq!(streamed, recorded);

@@ -11,7 +11,7 @@ use autoplug_virtual_car::scenario::Scenario;
 use autoplug_virtual_car::socketcand::{ClientFrame, SocketcandServer};
 use clap::{Parser, Subcommand};
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -216,8 +216,11 @@ fn run_one(
     // sender: when one appears on the bus, the other clients get it (as on a SocketCAN
     // interface, where every socket but the sender's sees a frame) and its sender does not.
     let mut on_the_way: std::collections::VecDeque<ClientFrame> = std::collections::VecDeque::new();
-    let record: RunRecord =
-        report::run_streaming(scenario, &mut bus_log, &mut trace, |car, frames| {
+    let record: RunRecord = report::run_streaming(
+        scenario,
+        &mut bus_log,
+        &mut trace,
+        |car, frames| {
             if let Some(server) = server {
                 loop {
                     let sent = match held.take() {
@@ -258,11 +261,11 @@ fn run_one(
                     std::thread::sleep(wait);
                 }
             }
-        })?;
-    bus_log.flush()?;
-    trace.flush()?;
+        },
+        // Rendered while the writer thread finishes the bus log and the trace.
+        |record| report::write_summary_and_plots(&dir, record),
+    )?;
     let elapsed = wall.elapsed().as_secs_f64();
-    report::write_summary_and_plots(&dir, &record)?;
     println!("{}", scenario.name);
     if !scenario.description.is_empty() {
         println!("  {}", scenario.description);
