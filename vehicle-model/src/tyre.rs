@@ -41,7 +41,26 @@ impl MagicFormula {
         Self { c, e }
     }
 
+    /// Whether this is the shape `C = 1.5, E = 0`, which has a closed form without
+    /// trigonometry (see [`MagicFormula::secant_ratio_c15`]).
+    fn is_c15(&self) -> bool {
+        self.c == 1.5 && self.e == 0.0
+    }
+
+    /// `g(z)/(C·z)` for `C = 1.5`, `E = 0`, `z >= 0`. With θ = atan z and r = √(1 + z²):
+    /// cos θ = 1/r, and the half-angle formulas give sin(3θ/2) = sin θ·cos(θ/2) +
+    /// cos θ·sin(θ/2) = z·(r + 2) / (r·√(2r·(r + 1))). Two square roots instead of an
+    /// arctangent and a sine, four times per step of the vehicle model (the largest
+    /// single cost of a virtual-car tick), and no cancellation at small z.
+    fn secant_ratio_c15(z: f64) -> f64 {
+        let r = (1.0 + z * z).sqrt();
+        (r + 2.0) / (1.5 * r * (2.0 * r * (r + 1.0)).sqrt())
+    }
+
     pub(crate) fn value(&self, z: f64) -> f64 {
+        if self.is_c15() {
+            return 1.5 * z * Self::secant_ratio_c15(z);
+        }
         let argument = if self.e == 0.0 {
             z
         } else {
@@ -53,7 +72,9 @@ impl MagicFormula {
     /// `g(z)/(C·z)` for `z >= 0`: the secant stiffness relative to the initial slope,
     /// 1 at `z = 0`.
     fn secant_ratio(&self, z: f64) -> f64 {
-        if z < 1e-4 {
+        if self.is_c15() {
+            Self::secant_ratio_c15(z)
+        } else if z < 1e-4 {
             // g(z) = C·z·(1 + O(z²)).
             1.0
         } else {
@@ -247,6 +268,23 @@ mod tests {
             surface_speed,
             cornering_stiffness_per_load: 14.0,
         }
+    }
+
+    #[test]
+    fn closed_form_of_c15_is_the_trigonometric_one() {
+        let shape = MagicFormula::new(1.5, 0.0);
+        assert!(shape.is_c15());
+        for i in 0..=4000 {
+            // 0 to 400: far past the peak (z ≈ 1.73) and the locked wheel on ice.
+            let z = f64::from(i) * 0.1 * (1.0 + f64::from(i) * 0.001);
+            let trig = (1.5 * z.atan()).sin();
+            assert!((shape.value(z) - trig).abs() < 1e-12, "g({z})");
+            if z >= 1e-3 {
+                let secant = trig / (1.5 * z);
+                assert!((shape.secant_ratio(z) - secant).abs() < 1e-12, "g({z})/(Cz)");
+            }
+        }
+        assert_eq!(shape.secant_ratio(0.0), 1.0);
     }
 
     #[test]
