@@ -297,10 +297,17 @@ impl VirtualDiag {
 
     /// Timers and a slice of pending programming; returns a reset request once its
     /// response is out.
+    // Inlined up to the early return: the car calls this for each ECU every tick, and
+    // nearly always the stack is quiet.
+    #[inline]
     pub fn poll(&mut self, t_us: u64, dtcs: &mut Dtcs) -> bool {
         if self.quiet || self.stalled(t_us) {
             return false;
         }
+        self.poll_busy(t_us, dtcs)
+    }
+
+    fn poll_busy(&mut self, t_us: u64, dtcs: &mut Dtcs) -> bool {
         let mut backend = backend!(self, dtcs);
         self.stack.poll(Instant::from_micros(t_us), &mut backend);
         let busy = backend.busy_us;
@@ -311,11 +318,17 @@ impl VirtualDiag {
     }
 
     /// The diagnostic frames to send now (sent at once: the stack is told so).
+    // Inlined up to the early return, as `poll`.
+    #[inline]
     pub fn poll_transmit(&mut self, t_us: u64) -> Vec<Frame> {
-        let mut frames = Vec::new();
         if self.quiet || self.stalled(t_us) {
-            return frames;
+            return Vec::new();
         }
+        self.poll_transmit_busy(t_us)
+    }
+
+    fn poll_transmit_busy(&mut self, t_us: u64) -> Vec<Frame> {
+        let mut frames = Vec::new();
         let now = Instant::from_micros(t_us);
         while let Some(frame) = self.stack.poll_transmit(now) {
             self.stack.confirm_transmit(now);
@@ -333,10 +346,15 @@ impl VirtualDiag {
 
     /// The self-test passed (CAN up, control loop running): an image booted unconfirmed
     /// confirms itself and raises the version floor to its own version.
+    #[inline]
     pub fn self_test_passed(&mut self, t_us: u64) {
         if self.boot_state != BootState::Trial || self.stalled(t_us) {
             return;
         }
+        self.confirm_trial(t_us);
+    }
+
+    fn confirm_trial(&mut self, t_us: u64) {
         let before = busy_us(&self.flash);
         let confirmed = state_twin(&self.flash)
             .is_ok_and(|mut twin| ab::confirm(&mut twin, self.running).is_ok());
