@@ -23,7 +23,7 @@
 //! a braked car on a slope stands still, and a stopping car does not jitter. The
 //! deflection update is backward Euler, so it is stable for any step.
 
-use crate::params::TyreParams;
+use crate::params::{TyreParams, VehicleParams, GRAVITY};
 
 /// The magic-formula shape `g(z) = sin(C·atan(z − E·(z − atan z)))`, peak value 1.
 #[derive(Clone, Copy, Debug)]
@@ -245,6 +245,30 @@ pub fn longitudinal_friction_coefficient(p: &TyreParams, mu: f64, slip: f64) -> 
     mu * shape.value(b * slip.abs()) * slip.signum()
 }
 
+/// The largest steady deceleration the four tyres can give a car braking in a straight
+/// line on a road of friction `mu`, m/s²: every tyre at its friction peak under the loads
+/// that this deceleration itself moves onto the front axle, with the tyres' load
+/// sensitivity (a more loaded tyre has a lower friction coefficient, so the car gets less
+/// than µ·g). The tyres alone: no rolling resistance, drag or grade. It bounds what any
+/// ABS can reach once the brake pressure is built; `v²/(2·µ·g)` assumes µ·g.
+pub fn peak_braking_deceleration(p: &VehicleParams, mu: f64) -> f64 {
+    let c = &p.chassis;
+    let weight = c.mass_kg * GRAVITY;
+    let model = TyreModel::new(&p.tyre, weight / 4.0);
+    // A fixed point: the load transfer grows with the deceleration, which falls with it
+    // (by a few per cent at most), so a few dozen rounds settle it to machine precision.
+    let mut decel = mu * GRAVITY;
+    for _ in 0..64 {
+        let transfer = c.mass_kg * decel * c.cg_height_m / c.wheelbase_m;
+        let front = 0.5 * (weight * c.cg_to_rear_axle_m() / c.wheelbase_m + transfer);
+        let rear = (0.5 * (weight * c.cg_to_front_axle_m() / c.wheelbase_m - transfer)).max(0.0);
+        let force =
+            2.0 * (model.effective_mu(mu, front) * front + model.effective_mu(mu, rear) * rear);
+        decel = force / c.mass_kg;
+    }
+    decel
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -271,6 +295,24 @@ mod tests {
     }
 
     #[test]
+    fn peak_braking_is_below_mu_g_by_the_load_transfer() {
+        let p = VehicleParams::evo_vi();
+        let g = GRAVITY;
+        let dry = peak_braking_deceleration(&p, 1.0);
+        // Front wheels at ≈ 1.6× and rear at ≈ 0.4× the nominal load near 1 g, friction
+        // 0.1 × the relative load lower (higher): ≈ 3.6 % less than µ·g on dry asphalt.
+        assert!(dry > 0.95 * g && dry < 0.975 * g, "{}", dry / g);
+        // The static front bias alone costs under 1 %; the transfer grows with µ.
+        let ice = peak_braking_deceleration(&p, 0.2);
+        assert!(ice < 0.2 * g && ice > 0.99 * 0.2 * g, "{}", ice / g);
+        let losses: Vec<f64> = [0.2, 0.4, 0.6, 0.8, 1.0]
+            .iter()
+            .map(|&mu| 1.0 - peak_braking_deceleration(&p, mu) / (mu * g))
+            .collect();
+        assert!(losses.windows(2).all(|w| w[0] < w[1]), "{losses:?}");
+    }
+
+    #[test]
     fn closed_form_of_c15_is_the_trigonometric_one() {
         let shape = MagicFormula::new(1.5, 0.0);
         assert!(shape.is_c15());
@@ -281,7 +323,10 @@ mod tests {
             assert!((shape.value(z) - trig).abs() < 1e-12, "g({z})");
             if z >= 1e-3 {
                 let secant = trig / (1.5 * z);
-                assert!((shape.secant_ratio(z) - secant).abs() < 1e-12, "g({z})/(Cz)");
+                assert!(
+                    (shape.secant_ratio(z) - secant).abs() < 1e-12,
+                    "g({z})/(Cz)"
+                );
             }
         }
         assert_eq!(shape.secant_ratio(0.0), 1.0);
