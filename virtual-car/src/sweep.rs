@@ -7,6 +7,8 @@
 
 use std::fmt::Write;
 
+use autoplug_vehicle::{peak_braking_deceleration, VehicleParams};
+
 use crate::plot::{Axis, Plot, Series};
 use crate::report::{self, Stop};
 use crate::scenario::Scenario;
@@ -128,12 +130,22 @@ pub fn run_sweep(
     results.into_iter().flatten().collect()
 }
 
-/// The sweep as a Markdown table: one row per stop, distance against the limit, the
-/// longest wheel lock and the heading change.
+/// The stop from `from_kmh` at the car's tyres' own limit on friction `mu`, m: a constant
+/// [`peak_braking_deceleration`] from the first instant (every tyre at its peak under
+/// the braking load transfer, no pressure build-up, no drag or rolling resistance). The
+/// tyres lose friction with load, so this is longer than v²/(2µg): 1.037 × on µ = 1.
+pub fn tyres_limit_m(mu: f64, from_kmh: f64) -> f64 {
+    let v = from_kmh / 3.6;
+    v * v / (2.0 * peak_braking_deceleration(&VehicleParams::evo_vi(), mu))
+}
+
+/// The sweep as a Markdown table: one row per stop, distance against the limit v²/(2µg)
+/// and against the tyres' own limit ([`tyres_limit_m`]), the longest wheel lock and the
+/// heading change.
 pub fn table(stops: &[SweepStop]) -> String {
     let mut t = String::new();
-    t.push_str("| µ left / right | from km/h | distance m | limit m | × limit | longest lock s | heading ° |\n");
-    t.push_str("|---|---:|---:|---:|---:|---:|---:|\n");
+    t.push_str("| µ left / right | from km/h | distance m | limit m | × limit | × tyres' limit | longest lock s | heading ° |\n");
+    t.push_str("|---|---:|---:|---:|---:|---:|---:|---:|\n");
     for s in stops {
         let mu = if s.even() {
             format!("{}", s.mu_left)
@@ -142,9 +154,17 @@ pub fn table(stops: &[SweepStop]) -> String {
         };
         match &s.stop {
             Some(stop) => {
+                let tyres = if s.even() {
+                    format!(
+                        "{:.3}",
+                        stop.distance_m / tyres_limit_m(s.mu_left, stop.from_kmh)
+                    )
+                } else {
+                    String::new()
+                };
                 let _ = writeln!(
                     t,
-                    "| {mu} | {:.0} | {:.1} | {:.1} | {:.3} | {:.2} | {:+.1} |",
+                    "| {mu} | {:.0} | {:.1} | {:.1} | {:.3} | {tyres} | {:.2} | {:+.1} |",
                     stop.from_kmh,
                     stop.distance_m,
                     stop.limit_m,
@@ -154,7 +174,7 @@ pub fn table(stops: &[SweepStop]) -> String {
                 );
             }
             None => {
-                let _ = writeln!(t, "| {mu} | {:.0} | no stop | | | | |", s.speed_kmh);
+                let _ = writeln!(t, "| {mu} | {:.0} | no stop | | | | | |", s.speed_kmh);
             }
         }
     }
