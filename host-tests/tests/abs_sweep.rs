@@ -5,11 +5,6 @@
 
 use autoplug_virtual_car::sweep::{self, SweepStop};
 
-/// Every stop from this speed up is held to [`FAST_RATIO`]; below it the brake system's
-/// pressure build-up (a fixed ~0.1 s at full speed) weighs more: [`SLOW_RATIO`].
-const FAST_FROM_KMH: f64 = 50.0;
-const FAST_RATIO: f64 = 1.05;
-const SLOW_RATIO: f64 = 1.10;
 /// Longest a wheel may stay locked (below 10 % of the car's speed), s.
 const MAX_LOCK_S: f64 = 0.2;
 /// Largest heading change of a split-friction stop with the wheel held straight, degrees.
@@ -25,11 +20,7 @@ fn check(s: &SweepStop) -> Result<(), String> {
         ));
     }
     if s.even() {
-        let bound = if stop.from_kmh >= FAST_FROM_KMH - 0.5 {
-            FAST_RATIO
-        } else {
-            SLOW_RATIO
-        };
+        let bound = sweep::ratio_bound(stop.from_kmh);
         if stop.ratio_to_limit > bound {
             return Err(format!(
                 "{where_}: {} m = {} x the limit (bound {bound})",

@@ -26,6 +26,25 @@ pub const FRICTIONS: [f64; 7] = [0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0];
 /// The initial speeds of the sweep, km/h.
 pub const SPEEDS_KMH: [f64; 8] = [40.0, 50.0, 60.0, 80.0, 100.0, 130.0, 160.0, 200.0];
 
+/// Issue 13's bound on an even-friction stop, × v²/(2µg): from [`BOUND_FAST_FROM_KMH`] up ...
+pub const BOUND_FAST: f64 = 1.05;
+
+/// ... and below it, where the brake system's pressure build-up weighs more.
+pub const BOUND_SLOW: f64 = 1.10;
+
+/// Where the bound changes, km/h.
+pub const BOUND_FAST_FROM_KMH: f64 = 50.0;
+
+/// The bound on a stop from `from_kmh` (the speed measured at the brake: drag has taken
+/// a few tenths of a km/h off the scenario's speed by then, so 49.5 counts as 50).
+pub fn ratio_bound(from_kmh: f64) -> f64 {
+    if from_kmh >= BOUND_FAST_FROM_KMH - 0.5 {
+        BOUND_FAST
+    } else {
+        BOUND_SLOW
+    }
+}
+
 /// Split friction (left, right) for the heading check: ice beside asphalt, snow beside wet.
 pub const SPLIT_FRICTIONS: [(f64, f64); 2] = [(0.2, 1.0), (0.3, 0.8)];
 
@@ -202,6 +221,16 @@ pub fn plot(stops: &[SweepStop]) -> Plot {
             axis: Axis::Left,
             steps: false,
         })
+        .chain(std::iter::once(Series {
+            name: "bound".into(),
+            points: vec![
+                (SPEEDS_KMH[0].min(BOUND_FAST_FROM_KMH), BOUND_SLOW),
+                (BOUND_FAST_FROM_KMH, BOUND_FAST),
+                (SPEEDS_KMH[SPEEDS_KMH.len() - 1], BOUND_FAST),
+            ],
+            axis: Axis::Left,
+            steps: true,
+        }))
         .collect();
     Plot {
         title: "Full braking with ABS: stopping distance / v²/(2µg)".into(),
