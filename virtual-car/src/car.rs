@@ -376,7 +376,7 @@ impl VirtualCar {
             y_m: 0.0,
             heading_rad: 0.0,
         };
-        let vehicle = Vehicle::new(VehicleParams::evo_vi(), environment, initial, scenario.seed);
+        let vehicle = Vehicle::new(Self::vehicle_params(), environment, initial, scenario.seed);
         let mut bus = VirtualBus::new(BusConfig {
             seed: scenario.seed,
             // Drained every tick: a 1 ms tick holds at most ~10 frames.
@@ -440,6 +440,11 @@ impl VirtualCar {
             car.apply_event(&event);
         }
         car
+    }
+
+    /// The car the virtual car simulates: the Lancer Evolution VI of the 2011 report.
+    pub fn vehicle_params() -> VehicleParams {
+        VehicleParams::evo_vi()
     }
 
     /// Simulated time, µs.

@@ -7,8 +7,9 @@
 
 use std::fmt::Write;
 
-use autoplug_vehicle::{peak_braking_deceleration, VehicleParams};
+use autoplug_vehicle::peak_braking_deceleration;
 
+use crate::car::VirtualCar;
 use crate::plot::{Axis, Plot, Series};
 use crate::report::{self, Stop};
 use crate::scenario::Scenario;
@@ -155,7 +156,7 @@ pub fn run_sweep(
 /// tyres lose friction with load, so this is longer than v²/(2µg): 1.037 × on µ = 1.
 pub fn tyres_limit_m(mu: f64, from_kmh: f64) -> f64 {
     let v = from_kmh / 3.6;
-    v * v / (2.0 * peak_braking_deceleration(&VehicleParams::evo_vi(), mu))
+    v * v / (2.0 * peak_braking_deceleration(&VirtualCar::vehicle_params(), mu))
 }
 
 /// The sweep as a Markdown table: one row per stop, distance against the limit v²/(2µg)
