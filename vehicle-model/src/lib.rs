@@ -47,7 +47,9 @@ pub use interface::{
     Actuators, Environment, Gear, GearCommand, InitialState, VehicleState, FL, FR, RL, RR,
 };
 pub use params::{VehicleParams, GRAVITY};
-pub use tyre::{longitudinal_friction_coefficient, peak_braking_deceleration};
+pub use tyre::{
+    longitudinal_friction_coefficient, peak_braking_deceleration, shortest_braking_distance,
+};
 
 use body::{flush_tiny, Body, BodyForces, Geometry};
 use driveline::{signed_ratio, Driveline, Gearbox, WheelLoads};

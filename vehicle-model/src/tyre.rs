@@ -269,6 +269,51 @@ pub fn peak_braking_deceleration(p: &VehicleParams, mu: f64) -> f64 {
     decel
 }
 
+/// The shortest stop the car can make braking in a straight line on a road of friction
+/// `mu` from `from_mps`, m, the brake pressed fully at the start. Each wheel brakes with
+/// the lesser of the torque its brake pressure has built up to (the apply lag of the
+/// brake parameters) and its tyre's peak force under its present load (the braking load
+/// transfer with the body's lag, the tyres' load sensitivity), and drag helps. The wheels
+/// reach their peak slip at once and stay there, so no ABS can stop shorter: a measured
+/// stop's excess over this is what the control costs, not the brakes or the tyres.
+pub fn shortest_braking_distance(p: &VehicleParams, mu: f64, from_mps: f64) -> f64 {
+    // Fine against the 40–50 ms of the brake and load-transfer lags.
+    const DT: f64 = 1e-4;
+    // Ends the loop without friction, where drag alone never quite stops the car.
+    const MAX_T: f64 = 600.0;
+    let c = &p.chassis;
+    let b = &p.brakes;
+    let weight = c.mass_kg * GRAVITY;
+    let model = TyreModel::new(&p.tyre, weight / 4.0);
+    let radius = p.tyre.rolling_radius_m;
+    let drag_per_v2 =
+        0.5 * p.aero.air_density_kg_per_m3 * p.aero.drag_coefficient * p.aero.frontal_area_m2;
+    let static_front = 0.5 * weight * c.cg_to_rear_axle_m() / c.wheelbase_m;
+    let static_rear = 0.5 * weight * c.cg_to_front_axle_m() / c.wheelbase_m;
+    let wheel_force = |built: f64, max_torque_nm: f64, load: f64| {
+        (built * max_torque_nm / radius).min(model.effective_mu(mu, load) * load)
+    };
+    let (mut v, mut x, mut t, mut transfer) = (from_mps, 0.0, 0.0, 0.0);
+    while v > 0.0 && t < MAX_T {
+        let built = 1.0 - (-t / b.pressure_apply_time_constant_s).exp();
+        let front = static_front + 0.5 * transfer;
+        let rear = (static_rear - 0.5 * transfer).max(0.0);
+        let force = 2.0
+            * (wheel_force(built, b.max_torque_front_nm, front)
+                + wheel_force(built, b.max_torque_rear_nm, rear))
+            + drag_per_v2 * v * v;
+        let decel = force / c.mass_kg;
+        // The axle load transfer follows the deceleration with the body's lag.
+        let steady = c.mass_kg * decel * c.cg_height_m / c.wheelbase_m;
+        transfer += (steady - transfer) * DT / (c.load_transfer_time_constant_s + DT);
+        let v_next = (v - decel * DT).max(0.0);
+        x += 0.5 * (v + v_next) * DT;
+        v = v_next;
+        t += DT;
+    }
+    x
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -410,5 +455,39 @@ mod tests {
         }
         // The regularisation leaks the deflection only very slowly.
         assert!(later > 0.5 * held, "{later}");
+    }
+
+    #[test]
+    fn shortest_stop_is_the_tyres_limit_plus_the_brake_build_up() {
+        let p = VehicleParams::evo_vi();
+        let v = 100.0 / 3.6;
+        for mu in [0.2, 0.5, 1.0] {
+            let tyres_only = v * v / (2.0 * peak_braking_deceleration(&p, mu));
+            // Instant brakes and load transfer, no drag: the tyres' limit itself.
+            let mut ideal = p.clone();
+            ideal.brakes.pressure_apply_time_constant_s = 1e-9;
+            ideal.chassis.load_transfer_time_constant_s = 1e-9;
+            ideal.aero.drag_coefficient = 0.0;
+            let instant = shortest_braking_distance(&ideal, mu, v);
+            assert!(
+                (instant / tyres_only - 1.0).abs() < 2e-3,
+                "µ {mu}: {instant} vs {tyres_only}"
+            );
+            // The real brakes build their pressure over 40 ms: a few tenths of a metre,
+            // never more than driving on for one time constant. Drag gives a little back.
+            let real = shortest_braking_distance(&p, mu, v);
+            let mut no_drag = p.clone();
+            no_drag.aero.drag_coefficient = 0.0;
+            let build_up = shortest_braking_distance(&no_drag, mu, v) - tyres_only;
+            let tau = p.brakes.pressure_apply_time_constant_s;
+            assert!(
+                build_up > 0.0 && build_up < v * tau,
+                "µ {mu}: build-up {build_up} m"
+            );
+            assert!(real < tyres_only + build_up, "µ {mu}: drag helps");
+        }
+        // Nothing to stop ends at once; no friction to stop with ends too.
+        assert_eq!(shortest_braking_distance(&p, 1.0, 0.0), 0.0);
+        assert!(shortest_braking_distance(&p, 0.0, v).is_finite());
     }
 }

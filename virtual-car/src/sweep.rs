@@ -7,7 +7,7 @@
 
 use std::fmt::Write;
 
-use autoplug_vehicle::peak_braking_deceleration;
+use autoplug_vehicle::shortest_braking_distance;
 
 use crate::car::VirtualCar;
 use crate::plot::{Axis, Plot, Series};
@@ -150,21 +150,21 @@ pub fn run_sweep(
     results.into_iter().flatten().collect()
 }
 
-/// The stop from `from_kmh` at the car's tyres' own limit on friction `mu`, m: a constant
-/// [`peak_braking_deceleration`] from the first instant (every tyre at its peak under
-/// the braking load transfer, no pressure build-up, no drag or rolling resistance). The
-/// tyres lose friction with load, so this is longer than v²/(2µg): 1.037 × on µ = 1.
-pub fn tyres_limit_m(mu: f64, from_kmh: f64) -> f64 {
-    let v = from_kmh / 3.6;
-    v * v / (2.0 * peak_braking_deceleration(&VirtualCar::vehicle_params(), mu))
+/// The shortest stop the car itself allows from `from_kmh` on friction `mu`, m
+/// ([`shortest_braking_distance`]): every tyre at its peak under the braking load transfer
+/// as soon as the brake pressure has built up to hold it there, drag included. Longer than
+/// v²/(2µg) by the tyres' load sensitivity (3.7 % on µ = 1) and the pressure build-up, so
+/// a stop's excess over this is what the ABS costs.
+pub fn car_limit_m(mu: f64, from_kmh: f64) -> f64 {
+    shortest_braking_distance(&VirtualCar::vehicle_params(), mu, from_kmh / 3.6)
 }
 
 /// The sweep as a Markdown table: one row per stop, distance against the limit v²/(2µg)
-/// and against the tyres' own limit ([`tyres_limit_m`]), the longest wheel lock and the
+/// and against the shortest stop the car allows ([`car_limit_m`]), the longest wheel lock and the
 /// heading change.
 pub fn table(stops: &[SweepStop]) -> String {
     let mut t = String::new();
-    t.push_str("| µ left / right | from km/h | distance m | limit m | × limit | × tyres' limit | longest lock s | heading ° |\n");
+    t.push_str("| µ left / right | from km/h | distance m | limit m | × limit | × car's limit | longest lock s | heading ° |\n");
     t.push_str("|---|---:|---:|---:|---:|---:|---:|---:|\n");
     for s in stops {
         let mu = if s.even() {
@@ -174,17 +174,17 @@ pub fn table(stops: &[SweepStop]) -> String {
         };
         match &s.stop {
             Some(stop) => {
-                let tyres = if s.even() {
+                let car = if s.even() {
                     format!(
                         "{:.3}",
-                        stop.distance_m / tyres_limit_m(s.mu_left, stop.from_kmh)
+                        stop.distance_m / car_limit_m(s.mu_left, stop.from_kmh)
                     )
                 } else {
                     String::new()
                 };
                 let _ = writeln!(
                     t,
-                    "| {mu} | {:.0} | {:.1} | {:.1} | {:.3} | {tyres} | {:.2} | {:+.1} |",
+                    "| {mu} | {:.0} | {:.1} | {:.1} | {:.3} | {car} | {:.2} | {:+.1} |",
                     stop.from_kmh,
                     stop.distance_m,
                     stop.limit_m,
