@@ -15,6 +15,7 @@ shared_cases!(
     front_axle_yaw_moment_builds_up_slowly,
     saturated_brake_resets_the_controller,
     released_wheel_teaches_the_friction_peak,
+    peak_seeking_follows_the_tyre_either_side_of_the_fixed_target,
     abs_inactive_below_the_minimum_speed,
     abs_times_out_after_it_stops_acting,
     traction_control_cuts_on_a_spinning_wheel,
