@@ -81,7 +81,7 @@ fn sweep_within_bounds(
 }
 
 #[test]
-#[ignore = "issue 13 open: 5 stops at 50-60 km/h on friction 0.6-1.0 are over 1.05 (on 1.0 from 50 km/h the car's own limit is 1.049, see sweep::car_limit_m), and 3 split-friction stops are longer than on the low side all round (run with --ignored; `virtual-car abs-sweep` shows where)"]
+#[ignore = "issue 13 open: 5 stops at 50-60 km/h on friction 0.6-1.0 are over 1.05 (on 1.0 from 50 km/h the car's own limit is 1.049, see sweep::car_limit_m), and 4 split-friction stops are longer than on the low side all round (run with --ignored; `virtual-car abs-sweep` shows where)"]
 fn full_braking_stays_near_the_limit_on_any_friction_and_keeps_the_heading_on_split_friction() {
     sweep_within_bounds(
         &sweep::FRICTIONS,
@@ -115,7 +115,7 @@ fn full_braking_from_80_kmh_stays_near_the_limit_on_any_friction() {
 /// Split friction at every speed of the sweep: no wheel locked and the heading within 10°
 /// with the wheel held straight (17° from 160 km/h on ice beside asphalt before the front
 /// axle's yaw-moment build-up was slowed). The distance bound of the whole sweep (no
-/// longer than on the low side all round) is not met yet at 3 of these 8 points.
+/// longer than on the low side all round) is not met yet at 4 of these 8 points.
 #[test]
 fn full_braking_on_split_friction_keeps_the_heading() {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
