@@ -51,6 +51,14 @@
 //!   partly holds the others' wheels (sought per channel, the front targets climbed to
 //!   8 % on ice whose tyres peak at 2.6 %). Nothing is assumed about the tyre: on the test
 //!   plant's tyre, peaking at 15 %, the factor goes up instead.
+//! - **Pressure hold.** The brake pressure lags the command (calibration
+//!   [`BRAKE_APPLY_TAU_S`], [`BRAKE_RELEASE_TAU_S`]), so the ECU follows what each channel's
+//!   pressure has built up to. When a channel engages, its release starts from that
+//!   pressure instead of from the driver's full command: a wheel that runs into lock while
+//!   the pressure is still rising gets it held at once. (Released from the full command,
+//!   the pressure kept rising for another 10–15 ms; the first cycle overshot to 20–32 %
+//!   slip on friction 0.6–1.0 and stalled there for a fifth of a second.) While a wheel
+//!   slips less than its target, the release unwinds faster ([`UNWIND_KI`]).
 //! - **Channels.** Three, as in a classic 3-channel ABS: front left and front right are
 //!   controlled individually (the fronts carry most of the braking); the rear axle is one
 //!   channel controlled on the rear wheel with the *larger* slip, and both rear wheels get
@@ -238,6 +246,16 @@ pub const BRAKE_TORQUE_AT_FULL_NM: [f32; 3] = [3000.0, 3000.0, 1400.0];
 /// Calibration: rotating inertia of one wheel with its brake disc and half shaft, kg·m².
 pub const WHEEL_INERTIA_KGM2: f32 = 1.2;
 
+/// Calibration: time constant of the brake pressure rising to the command, s (booster,
+/// master cylinder and inlet valves of the EVO's hydraulics, as the vehicle model has
+/// them). The ECU follows the pressure it cannot measure with it (the pressure hold in
+/// the crate documentation).
+pub const BRAKE_APPLY_TAU_S: f32 = 0.04;
+
+/// Calibration: time constant of the brake pressure falling to the command, s (outlet
+/// valves into the low-pressure accumulator).
+pub const BRAKE_RELEASE_TAU_S: f32 = 0.02;
+
 /// Calibration: rolling radius of the 225/45 ZR17 tyres, m.
 pub const WHEEL_RADIUS_M: f32 = 0.31;
 
@@ -248,8 +266,11 @@ pub const DECEL_AT_FULL_FRICTION_MPS2: f32 = 9.0;
 
 /// Time constant of the low-pass filter on the vehicle deceleration, s: smooths the
 /// 1 km/h steps of VehicleSpeedMsg (one every 30 ms at 1 g, every 140 ms on ice) and
-/// still follows a change of road within about a second.
-pub const DECEL_FILTER_TAU_S: f32 = 0.3;
+/// still follows a change of road within half a second. The start of a stop weighs most
+/// (the car is fastest): at 0.3 s the estimate, and the speed reference and the slip
+/// target floor built on it, lagged the first half second (µ 1.0 from 50 km/h: 1.070 ×
+/// v²/(2µg), 1.063 at 0.15 s).
+pub const DECEL_FILTER_TAU_S: f32 = 0.15;
 
 /// Peak seeking: the factor on the slip targets moves one step, then stays for this long,
 /// µs, while the brake torque is measured (at least two cycles of the pressure's pulsing,
@@ -326,6 +347,13 @@ pub const YAW_DELAY_INITIAL_MARGIN: f32 = 0.0;
 /// straight, turned 17° by its end, at 0.1 %/s 7.6° for 3 % more distance (still shorter
 /// than on ice all round); with no build-up at all it stops longer than on ice all round.
 pub const YAW_DELAY_MARGIN_RATE_PER_S: f32 = 0.1;
+
+/// Extra integral gain (release per unit of slip per second) while a wheel slips less than
+/// its target: an under-braked wheel (the road got better, or the pressure hold let go
+/// too much) gets its brake back at the PID's integral rate plus this one, so that the
+/// release built up on ice unwinds within a few tenths of a second on asphalt, while the
+/// integral stays gentle on the way up, where a faster one set the brake pulsing on ice.
+pub const UNWIND_KI: f32 = 2000.0;
 
 /// The ABS channel controller, built at compile time: an invalid tuning fails the build.
 const ABS_PID: Pid = Pid::from_tuning(ABS_TUNING);
@@ -488,6 +516,10 @@ impl PeakSeek {
         } else if mean <= self.last_mean * (1.0 + SEEK_TOLERANCE) {
             // Flat: prefer the lower slip, where the tyre keeps more side force.
             self.raising = false;
+        } else {
+            // Better: go on, with a larger step again (a turn on a noisy period would
+            // otherwise leave the smallest step to crawl back).
+            self.step = (self.step * 1.25).min(SEEK_STEP_INITIAL);
         }
         self.last_mean = mean;
         let factor = if self.raising {
@@ -591,6 +623,8 @@ pub struct AbsEcu {
     recovery: [Option<Recovery>; CHANNELS],
     /// Per channel: the tyre's peak-friction slip, once measured in this stop.
     peak_slip: [Option<f32>; CHANNELS],
+    /// Per channel: the brake pressure as the hydraulics have built it, 0..100.
+    pressure_estimate: [f32; CHANNELS],
     /// The search for the tyres' friction peak.
     seek: PeakSeek,
     tc_pid: Pid,
@@ -626,6 +660,7 @@ impl AbsEcu {
             previous_wheels_kmh: None,
             recovery: [None; CHANNELS],
             peak_slip: [None; CHANNELS],
+            pressure_estimate: [0.0; CHANNELS],
             seek: PeakSeek::NEW,
             tc_pid: TC_PID,
             tc_last_acted: None,
@@ -661,26 +696,30 @@ impl AbsEcu {
     /// Checks the wheel speed readings: returns them with invalid ones replaced by 0, and
     /// whether all four are valid now. Debounces implausible readings into the DTCs.
     fn check_wheel_sensors(&mut self, now: Instant, raw: &[f32; 4]) -> ([f32; 4], bool) {
-        let valid = raw.map(|w| w.is_finite() && (0.0..=WHEEL_SPEED_MAX_KMH).contains(&w));
+        // Plain index loops: the same checks as iterator chains took 88 bytes more of the
+        // firmware.
+        let mut sanitized = [0.0f32; 4];
         let mut all_valid = true;
-        for (i, ((w, ok), (since, dtc))) in raw
-            .iter()
-            .zip(valid)
-            .zip(self.implausible_since.iter_mut().zip(WHEEL_SENSOR_DTCS))
-            .enumerate()
-        {
+        for i in 0..4 {
+            let w = raw[i];
+            // Not a NaN or an infinity: neither lies in the range.
+            let ok = (0.0..=WHEEL_SPEED_MAX_KMH).contains(&w);
             all_valid &= ok;
-            let isolated = raw
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .all(|(_, other)| (w - other).abs() > WHEEL_PLAUSIBILITY_DIFF_KMH);
+            if ok {
+                sanitized[i] = w;
+            }
+            let mut isolated = true;
+            for (j, other) in raw.iter().enumerate() {
+                let far = (w - other).abs() > WHEEL_PLAUSIBILITY_DIFF_KMH;
+                isolated &= j == i || far;
+            }
+            let dtc = WHEEL_SENSOR_DTCS[i];
             if ok && !isolated {
-                *since = None;
+                self.implausible_since[i] = None;
                 self.dtcs.report_passed(dtc);
                 continue;
             }
-            let first = *since.get_or_insert(now);
+            let first = *self.implausible_since[i].get_or_insert(now);
             if now.micros_since(first) >= WHEEL_PLAUSIBILITY_DEBOUNCE_US {
                 if self.dtcs.report_failed(dtc, now) {
                     autoplug_log::warn!("abs: wheel {} speed sensor implausible, DTC", i);
@@ -689,12 +728,6 @@ impl AbsEcu {
                     autoplug_log::warn!("abs: wheel sensor fault, ABS off until restart");
                     self.sensor_fault = true;
                 }
-            }
-        }
-        let mut sanitized = [0.0f32; 4];
-        for ((out, w), ok) in sanitized.iter_mut().zip(raw).zip(valid) {
-            if ok {
-                *out = *w;
             }
         }
         (sanitized, all_valid)
@@ -867,6 +900,11 @@ impl AbsEcu {
         for ch in 0..CHANNELS {
             let slip = channel_slip[ch];
             if slip > SLIP_THRESHOLD {
+                if !self.engaged[ch] {
+                    // Pressure hold (crate documentation): release from the pressure
+                    // built so far, not from the driver's command.
+                    self.abs_pids[ch].set_integral(brake - self.pressure_estimate[ch]);
+                }
                 self.engaged[ch] = true;
                 acted = true;
             }
@@ -884,6 +922,10 @@ impl AbsEcu {
             // Reverse-acting loop: negating set point and measurement gives the error
             // `slip − target` and a derivative on +slip, so more slip means more release.
             let command = pid.update(-target, -slip, dt_s);
+            if slip < target {
+                // Under-braked: give the release back faster (see UNWIND_KI).
+                pid.set_integral(pid.integral() + UNWIND_KI * (slip - target) * dt_s);
+            }
             acted |= command >= RELEASE_ACTIVE_MIN || holding;
             if pid.integral() > brake || holding {
                 // Anti-windup against the real limit: releasing more than the driver
@@ -1066,6 +1108,14 @@ impl EcuLogic for AbsEcu {
         let release = release.map(|r| limit(r, 0.0, 100.0));
         let cut = limit(cut, 0.0, 100.0);
         let [a, b, c, d] = release.map(|r| limit(brake - r, 0.0, brake));
+        for (estimate, applied) in self.pressure_estimate.iter_mut().zip([a, b, c]) {
+            let tau = if applied > *estimate {
+                BRAKE_APPLY_TAU_S
+            } else {
+                BRAKE_RELEASE_TAU_S
+            };
+            *estimate += (applied - *estimate) * dt_s / (tau + dt_s);
+        }
 
         self.status = Status {
             availability,

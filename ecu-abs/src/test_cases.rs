@@ -354,10 +354,23 @@ pub fn light_braking_passes_the_command_through() {
 
 /// A wheel running into lock gets a release (PID on slip); the rear wheels keep the
 /// driver's brake and the other front wheel is held to the yaw-moment delay margin; more
-/// slip gives more release; the applied brake never exceeds the command.
+/// slip gives more release; the applied brake never exceeds the command. The driver has
+/// braked for 0.3 s before, so the pressure has built up to the command.
 pub fn slipping_wheel_is_released() {
-    let mut ecu = AbsEcu::new(Variant::Correct, ms(0));
-    let out = step_with(&mut ecu, 0, 100.0, 80.0, [70.0, 98.0, 98.0, 98.0]);
+    /// The ECU after 0.3 s of braking at 80 with the wheels rolling, then one step with
+    /// the front left wheel at `fl`.
+    fn braked_then(fl: f32) -> (AbsEcu, Actuators) {
+        let mut ecu = AbsEcu::new(Variant::Correct, ms(0));
+        let mut t = 0;
+        while t < 300_000 {
+            step_with(&mut ecu, t, 100.0, 80.0, [99.0; 4]);
+            t += STEP_PERIOD_US;
+        }
+        assert!(!ecu.status().abs_active);
+        let out = step_with(&mut ecu, t, 100.0, 80.0, [fl, 99.0, 99.0, 99.0]);
+        (ecu, out)
+    }
+    let (ecu, out) = braked_then(70.0);
     let status = ecu.status();
     assert!(status.abs_active);
     assert!(status.release[0] > 0.0, "FL slips 0.30: released");
@@ -366,16 +379,42 @@ pub fn slipping_wheel_is_released() {
     let front_right_cap = (out.brake[0] + YAW_DELAY_INITIAL_MARGIN).min(80.0);
     assert!((out.brake[1] - front_right_cap).abs() < 1e-3);
     assert_eq!(&out.brake[2..], &[80.0; 2]);
-    // A fresh controller: more slip, more release (P + D).
-    let mut other = AbsEcu::new(Variant::Correct, ms(0));
-    step_with(&mut other, 0, 100.0, 80.0, [80.0, 98.0, 98.0, 98.0]);
+    // More slip, more release (P + D).
+    let (other, _) = braked_then(80.0);
     assert!(other.status().release[0] < status.release[0]);
     assert!(other.status().release[0] > 0.0);
     // Slip between the detection threshold and the target: engaged, nothing to release.
-    let mut other = AbsEcu::new(Variant::Correct, ms(0));
-    step_with(&mut other, 0, 100.0, 80.0, [89.0, 98.0, 98.0, 98.0]);
+    let (other, _) = braked_then(89.0);
     assert!(other.status().abs_active);
     assert_eq!(other.status().release, [0.0; 4]);
+}
+
+/// Pressure hold: a wheel that runs into lock while the brake pressure is still building
+/// (the driver has just pressed the pedal) gets its brake held where the pressure has got
+/// to, well under the driver's command, rather than released from the command.
+pub fn a_wheel_locking_while_the_pressure_builds_holds_it() {
+    let mut ecu = AbsEcu::new(Variant::Correct, ms(0));
+    // 20 ms of full braking: the pressure has built to 1 − e^(−20/40) ≈ 39 %.
+    let mut t = 0;
+    while t < 20_000 {
+        step_with(&mut ecu, t, 100.0, 100.0, [99.0; 4]);
+        t += STEP_PERIOD_US;
+    }
+    // The front left wheel slips 11 %, just past the detection threshold.
+    let out = step_with(&mut ecu, t, 100.0, 100.0, [89.0, 99.0, 99.0, 99.0]);
+    assert!(ecu.status().abs_active);
+    // 1 − e^(−20 ms / BRAKE_APPLY_TAU_S), written out: no `exp` without std.
+    let built = 39.3;
+    assert!(
+        (out.brake[0] - built).abs() < 8.0,
+        "brake {} where the pressure had built to {built}",
+        out.brake[0]
+    );
+    assert_eq!(
+        &out.brake[2..],
+        &[100.0; 2],
+        "rear wheels roll: driver's brake"
+    );
 }
 
 /// Full braking from 100 km/h on μ = 1.0 with the correct build: no wheel locked for more

@@ -8,6 +8,7 @@ shared_cases!(
     publishes_its_messages_every_10_ms,
     light_braking_passes_the_command_through,
     slipping_wheel_is_released,
+    a_wheel_locking_while_the_pressure_builds_holds_it,
     full_braking_stops_short_without_locking,
     full_braking_on_low_friction,
     faulty_build_locks_the_wheels,

@@ -23,6 +23,11 @@ mod tests {
     }
 
     #[test]
+    fn a_wheel_locking_while_the_pressure_builds_holds_it() {
+        test_cases::a_wheel_locking_while_the_pressure_builds_holds_it();
+    }
+
+    #[test]
     fn full_braking_stops_short_without_locking() {
         test_cases::full_braking_stops_short_without_locking();
     }
