@@ -417,14 +417,11 @@ pub fn a_wheel_locking_while_the_pressure_builds_holds_it() {
     );
 }
 
-/// Full braking from 100 km/h on μ = 1.0 with the correct build: no wheel locked for more
-/// than 150 ms at a stretch above 10 km/h, stopping distance within 1.15 × v²/(2μg), and
-/// the brake pulses (releases non-zero and changing).
-pub fn full_braking_stops_short_without_locking() {
-    let run = brake_run(Variant::Correct, 100.0, [1.0; 4], 100.0);
-    let ideal = plant::ideal_stop_m(100.0, 1.0);
+/// Asserts that `run` stopped within `factor` × `ideal` metres and never held a wheel
+/// locked for more than 150 ms.
+fn assert_short_stop_without_lock(run: &BrakeRun, ideal: f32, factor: f32) {
     assert!(
-        run.distance_m <= 1.15 * ideal,
+        run.distance_m <= factor * ideal,
         "stopped in {} m, ideal {} m",
         run.distance_m,
         ideal
@@ -434,6 +431,14 @@ pub fn full_braking_stops_short_without_locking() {
         "locked {} ms",
         run.longest_lock_ms
     );
+}
+
+/// Full braking from 100 km/h on μ = 1.0 with the correct build: no wheel locked for more
+/// than 150 ms at a stretch above 10 km/h, stopping distance within 1.15 × v²/(2μg), and
+/// the brake pulses (releases non-zero and changing).
+pub fn full_braking_stops_short_without_locking() {
+    let run = brake_run(Variant::Correct, 100.0, [1.0; 4], 100.0);
+    assert_short_stop_without_lock(&run, plant::ideal_stop_m(100.0, 1.0), 1.15);
     assert!(
         run.release_steps > 100,
         "ABS released {} steps",
@@ -631,18 +636,7 @@ pub fn released_wheel_teaches_the_friction_peak() {
         "lowest target {} on ice peaking at 3 %",
         run.lowest_slip_target
     );
-    let ideal = plant::ideal_stop_m(100.0, 0.2);
-    assert!(
-        run.distance_m <= 1.2 * ideal,
-        "stopped in {} m, ideal {} m",
-        run.distance_m,
-        ideal
-    );
-    assert!(
-        run.longest_lock_ms <= 150,
-        "locked {} ms",
-        run.longest_lock_ms
-    );
+    assert_short_stop_without_lock(&run, plant::ideal_stop_m(100.0, 0.2), 1.2);
     let usual = brake_run(Variant::Correct, 100.0, [0.2; 4], 100.0);
     assert!(
         usual.lowest_slip_target >= SLIP_TARGET,
@@ -669,17 +663,7 @@ pub fn peak_seeking_follows_the_tyre_either_side_of_the_fixed_target() {
         "mean target {} on a tyre peaking at 6.5 %",
         low.mean_slip_target
     );
-    assert!(
-        low.distance_m <= 1.02 * ideal,
-        "stopped in {} m, ideal {} m",
-        low.distance_m,
-        ideal
-    );
-    assert!(
-        low.longest_lock_ms <= 150,
-        "locked {} ms",
-        low.longest_lock_ms
-    );
+    assert_short_stop_without_lock(&low, ideal, 1.02);
     let high = run_on(0.15);
     assert!(
         high.mean_slip_target > SLIP_TARGET,
