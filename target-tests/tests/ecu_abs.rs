@@ -106,6 +106,11 @@ mod tests {
     fn released_wheel_teaches_the_friction_peak() {
         test_cases::released_wheel_teaches_the_friction_peak();
     }
+
+    #[test]
+    fn peak_seeking_follows_the_tyre_either_side_of_the_fixed_target() {
+        test_cases::peak_seeking_follows_the_tyre_either_side_of_the_fixed_target();
+    }
 }
 
 /// Only reached by a host build with a transport feature (`--all-features`).
