@@ -1,7 +1,7 @@
 //! `virtual-car` against hostile command lines and files: errors stay short whatever the
 //! input, name the argument that is wrong, and no numeric argument panics.
 
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
 
 fn virtual_car(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_virtual-car"))
@@ -104,5 +104,30 @@ fn numeric_arguments_are_checked_never_a_panic() {
         let text = stderr(&output);
         assert!(text.contains("--wait-for-client"), "{value}: {text}");
         assert!(!text.contains("panicked"), "{value}: {text}");
+    }
+}
+
+/// `virtual-car run a.toml b.toml | head`: the reader goes away before anything is
+/// written; the program does not panic and still runs every scenario and writes its files.
+#[test]
+fn a_reader_gone_away_costs_no_output_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_virtual-car"))
+        .args(["run", "--out"])
+        .arg(dir.path())
+        .args(["scenarios/stop-100-dry.toml", "scenarios/stop-100-wet.toml"])
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the virtual-car binary runs");
+    drop(child.stdout.take());
+    let output = child.wait_with_output().expect("it ends");
+    let err = stderr(&output);
+    assert!(output.status.success(), "{:?}: {err}", output.status);
+    assert!(!err.contains("panicked"), "{err}");
+    for scenario in ["stop-100-dry", "stop-100-wet"] {
+        let summary = dir.path().join(scenario).join("summary.json");
+        assert!(summary.exists(), "{} missing", summary.display());
     }
 }

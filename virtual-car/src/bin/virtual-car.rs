@@ -16,6 +16,37 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+/// Set once standard output's reader has gone away (`virtual-car run ... | head`).
+static STDOUT_GONE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// `print!` to standard output, except that a reader gone away does not end the program
+/// (where `print!` would panic): the rest of the output is dropped and the work goes on,
+/// so every scenario still writes its files. Any other write error ends the program with
+/// a short message.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        use std::sync::atomic::Ordering;
+        if !STDOUT_GONE.load(Ordering::Relaxed) {
+            if let Err(e) = write!(std::io::stdout().lock(), $($arg)*) {
+                if e.kind() == std::io::ErrorKind::BrokenPipe {
+                    STDOUT_GONE.store(true, Ordering::Relaxed);
+                } else {
+                    eprintln!("error: cannot write to standard output: {e}");
+                    std::process::exit(1);
+                }
+            }
+        }
+    }};
+}
+
+/// [`out!`] with a newline.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        out!("{}\n", format_args!($($arg)*))
+    };
+}
+
 #[derive(Parser)]
 #[command(
     name = "virtual-car",
@@ -105,7 +136,7 @@ fn main() -> ExitCode {
             let server = match socketcand.as_deref().map(SocketcandServer::start) {
                 None => None,
                 Some(Ok(server)) => {
-                    println!("socketcand: serving can0 on {}", server.address());
+                    outln!("socketcand: serving can0 on {}", server.address());
                     Some(server)
                 }
                 Some(Err(e)) => {
@@ -178,7 +209,6 @@ fn abs_sweep(out: &Path) -> ExitCode {
         }
     };
     let table = sweep::table(&stops);
-    print!("{table}");
     let written = std::fs::create_dir_all(out)
         .and_then(|()| std::fs::write(out.join("abs-sweep.md"), &table))
         .and_then(|()| std::fs::write(out.join("abs-sweep.svg"), sweep::plot(&stops).to_svg()));
@@ -189,7 +219,8 @@ fn abs_sweep(out: &Path) -> ExitCode {
         );
         return ExitCode::FAILURE;
     }
-    println!(
+    out!("{table}");
+    outln!(
         "{} stops in {:.1} s; table and plot in {}",
         stops.len(),
         wall.elapsed().as_secs_f64(),
@@ -266,14 +297,14 @@ fn run_one(
         |record| report::write_summary_and_plots(&dir, record),
     )?;
     let elapsed = wall.elapsed().as_secs_f64();
-    println!("{}", scenario.name);
+    outln!("{}", scenario.name);
     if !scenario.description.is_empty() {
-        println!("  {}", scenario.description);
+        outln!("  {}", scenario.description);
     }
-    print!("{}", record.summary.table());
+    out!("{}", record.summary.table());
     if let Some(server) = server {
         let drops = server.drops();
-        println!(
+        outln!(
             "  {:<28} {} frame(s) dropped toward the bus, {} toward clients (queues full), {} command(s) refused",
             "socketcand",
             drops.to_bus,
@@ -281,14 +312,14 @@ fn run_one(
             server.refused_commands()
         );
     }
-    println!(
+    outln!(
         "  {:<28} {:.3} s wall for {:.1} s simulated ({:.0}x real time)",
         "run time",
         elapsed,
         scenario.duration_s,
         scenario.duration_s / elapsed.max(1e-9)
     );
-    println!("  {:<28} {}", "written to", dir.display());
+    outln!("  {:<28} {}", "written to", dir.display());
     Ok(())
 }
 
@@ -308,7 +339,7 @@ fn list(dir: &Path) -> ExitCode {
     let mut ok = true;
     for path in paths {
         match Scenario::load(&path) {
-            Ok(s) => println!(
+            Ok(s) => outln!(
                 "{:<32} {:>6.1} s  {}",
                 path.display(),
                 s.duration_s,
