@@ -1173,7 +1173,8 @@ impl EcuLogic for AbsEcu {
     }
 }
 
-/// `x` limited to `[lo, hi]`, NaN to `lo`; never panics (unlike `f32::clamp`).
+/// `x` limited to `[lo, hi]`, NaN to `lo`; never panics (unlike `f32::clamp`). Out of
+/// line: inlined at each of its call sites it took 172 bytes more of the firmware.
 #[inline(never)]
 fn limit(x: f32, lo: f32, hi: f32) -> f32 {
     if x.is_nan() || x < lo {

@@ -168,8 +168,14 @@ fn a_sweep_point_is_a_full_stop_from_its_speed_measured_against_the_limit() {
         stop.limit_m
     );
     assert!(stop.ratio_to_limit > 0.9 && stop.ratio_to_limit < 1.3);
+    // The car's own limit lies between v²/(2µg) and the stop, and the table shows the stop
+    // against it.
+    let car = sweep::car_limit_m(0.6, stop.from_kmh);
+    assert!(car > limit && car <= stop.distance_m, "car's limit {car} m");
     let table = sweep::table(std::slice::from_ref(&point));
     assert!(table.contains("| 0.6 | 80 |"), "{table}");
+    let against_car = format!("| {:.3} |", stop.distance_m / car);
+    assert!(table.contains(&against_car), "{table}");
     let svg = sweep::plot(std::slice::from_ref(&point)).to_svg();
     assert!(svg.contains("µ 0.6"));
     assert!(sweep::run_stop(f64::NAN, 0.6, 80.0).is_err());

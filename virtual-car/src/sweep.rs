@@ -160,8 +160,8 @@ pub fn car_limit_m(mu: f64, from_kmh: f64) -> f64 {
 }
 
 /// The sweep as a Markdown table: one row per stop, distance against the limit v²/(2µg)
-/// and against the shortest stop the car allows ([`car_limit_m`]), the longest wheel lock and the
-/// heading change.
+/// and against the shortest stop the car allows ([`car_limit_m`]), the longest wheel lock
+/// and the heading change.
 pub fn table(stops: &[SweepStop]) -> String {
     let mut t = String::new();
     t.push_str("| µ left / right | from km/h | distance m | limit m | × limit | × car's limit | longest lock s | heading ° |\n");
