@@ -68,7 +68,7 @@ pub enum Command {
     #[command(subcommand)]
     Image(ImageCommand),
     /// Read the identification (part number F187, software F189, serial F18C, hardware
-    /// F191) of one ECU or all nine.
+    /// F191, VIN F190, running slot and its state F1A0) of one ECU or all nine.
     Ids(ReadArgs),
     /// Read the trouble codes (UDS 0x19 02 FF) of one ECU or all nine, with their status
     /// and description.

@@ -117,7 +117,7 @@ mod tests {
     use autoplug_can::{Frame, Node};
 
     use super::*;
-    use crate::tester::{IdentJob, TesterConfig, UdsError};
+    use crate::tester::{IdentJob, TesterConfig, UdsError, IDENTIFICATION_DIDS};
     use crate::transport::Timestamp;
 
     /// A bus with one ECU that answers every ReadDataByIdentifier with "AB", or a link
@@ -179,8 +179,9 @@ mod tests {
         let mut job = IdentJob::new(&[Node::Cruise, Node::ABS], TesterConfig::default());
         let rows = run(&mut link, &mut job).unwrap();
         assert_eq!(
-            link.sent, 6,
-            "five DIDs of the cruise ECU, one of the silent ABS"
+            link.sent,
+            IDENTIFICATION_DIDS.len() + 1,
+            "every identification DID of the cruise ECU, one of the silent ABS"
         );
         assert_eq!(rows[0].part_number.as_deref(), Ok(&b"AB"[..]));
         assert_eq!(rows[0].hardware_version.as_deref(), Ok(&b"AB"[..]));

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use autoplug_can::Node;
 use autoplug_gateway::{CarState, Observer, RecordingSink, Update};
-use autoplug_image::ImageHeader;
+use autoplug_image::ImageSet;
 use autoplug_logs::{LogFrame, RotatePolicy};
 use autoplug_virtual_car::driver::HeldControls;
 use autoplug_virtual_car::scenario::{Button, FRICTION_RANGE};
@@ -58,7 +58,11 @@ struct FlashState {
     origin: String,
     version: String,
     variant: String,
-    bytes: usize,
+    /// The image that goes over CAN: the file's first until the ECU said which slot it
+    /// writes, then the one for that slot (a release holds one per slot).
+    image_bytes: u64,
+    /// The file as given (both images of a release).
+    file_bytes: usize,
     started: Instant,
     /// `None` while it runs.
     result: Option<Result<Value, String>>,
@@ -330,19 +334,27 @@ impl<'a> Session<'a> {
 
     fn start_flash(&mut self, ecu: &str, image: Vec<u8>, origin: String) -> Answer {
         let node = parse_ecu(ecu).map_err(|e| e.to_string())?;
-        let header = ImageHeader::parse(&image)
-            .map_err(|e| format!("'{origin}' is not a firmware image: {e}"))?;
-        if Some(header.node) != node.diag_node_number() {
-            let target = ECUS
-                .iter()
-                .find(|n| n.diag_node_number() == Some(header.node))
-                .map_or_else(|| format!("node 0x{:02X}", header.node), |n| ecu_label(*n));
-            return Err(format!(
-                "'{origin}' is an image for {target}, not for {}: the ECU would refuse it",
-                ecu_label(node)
-            ));
+        // The whole file is checked here, not only the image that will go: a truncated
+        // release or bytes after its second image mean a broken file, whichever slot the
+        // ECU runs.
+        let set = ImageSet::parse(&image)
+            .map_err(|e| format!("'{origin}' is not a firmware image or release: {e}"))?;
+        for (_, header) in set.iter() {
+            if Some(header.node) != node.diag_node_number() {
+                let target = ECUS
+                    .iter()
+                    .find(|n| n.diag_node_number() == Some(header.node))
+                    .map_or_else(|| format!("node 0x{:02X}", header.node), |n| ecu_label(*n));
+                return Err(format!(
+                    "'{origin}' is an image for {target}, not for {}: the ECU would refuse it",
+                    ecu_label(node)
+                ));
+            }
         }
-        let bytes = image.len();
+        let header = set.first();
+        let image_bytes = set.first_image().len() as u64;
+        let images = set.len();
+        let file_bytes = image.len();
         let job = FlashJob::new(FlashConfig::new(node, image, &self.security_secret))
             .map_err(|e| format!("cannot flash '{origin}': {e}"))?;
         self.tester()?.queue(UserJob::Flash(Box::new(job)))?;
@@ -357,11 +369,19 @@ impl<'a> Session<'a> {
             origin,
             version: version.clone(),
             variant: variant.clone(),
-            bytes,
+            image_bytes,
+            file_bytes,
             started: Instant::now(),
             result: None,
         });
-        Ok(json!({ "ecu": ecu_name(node), "version": version, "variant": variant, "bytes": bytes }))
+        Ok(json!({
+            "ecu": ecu_name(node),
+            "version": version,
+            "variant": variant,
+            "bytes": image_bytes,
+            "file_bytes": file_bytes,
+            "images": images,
+        }))
     }
 
     fn clear_dtcs(&mut self, ecu: Option<&str>) -> Answer {
@@ -420,6 +440,8 @@ impl<'a> Session<'a> {
                                 report.total_us as f64 * 1e-6
                             ),
                             Ok(json!({
+                                "slot": report.slot.map(|s| s.letter().to_string()),
+                                "image_bytes": report.image_len,
                                 "total_s": report.total_us as f64 * 1e-6,
                                 "phases": phases(&report.phases),
                                 "throughput_bps": report.transfer_throughput(),
@@ -429,6 +451,11 @@ impl<'a> Session<'a> {
                     };
                     self.event(text);
                     if let Some(flash) = self.flash.as_mut().filter(|f| f.ecu == node) {
+                        if let Ok(report) = &result {
+                            if let Some(len) = report["image_bytes"].as_u64() {
+                                flash.image_bytes = len;
+                            }
+                        }
                         flash.result = Some(result);
                     }
                 }
@@ -513,19 +540,25 @@ impl<'a> Session<'a> {
                     "software_version": text(&row.software_version),
                     "hardware_version": text(&row.hardware_version),
                     "serial_number": text(&row.serial_number),
+                    "slot": row.running_slot().map(|(slot, _)| slot.letter().to_string()),
+                    "boot_state": row.running_slot().map(|(_, state)| state.name()),
                 })
             })
             .collect();
         let tester = self.watch.tester.as_ref();
         let progress = tester.and_then(|t| t.flash_progress());
-        let flash = self.flash.as_ref().map(|f| {
+        let flash = self.flash.as_mut().map(|f| {
             let running = progress.filter(|(node, _)| *node == f.ecu);
+            if let Some((_, p)) = running {
+                f.image_bytes = p.total;
+            }
             json!({
                 "ecu": ecu_name(f.ecu),
                 "image": f.origin,
                 "version": f.version,
                 "variant": f.variant,
-                "bytes": f.bytes,
+                "bytes": f.image_bytes,
+                "file_bytes": f.file_bytes,
                 "state": match (&f.result, running) {
                     (Some(Ok(_)), _) => "done",
                     (Some(Err(_)), _) => "failed",

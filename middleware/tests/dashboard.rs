@@ -170,6 +170,22 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
         let error = json(&answer)["error"].as_str().unwrap().to_string();
         assert!(error.contains(says), "{path}: {error}");
     }
+    // A release cut short, or with bytes after it, is refused before it goes on the bus
+    // (whichever of its images the ECU would have been sent).
+    let release = std::fs::read(dir.path().join("images").join("cruise-1.2.0.img")).unwrap();
+    let mut trailing = release.clone();
+    trailing.extend_from_slice(b"junk after the release");
+    for (body, says) in [
+        (
+            &release[..release.len() - 1],
+            "not a firmware image or release",
+        ),
+        (&trailing[..], "not a firmware image or release"),
+    ] {
+        let (status, answer) = request(addr, "POST", "/api/ecus/cruise/flash", Some(TOKEN), body);
+        assert_eq!(status, 409, "{answer}");
+        assert!(answer.contains(says), "{answer}");
+    }
     let (status, answer) = request(
         addr,
         "POST",
@@ -225,6 +241,11 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
         9,
         "{session}"
     );
+    // F1A0 of every ECU: the virtual car's ECUs start from a confirmed slot A.
+    for row in session["inventory"].as_array().unwrap() {
+        assert_eq!(row["slot"], "A", "{row}");
+        assert_eq!(row["boot_state"], "confirmed", "{row}");
+    }
     let (status, answer) = request(
         addr,
         "POST",

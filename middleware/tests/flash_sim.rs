@@ -7,7 +7,7 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use autoplug_can::Node;
-use autoplug_image::ImageSlot;
+use autoplug_image::{BootState, ImageSlot};
 use autoplug_middleware::names::ECUS;
 use autoplug_middleware::tester::{
     FlashConfig, FlashFailure, FlashJob, IdentJob, Phase, Progress, Response, Tester, TesterConfig,
@@ -315,6 +315,10 @@ fn identification_of_all_ecus() {
         assert_eq!(row.serial_number.as_deref(), Ok(serial.as_bytes()));
         assert_eq!(row.hardware_version.as_deref(), Ok(&b"NUCLEO-F446RE"[..]));
         assert_eq!(row.vin.as_deref(), Ok(&b"JA3AP47H0YF000042"[..]));
+        assert_eq!(
+            row.running_slot(),
+            Some((ImageSlot::A, BootState::Confirmed))
+        );
     }
     assert_eq!(
         autoplug_middleware::tester::vehicle_vin(&rows).map(|v| v.map(|v| v.to_string())),
@@ -322,11 +326,12 @@ fn identification_of_all_ecus() {
     );
     let table = autoplug_middleware::tester::identification_table(&rows);
     assert!(table.contains("AP-CRUISE-0001"), "{table}");
+    assert!(table.contains("slot A, confirmed"), "{table}");
     assert!(
         table.contains("cabin") && table.contains("no response"),
         "{table}"
     );
-    // Eight ECUs x 5 requests plus one silent ECU asked once (50 ms), from the bus's start.
+    // Eight ECUs x 6 requests plus one silent ECU asked once (50 ms), from the bus's start.
     let took_us = bus.now.as_micros() - autoplug_uds::STANDSTILL_WINDOW_US;
     assert!(took_us < 200_000, "{took_us} us");
 }

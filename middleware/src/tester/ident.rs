@@ -1,6 +1,6 @@
 //! Reading identification: part number (F187), software version (F189), serial number
-//! (F18C), hardware version (F191) and the vehicle's VIN (F190) of one ECU or all nine, in
-//! the default session.
+//! (F18C), hardware version (F191), the vehicle's VIN (F190) and the running image slot with
+//! its boot state (F1A0) of one ECU or all nine, in the default session.
 //!
 //! Each DID is read with a request of its own: the ECUs' identification strings have no
 //! length field, so a response to several DIDs at once could not be split where one
@@ -11,20 +11,22 @@ use std::fmt::Write as _;
 
 use autoplug_can::Node;
 use autoplug_ecu::Instant;
-use autoplug_uds::server::did;
+use autoplug_image::{BootState, ImageSlot};
+use autoplug_uds::server::{did, parse_boot_slot};
 use autoplug_vin::Vin;
 
 use super::{Job, Response, Tester, TesterConfig, UdsError};
 use crate::names::ecu_name;
 
 /// The DIDs read, in table order: part number, software version, serial number, hardware
-/// version, VIN.
-pub const IDENTIFICATION_DIDS: [u16; 5] = [
+/// version, VIN, running slot and boot state.
+pub const IDENTIFICATION_DIDS: [u16; 6] = [
     did::PART_NUMBER,
     did::SOFTWARE_VERSION,
     did::SERIAL_NUMBER,
     did::HARDWARE_VERSION,
     did::VIN,
+    did::BOOT_SLOT,
 ];
 
 /// What one ECU said about itself; each value is the DID's data or why it is missing.
@@ -42,6 +44,9 @@ pub struct EcuIdentification {
     pub hardware_version: Result<Vec<u8>, UdsError>,
     /// F190, the vehicle's VIN as this ECU holds it.
     pub vin: Result<Vec<u8>, UdsError>,
+    /// F1A0, the image slot the ECU runs and that image's boot state (two bytes: see
+    /// [`boot_slot_text`]).
+    pub boot_slot: Result<Vec<u8>, UdsError>,
 }
 
 impl EcuIdentification {
@@ -54,6 +59,7 @@ impl EcuIdentification {
             serial_number: missing(),
             hardware_version: missing(),
             vin: missing(),
+            boot_slot: missing(),
         }
     }
 
@@ -63,19 +69,27 @@ impl EcuIdentification {
             1 => &mut self.software_version,
             2 => &mut self.serial_number,
             3 => &mut self.hardware_version,
-            _ => &mut self.vin,
+            4 => &mut self.vin,
+            _ => &mut self.boot_slot,
         }
     }
 
-    /// The five values in [`IDENTIFICATION_DIDS`] order.
-    pub fn values(&self) -> [&Result<Vec<u8>, UdsError>; 5] {
+    /// The six values in [`IDENTIFICATION_DIDS`] order.
+    pub fn values(&self) -> [&Result<Vec<u8>, UdsError>; 6] {
         [
             &self.part_number,
             &self.software_version,
             &self.serial_number,
             &self.hardware_version,
             &self.vin,
+            &self.boot_slot,
         ]
+    }
+
+    /// The running slot and its boot state, when the ECU answered F1A0 with bytes that say
+    /// them.
+    pub fn running_slot(&self) -> Option<(ImageSlot, BootState)> {
+        self.boot_slot.as_deref().ok().and_then(parse_boot_slot)
     }
 
     /// Whether the ECU answered at all (a positive or a negative response).
@@ -149,6 +163,21 @@ pub fn value_text(value: &Result<Vec<u8>, UdsError>) -> String {
     }
 }
 
+/// F1A0's value as text: `slot B, on trial`; bytes no ECU sends in hex, an error as
+/// [`value_text`] says it (an ECU without slots answers NRC 0x31).
+pub fn boot_slot_text(value: &Result<Vec<u8>, UdsError>) -> String {
+    match value {
+        Ok(bytes) => match parse_boot_slot(bytes) {
+            Some((slot, state)) => format!("slot {}, {}", slot.letter(), state.name()),
+            None => format!(
+                "0x{} (not a slot and state)",
+                bytes.iter().map(|b| format!("{b:02X}")).collect::<String>()
+            ),
+        },
+        Err(_) => value_text(value),
+    }
+}
+
 /// The identification table the `ids` command prints.
 pub fn identification_table(rows: &[EcuIdentification]) -> String {
     let headers = [
@@ -159,16 +188,18 @@ pub fn identification_table(rows: &[EcuIdentification]) -> String {
         "serial (F18C)",
         "hardware (F191)",
         "VIN (F190)",
+        "running (F1A0)",
     ];
-    let cells: Vec<[String; 7]> = rows
+    let cells: Vec<[String; 8]> = rows
         .iter()
         .map(|row| {
             let number = row
                 .ecu
                 .diag_node_number()
                 .map_or_else(String::new, |n| format!("0x{n:02X}"));
-            let [a, b, c, d, e] = row.values().map(value_text);
-            [ecu_name(row.ecu).to_string(), number, a, b, c, d, e]
+            let [a, b, c, d, e, _] = row.values().map(value_text);
+            let slot = boot_slot_text(&row.boot_slot);
+            [ecu_name(row.ecu).to_string(), number, a, b, c, d, e, slot]
         })
         .collect();
     let mut widths = headers.map(str::len);
@@ -325,6 +356,7 @@ mod tests {
                 serial_number: Ok(vec![0x0D, 0x00, 0x42]),
                 hardware_version: Err(UdsError::negative(0x22, 0x31)),
                 vin: Ok(b"JA3AP47H0YF000042".to_vec()),
+                boot_slot: Ok(vec![1, 1]),
             },
             EcuIdentification {
                 ecu: Node::ABS,
@@ -341,6 +373,7 @@ mod tests {
                 serial_number: Err(UdsError::Busy),
                 hardware_version: Err(UdsError::Busy),
                 vin: Err(UdsError::Busy),
+                boot_slot: Err(UdsError::Busy),
             },
         ];
         let table = identification_table(&rows);
@@ -354,6 +387,13 @@ mod tests {
         assert!(lines[1].contains("NRC 0x31 requestOutOfRange"), "{table}");
         assert!(lines[2].contains("no response"), "{table}");
         assert!(lines[1].contains("JA3AP47H0YF000042"), "{table}");
+        assert!(lines[0].contains("running (F1A0)"), "{table}");
+        assert!(lines[1].ends_with("slot B, on trial"), "{table}");
+        assert_eq!(
+            rows[0].running_slot(),
+            Some((ImageSlot::B, BootState::Trial))
+        );
+        assert_eq!(rows[1].running_slot(), None);
         assert!(rows[0].answered());
         assert!(!rows[1].answered());
     }
@@ -362,6 +402,22 @@ mod tests {
         let mut row = EcuIdentification::new(ecu);
         row.vin = vin.map(<[u8]>::to_vec);
         row
+    }
+
+    #[test]
+    fn the_running_slot_reads_as_slot_and_state_and_odd_bytes_in_hex() {
+        assert_eq!(boot_slot_text(&Ok(vec![0, 0])), "slot A, confirmed");
+        assert_eq!(boot_slot_text(&Ok(vec![0, 2])), "slot A, reverted");
+        assert_eq!(
+            boot_slot_text(&Ok(vec![2, 0])),
+            "0x0200 (not a slot and state)"
+        );
+        assert_eq!(boot_slot_text(&Ok(vec![0])), "0x00 (not a slot and state)");
+        // An ECU without slots does not know F1A0.
+        assert_eq!(
+            boot_slot_text(&Err(UdsError::negative(0x22, 0x31))),
+            "NRC 0x31 requestOutOfRange"
+        );
     }
 
     #[test]

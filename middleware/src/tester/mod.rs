@@ -44,8 +44,8 @@ pub use flash::{
     FlashConfig, FlashError, FlashFailure, FlashJob, FlashReport, Phase, PhaseTiming, Progress,
 };
 pub use ident::{
-    identification_table, value_text, vehicle_vin, vin_line, EcuIdentification, IdentJob,
-    IDENTIFICATION_DIDS,
+    boot_slot_text, identification_table, value_text, vehicle_vin, vin_line, EcuIdentification,
+    IdentJob, IDENTIFICATION_DIDS,
 };
 pub use job::Job;
 

@@ -214,6 +214,15 @@ impl BootState {
         }
     }
 
+    /// How tools name the state: `confirmed`, `on trial`, `reverted`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            BootState::Confirmed => "confirmed",
+            BootState::Trial => "on trial",
+            BootState::Reverted => "reverted",
+        }
+    }
+
     /// The state of a number ([`BootState::number`]).
     pub const fn from_number(number: u8) -> Option<BootState> {
         match number {

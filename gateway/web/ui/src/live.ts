@@ -41,6 +41,9 @@ export interface Session {
     software_version: string | null;
     hardware_version: string | null;
     serial_number: string | null;
+    // F1A0: the slot the ECU runs (A, B) and that image's boot state.
+    slot: string | null;
+    boot_state: string | null;
   }[];
   flash: Flash | null;
   recording: { frames: number; bytes: number; file: string | null; failure: string | null } | null;
@@ -90,12 +93,15 @@ export interface Flash {
   image: string;
   version: string;
   variant: string;
+  // The image that goes over CAN (a release's image for the slot the ECU writes).
   bytes: number;
+  // The file as given: a release holds one image per slot.
+  file_bytes: number;
   state: 'queued' | 'running' | 'done' | 'failed';
   phase: string | null;
   transferred: number | null;
   elapsed_s: number;
-  report: { total_s: number; phases: { phase: string; s: number }[]; throughput_bps: number | null } | null;
+  report: { slot: string | null; image_bytes: number; total_s: number; phases: { phase: string; s: number }[]; throughput_bps: number | null } | null;
   error: string | null;
 }
 

@@ -104,6 +104,11 @@ async function flash(page, ecu, image) {
   await view(page, 'ecus');
   await page.selectOption('[data-testid=flash-image]', image);
   await page.selectOption('[data-testid=flash-ecu]', ecu);
+  // F1A0 in the inventory: the slot the ECU runs now (the image goes to the other one).
+  const before = await until(`the inventory to show the slot ${ecu} runs`, async () => {
+    const shown = await page.textContent(`[data-testid=slot-${ecu}]`);
+    return /^slot [AB], /.test(shown ?? '') ? shown : null;
+  }, 15_000);
   await page.click('[data-testid=flash-start]');
   // The bar moves while the image goes over the bus.
   const midway = await until('the progress bar to move', async () => {
@@ -118,12 +123,24 @@ async function flash(page, ecu, image) {
     if (s === 'failed') throw new Error(await page.textContent('[data-testid=flash-status]'));
     return s === 'done';
   }, 120_000);
+  // The status names the slot written and the bytes that went over CAN: one image of
+  // the release, not the whole file.
+  const done = await page.textContent('[data-testid=flash-status]');
+  const into = /into slot ([AB])/.exec(done)?.[1];
+  assert.ok(into && !before.startsWith(`slot ${into}`), `ran ${before}, status: ${done}`);
+  const library = await page.textContent(`[data-testid=flash-image] option[value="${image}"]`);
+  const fileSize = /\(([^()]+)\)$/.exec(library)?.[1];
+  assert.ok(fileSize && !done.includes(fileSize), `status ${done} shows the file's size ${fileSize}`);
+  const running = await until(`the inventory to show ${ecu} on slot ${into}`, async () => {
+    const shown = await page.textContent(`[data-testid=slot-${ecu}]`);
+    return shown?.startsWith(`slot ${into}, `) ? shown : null;
+  }, 15_000);
   const version = /-(\d+\.\d+\.\d+)/.exec(image)[1];
   const inventory = await until(`the inventory to show ${ecu} ${version}`, async () => {
     const shown = await page.textContent(`[data-testid=inventory-${ecu}] .sw`);
     return shown === version ? shown : null;
   }, 15_000);
-  ok(`flashed ${image} into ${ecu} from the ECUs view (bar seen at ${midway.toFixed(0)} %), inventory shows ${inventory}`);
+  ok(`flashed ${image} into ${ecu} from the ECUs view (bar seen at ${midway.toFixed(0)} %), inventory shows ${inventory}, ${before} → ${running}`);
 }
 
 try {

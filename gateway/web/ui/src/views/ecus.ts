@@ -18,8 +18,8 @@ export function ecusView(ctx: Ctx): View {
   const status = h('div', { class: 'flash-status', 'data-testid': 'flash-status' });
   const phases = h('div', { class: 'small' });
   const el = h('section', { class: 'ecus' },
-    h('div', { class: 'card table-wrap' }, h('h3', { text: 'Inventory (UDS 0x22: F187, F189, F191, F18C)' }),
-      h('table', { class: 'grid' }, h('thead', {}, h('tr', {}, ...['ECU', 'Part number', 'Software', 'Hardware', 'Serial'].map((t) => h('th', { text: t })))), inventory)),
+    h('div', { class: 'card table-wrap' }, h('h3', { text: 'Inventory (UDS 0x22: F187, F189, F191, F18C, F1A0)' }),
+      h('table', { class: 'grid' }, h('thead', {}, h('tr', {}, ...['ECU', 'Part number', 'Software', 'Running', 'Hardware', 'Serial'].map((t) => h('th', { text: t })))), inventory)),
     h('div', { class: 'card' }, h('h3', { text: 'Flash a signed image over CAN' }),
       h('div', { class: 'form' },
         h('label', {}, 'ECU ', ecu),
@@ -79,8 +79,9 @@ export function ecusView(ctx: Ctx): View {
       if (image.childElementCount === 0) void loadLibrary();
       inventory.replaceChildren(...s.inventory.map((r) => h('tr', { 'data-testid': `inventory-${r.ecu}` },
         h('td', { text: r.ecu }), h('td', { text: r.part_number ?? '–' }), h('td', { class: 'sw', text: r.software_version ?? '–' }),
+        h('td', { class: `slot ${r.boot_state === 'on trial' ? 'trial' : ''}`, 'data-testid': `slot-${r.ecu}`, text: r.slot ? `slot ${r.slot}, ${r.boot_state}` : '–' }),
         h('td', { text: r.hardware_version ?? '–' }), h('td', { class: 'mono', text: r.serial_number ?? '–' }))));
-      if (s.inventory.length === 0) inventory.append(h('tr', {}, h('td', { colspan: 5, class: 'muted', text: s.source.transmit ? 'Reading…' : 'The gateway only listens on this bus.' })));
+      if (s.inventory.length === 0) inventory.append(h('tr', {}, h('td', { colspan: 6, class: 'muted', text: s.source.transmit ? 'Reading…' : 'The gateway only listens on this bus.' })));
     }
     const f = s.flash;
     if (!f) {
@@ -95,7 +96,7 @@ export function ecusView(ctx: Ctx): View {
     const what = `${f.image} (${f.version}, ${f.variant}) → ${f.ecu}`;
     if (f.state === 'running') setText(status, `${what}: ${f.phase} — ${num(percent)} % of ${bytes(f.bytes)}, ${seconds(f.elapsed_s)}`);
     else if (f.state === 'queued') setText(status, `${what}: waiting for the tester`);
-    else if (f.state === 'done') setText(status, `${what}: done in ${seconds(f.report?.total_s ?? 0)}`);
+    else if (f.state === 'done') setText(status, `${what}: ${bytes(f.bytes)} into slot ${f.report?.slot ?? '?'}, done in ${seconds(f.report?.total_s ?? 0)}`);
     else setText(status, `${what}: failed — ${f.error}`);
     const report = f.report;
     const text = report ? report.phases.map((p) => `${p.phase} ${num(p.s, 2)} s`).join(' · ') + (report.throughput_bps ? ` · transfer ${bytes(report.throughput_bps)}/s` : '') : '';
