@@ -93,3 +93,22 @@ fn a_malformed_line_is_named_and_lenient_mode_counts_it() {
     assert_eq!(missing.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent/x.log"));
 }
+
+/// `autoplug replay log | head`: the reader leaving early is no error and no panic.
+#[test]
+fn replay_into_a_reader_gone_away_exits_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = bus_log(dir.path(), "stop-100-dry");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .arg("replay")
+        .arg(&log)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the autoplug binary runs");
+    drop(child.stdout.take());
+    let output = child.wait_with_output().expect("it ends");
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{:?}: {err}", output.status);
+    assert!(err.is_empty(), "{err}");
+}

@@ -459,3 +459,34 @@ fn the_gateway_serves_the_car_live_over_http_and_websocket() {
     );
     assert!(state.contains("\"frames\":"), "{state}");
 }
+
+/// `autoplug gateway ... | head`, standard error closed too: the reader going away ends
+/// neither the run nor the trip; the gateway still stores it closed and exits 0.
+#[test]
+fn a_reader_gone_away_still_gets_the_trip_stored() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("trips.db");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .args([
+            "gateway",
+            "--bus",
+            "virtual:scenarios/stop-100-dry.toml",
+            "--fast",
+            "--db",
+        ])
+        .arg(&db)
+        .args(["--vehicle", "JA3AP00TEST000001"])
+        .current_dir(root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the autoplug binary runs");
+    drop(child.stdout.take());
+    drop(child.stderr.take());
+    let status = child.wait().expect("it ends");
+    assert!(status.success(), "{status:?}");
+    let store = SqliteStore::open(&db).unwrap();
+    let trips = store.trips(Some("JA3AP00TEST000001")).unwrap();
+    assert_eq!(trips.len(), 1);
+    assert_eq!(trips[0].status, TripStatus::Closed);
+}
