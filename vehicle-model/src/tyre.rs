@@ -272,8 +272,9 @@ pub fn peak_braking_deceleration(p: &VehicleParams, mu: f64) -> f64 {
 /// The shortest stop the car can make braking in a straight line on a road of friction
 /// `mu` from `from_mps`, m, the brake pressed fully at the start. Each wheel brakes with
 /// the lesser of the torque its brake pressure has built up to (the apply lag of the
-/// brake parameters) and its tyre's peak force under its present load (the braking load
-/// transfer with the body's lag, the tyres' load sensitivity), and drag helps. The wheels
+/// brake parameters) plus its rolling resistance, and its tyre's peak force under its
+/// present load (the braking load transfer with the body's lag, the tyres' load
+/// sensitivity), and drag helps. The wheels
 /// reach their peak slip at once and stay there, so no ABS can stop shorter: a measured
 /// stop's excess over this is what the control costs, not the brakes or the tyres.
 pub fn shortest_braking_distance(p: &VehicleParams, mu: f64, from_mps: f64) -> f64 {
@@ -290,8 +291,12 @@ pub fn shortest_braking_distance(p: &VehicleParams, mu: f64, from_mps: f64) -> f
         0.5 * p.aero.air_density_kg_per_m3 * p.aero.drag_coefficient * p.aero.frontal_area_m2;
     let static_front = 0.5 * weight * c.cg_to_rear_axle_m() / c.wheelbase_m;
     let static_rear = 0.5 * weight * c.cg_to_front_axle_m() / c.wheelbase_m;
-    let wheel_force = |built: f64, max_torque_nm: f64, load: f64| {
-        (built * max_torque_nm / radius).min(model.effective_mu(mu, load) * load)
+    // Rolling resistance (a torque at the wheel in the model, growing with speed) adds to
+    // the brake's until the tyre is at its peak.
+    let wheel_force = |built: f64, max_torque_nm: f64, load: f64, v: f64| {
+        let rolling = p.tyre.rolling_resistance_coefficient
+            * (1.0 + v * 3.6 / p.tyre.rolling_resistance_doubling_speed_kmh);
+        (built * max_torque_nm / radius + rolling * load).min(model.effective_mu(mu, load) * load)
     };
     let (mut v, mut x, mut t, mut transfer) = (from_mps, 0.0, 0.0, 0.0);
     while v > 0.0 && t < MAX_T {
@@ -299,8 +304,8 @@ pub fn shortest_braking_distance(p: &VehicleParams, mu: f64, from_mps: f64) -> f
         let front = static_front + 0.5 * transfer;
         let rear = (static_rear - 0.5 * transfer).max(0.0);
         let force = 2.0
-            * (wheel_force(built, b.max_torque_front_nm, front)
-                + wheel_force(built, b.max_torque_rear_nm, rear))
+            * (wheel_force(built, b.max_torque_front_nm, front, v)
+                + wheel_force(built, b.max_torque_rear_nm, rear, v))
             + drag_per_v2 * v * v;
         let decel = force / c.mass_kg;
         // The axle load transfer follows the deceleration with the body's lag.
