@@ -167,8 +167,14 @@ pub const INTERVENTION_MERGE_GAP_US: u64 = 1_000_000;
 
 /// Control period. Wheel dynamics are fast (a wheel locks within ~100 ms at full brake), so
 /// the ABS runs at twice the message rate; messages still go out at their 10 ms periods
-/// (or on change, at most every 5 ms).
+/// (or on change, at most every 5 ms). A PedalBrake frame that starts a braking gets a
+/// step of its own at once (`EcuLogic::step_requested`), the period counting from it.
 pub const STEP_PERIOD_US: u64 = 5_000;
+
+/// Brake onsets closer together than this get no step of their own (they wait for the
+/// period): no foot presses a pedal twice in a tenth of a second, and a bus flooded with
+/// alternating PedalBrake frames must not make the ECU step at the flood's rate.
+pub const ONSET_STEP_MIN_GAP_US: u64 = 100_000;
 
 /// Driver brake command (0..100) above which the driver is braking. Small, above the
 /// 1-unit resolution of PedalBrake, so a resting foot does not enable the ABS.
@@ -228,6 +234,11 @@ pub const RECOVERED_SLIP: f32 = 0.03;
 
 /// Largest slip target a measured peak can give: tyres on some surfaces peak at 15–20 %.
 pub const SLIP_TARGET_MAX: f32 = 0.18;
+
+/// A channel released completely watches its wheel spin back up (and holds the release
+/// until it has) only once the slip is this far past the target: a wheel running into
+/// lock, not one a little over the target, which the controller brings back by itself.
+pub const RECOVERY_SLIP_FACTOR: f32 = 1.5;
 
 /// Longest full release while a wheel spins back up, µs; a recovery that takes longer
 /// teaches nothing.
@@ -621,6 +632,11 @@ pub struct AbsEcu {
     speed_estimate_kmh: Option<f32>,
     /// Wheel speeds at the previous braking step, km/h.
     previous_wheels_kmh: Option<[f32; 4]>,
+    /// A PedalBrake frame since the last step took the brake command from released to
+    /// braking: the runtime steps at once.
+    brake_onset: bool,
+    /// When the last onset asked for a step (see [`ONSET_STEP_MIN_GAP_US`]).
+    last_onset: Option<Instant>,
     /// Per channel: a full release in progress, watched for the friction peak.
     recovery: [Option<Recovery>; CHANNELS],
     /// Per channel: the tyre's peak-friction slip, once measured in this stop.
@@ -660,6 +676,8 @@ impl AbsEcu {
             previous_speed_kmh: None,
             speed_estimate_kmh: None,
             previous_wheels_kmh: None,
+            brake_onset: false,
+            last_onset: None,
             recovery: [None; CHANNELS],
             peak_slip: [None; CHANNELS],
             pressure_estimate: [0.0; CHANNELS],
@@ -939,7 +957,7 @@ impl AbsEcu {
                 release[ch] = brake;
                 continue;
             }
-            if command >= brake && slip > target {
+            if command >= brake && slip > RECOVERY_SLIP_FACTOR * target {
                 // Released completely: watch the wheel spin back up for its peak.
                 self.recovery[ch] = Some(Recovery {
                     since: now,
@@ -1066,8 +1084,25 @@ impl EcuLogic for AbsEcu {
     const STEP_PERIOD_US: u64 = STEP_PERIOD_US;
 
     fn on_frame(&mut self, now: Instant, frame: &Frame) {
-        let _ = receive(&mut self.vehicle_speed, &mut self.dtcs, now, frame)
-            || receive(&mut self.pedal_brake, &mut self.dtcs, now, frame);
+        let released = self.pedal_brake.value().brake_cmd <= BRAKING_THRESHOLD;
+        if !receive(&mut self.vehicle_speed, &mut self.dtcs, now, frame)
+            && receive(&mut self.pedal_brake, &mut self.dtcs, now, frame)
+        {
+            // The driver starts braking: the pressure builds from this frame, not from
+            // the next step (see `step_requested`).
+            let onset = released && self.pedal_brake.value().brake_cmd > BRAKING_THRESHOLD;
+            let spaced = self
+                .last_onset
+                .is_none_or(|t| now.micros_since(t) >= ONSET_STEP_MIN_GAP_US);
+            if onset && spaced {
+                self.brake_onset = true;
+                self.last_onset = Some(now);
+            }
+        }
+    }
+
+    fn step_requested(&self) -> bool {
+        self.brake_onset
     }
 
     fn step(&mut self, now: Instant, sensors: &Sensors) -> Actuators {
@@ -1078,6 +1113,7 @@ impl EcuLogic for AbsEcu {
             None => STEP_PERIOD_US as f32 * 1e-6,
         };
         self.last_step = Some(now);
+        self.brake_onset = false;
 
         let speed_stale = supervise(&mut self.vehicle_speed, &mut self.dtcs, now);
         let pedal_stale = supervise(&mut self.pedal_brake, &mut self.dtcs, now);

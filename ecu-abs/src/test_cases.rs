@@ -352,6 +352,39 @@ pub fn light_braking_passes_the_command_through() {
     }
 }
 
+/// A PedalBrake frame that takes the command from released to braking asks the runtime
+/// for a step at once (the pressure builds from the frame, not from the next period); a
+/// held or light pedal does not, nor an onset within [`ONSET_STEP_MIN_GAP_US`] of the
+/// last, and the step answers the request.
+pub fn pressing_the_brake_asks_for_a_step_at_once() {
+    let mut ecu = AbsEcu::new(Variant::Correct, ms(0));
+    let _ = step_with(&mut ecu, 0, 80.0, 0.0, [80.0; 4]);
+    assert!(!ecu.step_requested());
+    ecu.on_frame(us(2_000), &speed_frame(80.0));
+    ecu.on_frame(us(2_100), &brake_frame(BRAKING_THRESHOLD));
+    assert!(!ecu.step_requested(), "a resting foot is no braking");
+    ecu.on_frame(us(2_200), &brake_frame(100.0));
+    assert!(ecu.step_requested());
+    let out = ecu.step(us(2_300), &sensors([80.0; 4]));
+    assert_eq!(out.brake, [100.0; 4]);
+    assert!(!ecu.step_requested(), "the step answered it");
+    ecu.on_frame(us(4_000), &brake_frame(100.0));
+    ecu.on_frame(us(4_100), &brake_frame(60.0));
+    assert!(
+        !ecu.step_requested(),
+        "braking already: the period is soon enough"
+    );
+    // Released and pressed again within a tenth of a second (a flood of alternating
+    // frames): the period is soon enough.
+    let _ = step_with(&mut ecu, 10_000, 80.0, 0.0, [80.0; 4]);
+    ecu.on_frame(us(12_000), &brake_frame(30.0));
+    assert!(!ecu.step_requested(), "a second onset within the gap");
+    let _ = step_with(&mut ecu, 15_000, 80.0, 30.0, [80.0; 4]);
+    ecu.on_frame(us(2_200 + ONSET_STEP_MIN_GAP_US), &brake_frame(0.0));
+    ecu.on_frame(us(2_300 + ONSET_STEP_MIN_GAP_US), &brake_frame(30.0));
+    assert!(ecu.step_requested(), "braking again after the gap");
+}
+
 /// A wheel running into lock gets a release (PID on slip); the rear wheels keep the
 /// driver's brake and the other front wheel is held to the yaw-moment delay margin; more
 /// slip gives more release; the applied brake never exceeds the command. The driver has
@@ -625,8 +658,9 @@ pub fn saturated_brake_resets_the_controller() {
 /// vehicle model's tyres do on μ = 0.2) the channels learn it and regulate near it, where
 /// a tyre still has side force (the fixed 12 % target held the wheels four times past
 /// the peak), and still stop short without a locked wheel. On a surface that peaks at
-/// 15 % (the test plant's usual tyre, like wet cobblestones) the target stays at
-/// [`SLIP_TARGET`] or above.
+/// 15 % (the test plant's usual tyre, like wet cobblestones) nothing false is learned: the
+/// target averages [`SLIP_TARGET`] or above and goes no lower than the peak seeking's
+/// first step down from it.
 pub fn released_wheel_teaches_the_friction_peak() {
     let mut ice = plant::Plant::new(100.0, [0.2; 4]);
     ice.slip_peak = 0.03;
@@ -639,8 +673,10 @@ pub fn released_wheel_teaches_the_friction_peak() {
     assert_short_stop_without_lock(&run, plant::ideal_stop_m(100.0, 0.2), 1.2);
     let usual = brake_run(Variant::Correct, 100.0, [0.2; 4], 100.0);
     assert!(
-        usual.lowest_slip_target >= SLIP_TARGET,
-        "lowest target {} on a tyre peaking at 15 %",
+        usual.mean_slip_target >= SLIP_TARGET
+            && usual.lowest_slip_target >= SLIP_TARGET * (1.0 - SEEK_STEP_INITIAL),
+        "target {} on average, {} at the lowest, on a tyre peaking at 15 %",
+        usual.mean_slip_target,
         usual.lowest_slip_target
     );
 }

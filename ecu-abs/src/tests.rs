@@ -7,6 +7,7 @@ macro_rules! shared_cases {
 shared_cases!(
     publishes_its_messages_every_10_ms,
     light_braking_passes_the_command_through,
+    pressing_the_brake_asks_for_a_step_at_once,
     slipping_wheel_is_released,
     a_wheel_locking_while_the_pressure_builds_holds_it,
     full_braking_stops_short_without_locking,

@@ -135,3 +135,40 @@ fn split_friction_keeps_the_heading_with_abs_and_not_without() {
         "faulty ABS: heading changed only {heading} deg"
     );
 }
+
+/// The brake acts within a tick of the driver's command reaching the ABS ECU: a
+/// PedalBrake frame that starts a braking makes the ECU step at once rather than at its
+/// next 5 ms period (at 100 km/h, 28 mm of stopping distance per millisecond).
+#[test]
+fn the_brake_acts_as_soon_as_the_pedal_frame_arrives() {
+    use autoplug_can::{CanMessage, PedalBrake};
+    use autoplug_virtual_car::car::VirtualCar;
+    use autoplug_virtual_car::sweep::braking_scenario;
+
+    let mut car = VirtualCar::new(&braking_scenario(1.0, 1.0, 100.0).unwrap());
+    let mut pressed_at_us = None;
+    let mut acting_at_us = None;
+    while acting_at_us.is_none() && car.time_us() < 2_000_000 {
+        car.tick();
+        for logged in car.take_log() {
+            let braking = logged.frame.id() == PedalBrake::ID
+                && PedalBrake::decode_data(logged.frame.data())
+                    .is_ok_and(|m| m.brake_cmd > ecu_abs::BRAKING_THRESHOLD);
+            if braking && pressed_at_us.is_none() {
+                pressed_at_us = Some(logged.t_us);
+            }
+        }
+        if pressed_at_us.is_some() && car.vehicle().brake_torque_nm.iter().any(|t| *t > 0.0) {
+            acting_at_us = Some(car.time_us());
+        }
+    }
+    let pressed = pressed_at_us.expect("the pedals ECU sent the brake");
+    let acting = acting_at_us.expect("the brakes acted");
+    // The virtual car's tick is 1 ms: the frame reaches the ECU at the first tick after
+    // it ended, the ECU steps and the brakes act in that tick, seen at the tick's end (at
+    // the next 5 ms period instead, this was 5.9 ms).
+    assert!(
+        acting - pressed <= 2_000,
+        "PedalBrake at {pressed} us, brake torque at {acting} us"
+    );
+}

@@ -23,7 +23,10 @@ fn check(s: &SweepStop) -> Result<(), String> {
         // The shortest stop the car's brakes and tyres allow bounds any ABS from below: a
         // stop under it would mean the bound (or the simulation) is wrong.
         let car_limit = sweep::car_limit_m(s.mu_left, stop.from_kmh);
-        if stop.distance_m < car_limit {
+        // The stop's figures are rounded (0.01 m, 0.01 km/h, the limit going with the
+        // speed squared): a stop at the limit within that counts as at it.
+        let rounding = 0.005 + car_limit * 0.01 / stop.from_kmh;
+        if stop.distance_m < car_limit - rounding {
             return Err(format!(
                 "{where_}: {} m, shorter than the car's own limit {car_limit:.2} m",
                 stop.distance_m
@@ -81,7 +84,7 @@ fn sweep_within_bounds(
 }
 
 #[test]
-#[ignore = "issue 13 open: on dry asphalt (µ 1.0) the stops from 50 and 60 km/h are 1.063 and 1.054 x v²/(2µg), where the car's own limit is already 1.049 and 1.044 (sweep::car_limit_m); 3 split-friction stops are longer than on the low side all round (run with --ignored; `virtual-car abs-sweep` shows where)"]
+#[ignore = "issue 13 open: on dry asphalt (µ 1.0) the stop from 50 km/h is 1.056 x v²/(2µg), where the car's own limit is already 1.048 (sweep::car_limit_m): 1.05 would take the ABS within 0.2 % of it, and the 1 ms from the pedal to the brakes alone costs 0.13 %; 2 split-friction stops (from 50 km/h) are longer than on the low side all round (run with --ignored; `virtual-car abs-sweep` shows where)"]
 fn full_braking_stays_near_the_limit_on_any_friction_and_keeps_the_heading_on_split_friction() {
     sweep_within_bounds(
         &sweep::FRICTIONS,
@@ -107,18 +110,23 @@ fn full_braking_up_to_friction_0_8_stays_near_the_limit() {
     );
 }
 
-/// Dry asphalt (friction 1.0) from 40 km/h (bound 1.10) and from 80 km/h up: from 50 and
-/// 60 km/h the car's own limit leaves the ABS less than 0.1 % and 0.6 % (see the ignored
-/// test above).
+/// Dry asphalt (friction 1.0) from 40 km/h (bound 1.10) and from 60 km/h up (1.054 × from
+/// 60 km/h before the ABS stepped at once on the pedal's frame): from 50 km/h the car's
+/// own limit leaves the ABS 0.2 % (see the ignored test above).
 #[test]
-fn full_braking_on_dry_asphalt_stays_near_the_limit_below_50_and_from_80_kmh() {
-    sweep_within_bounds(&[1.0], &[40.0, 80.0, 100.0, 130.0, 160.0, 200.0], &[], &[]);
+fn full_braking_on_dry_asphalt_stays_near_the_limit_except_from_50_kmh() {
+    sweep_within_bounds(
+        &[1.0],
+        &[40.0, 60.0, 80.0, 100.0, 130.0, 160.0, 200.0],
+        &[],
+        &[],
+    );
 }
 
 /// Split friction at every speed of the sweep: no wheel locked and the heading within 10°
 /// with the wheel held straight (17° from 160 km/h on ice beside asphalt before the front
 /// axle's yaw-moment build-up was slowed). The distance bound of the whole sweep (no
-/// longer than on the low side all round) is not met yet at 3 of these 8 points.
+/// longer than on the low side all round) is not met yet at 2 of these 8 points.
 #[test]
 fn full_braking_on_split_friction_keeps_the_heading() {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());

@@ -111,6 +111,11 @@ mod tests {
     fn peak_seeking_follows_the_tyre_either_side_of_the_fixed_target() {
         test_cases::peak_seeking_follows_the_tyre_either_side_of_the_fixed_target();
     }
+
+    #[test]
+    fn pressing_the_brake_asks_for_a_step_at_once() {
+        test_cases::pressing_the_brake_asks_for_a_step_at_once();
+    }
 }
 
 /// Only reached by a host build with a transport feature (`--all-features`).

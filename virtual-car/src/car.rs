@@ -108,11 +108,18 @@ where
 
     fn step_if_due(&mut self, t_us: u64, sensors: impl FnOnce() -> E::Sensors) {
         // A stalled core runs no step; the ticker catches up afterwards, one step per tick.
-        if t_us >= self.next_step_us && !self.diag.stalled(t_us) {
+        // A step the logic asks for at once (a frame it got) restarts the period from now,
+        // as the firmware's loop resets its ticker.
+        let requested = self.ecu.step_requested();
+        if (t_us >= self.next_step_us || requested) && !self.diag.stalled(t_us) {
             let outputs = self.ecu.step(Instant::from_micros(t_us), &sensors());
             self.diag.set_own_motion(self.ecu.own_sensors_show_motion());
             self.outputs = Some(outputs);
-            self.next_step_us += E::STEP_PERIOD_US;
+            self.next_step_us = if requested {
+                t_us + E::STEP_PERIOD_US
+            } else {
+                self.next_step_us + E::STEP_PERIOD_US
+            };
             self.steps_since_boot = self.steps_since_boot.saturating_add(1);
         }
     }

@@ -5,8 +5,9 @@
 //! Tasks (one thread-mode executor):
 //! - the control loop, in [`run`]: owns the logic (no mutex). Runs `step` on a ticker every
 //!   `STEP_PERIOD_US` (reading sensors, driving outputs, feeding the watchdog) and
-//!   `on_frame` as soon as a frame arrives; after either, queues every frame
-//!   `poll_transmit` hands out;
+//!   `on_frame` as soon as a frame arrives (then `step` at once if the logic asks for it,
+//!   the ticker restarting from there); after either, queues every frame `poll_transmit`
+//!   hands out;
 //! - CAN1 → RX queue, TX queue → CAN1 mailboxes, and the error monitor ([`can_io`]).
 
 use autoplug_can::Frame;
@@ -120,7 +121,15 @@ where
     loop {
         match select3(ticker.next(), RX_QUEUE.receive(), diag_ticker.next()).await {
             Either3::First(()) => state.control_step(),
-            Either3::Second(frame) => state.received(&frame),
+            Either3::Second(frame) => {
+                state.received(&frame);
+                // A command that must act at once (the brake pedal pressed): step now and
+                // count the next period from here, so no two steps come closer than one.
+                if state.ecu.step_requested() {
+                    state.control_step();
+                    ticker.reset();
+                }
+            }
             Either3::Third(()) => state.diag_poll(),
         }
         if let Some(kind) = state.transmit() {
