@@ -33,6 +33,7 @@ use crate::watch::{StatusLine, TripLog, Watch};
 use crate::DEV_SECURITY_SECRET;
 use autoplug_gateway::{Observer, Pipeline, RecordingSink, Strictness};
 use autoplug_store::{SqliteStore, TripStore};
+use autoplug_virtual_car::console::ReaderMayLeave;
 use autoplug_virtual_car::scenario::Scenario;
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -1613,58 +1614,6 @@ fn flash(
     }
 }
 
-/// Standard output that outlives its reader: once the reader has gone away (`autoplug
-/// replay log | head`), the rest of the output is dropped and the command goes on, so a
-/// gateway still closes its trips and a flash still finishes. Rust ignores SIGPIPE, so
-/// without this every later write would fail and end the command half-way.
-struct ReaderMayLeave<W: Write> {
-    inner: W,
-    gone: bool,
-}
-
-impl<W: Write> ReaderMayLeave<W> {
-    fn absorb(&mut self, result: io::Result<()>) -> io::Result<()> {
-        match result {
-            Err(e) if e.kind() == io::ErrorKind::BrokenPipe => {
-                self.gone = true;
-                Ok(())
-            }
-            other => other,
-        }
-    }
-}
-
-impl<W: Write> Write for ReaderMayLeave<W> {
-    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        if self.gone {
-            return Ok(buf.len());
-        }
-        match self.inner.write(buf) {
-            Err(e) if e.kind() == io::ErrorKind::BrokenPipe => {
-                self.gone = true;
-                Ok(buf.len())
-            }
-            other => other,
-        }
-    }
-
-    fn write_all(&mut self, buf: &[u8]) -> io::Result<()> {
-        if self.gone {
-            return Ok(());
-        }
-        let result = self.inner.write_all(buf);
-        self.absorb(result)
-    }
-
-    fn flush(&mut self) -> io::Result<()> {
-        if self.gone {
-            return Ok(());
-        }
-        let result = self.inner.flush();
-        self.absorb(result)
-    }
-}
-
 /// The `autoplug` program: parses the command line, runs it, prints an error and exits
 /// with status 1 if it fails (2 for a command-line error, as clap does).
 pub fn main() -> ExitCode {
@@ -1672,10 +1621,8 @@ pub fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(error) => error.exit(),
     };
-    let mut out = ReaderMayLeave {
-        inner: io::stdout().lock(),
-        gone: false,
-    };
+    // A reader gone away (`| head`) ends neither a gateway's trips nor a flash.
+    let mut out = ReaderMayLeave::new(io::stdout().lock());
     let result = run(cli, &mut out);
     let _ = out.flush();
     // Not eprintln!: it panics when standard error is a closed pipe too (`2>&1 | head`).

@@ -6,6 +6,7 @@
 //!     virtual-car list
 
 use autoplug_vin::Vin;
+use autoplug_virtual_car::console::ReaderMayLeave;
 use autoplug_virtual_car::report::{self, RunRecord};
 use autoplug_virtual_car::scenario::Scenario;
 use autoplug_virtual_car::socketcand::{ClientFrame, SocketcandServer};
@@ -16,8 +17,11 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-/// Set once standard output's reader has gone away (`virtual-car run ... | head`).
-static STDOUT_GONE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+thread_local! {
+    /// Standard output, which outlives its reader (`virtual-car run ... | head`).
+    static STDOUT: std::cell::RefCell<ReaderMayLeave<std::io::Stdout>> =
+        std::cell::RefCell::new(ReaderMayLeave::new(std::io::stdout()));
+}
 
 /// `print!` to standard output, except that a reader gone away does not end the program
 /// (where `print!` would panic): the rest of the output is dropped and the work goes on,
@@ -26,16 +30,9 @@ static STDOUT_GONE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBoo
 macro_rules! out {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        use std::sync::atomic::Ordering;
-        if !STDOUT_GONE.load(Ordering::Relaxed) {
-            if let Err(e) = write!(std::io::stdout().lock(), $($arg)*) {
-                if e.kind() == std::io::ErrorKind::BrokenPipe {
-                    STDOUT_GONE.store(true, Ordering::Relaxed);
-                } else {
-                    eprintln!("error: cannot write to standard output: {e}");
-                    std::process::exit(1);
-                }
-            }
+        if let Err(e) = STDOUT.with(|out| write!(out.borrow_mut(), $($arg)*)) {
+            eprintln!("error: cannot write to standard output: {e}");
+            std::process::exit(1);
         }
     }};
 }
