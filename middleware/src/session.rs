@@ -432,6 +432,7 @@ impl<'a> Session<'a> {
         while let Some(outcome) = self.watch.tester.as_mut().and_then(|t| t.take_outcome()) {
             match outcome {
                 JobOutcome::Flash(node, result) => {
+                    let sent_bytes = result.as_ref().ok().map(|report| report.image_len);
                     let (text, result) = match result {
                         Ok(report) => (
                             format!(
@@ -451,11 +452,7 @@ impl<'a> Session<'a> {
                     };
                     self.event(text);
                     if let Some(flash) = self.flash.as_mut().filter(|f| f.ecu == node) {
-                        if let Ok(report) = &result {
-                            if let Some(len) = report["image_bytes"].as_u64() {
-                                flash.image_bytes = len;
-                            }
-                        }
+                        flash.image_bytes = sent_bytes.unwrap_or(flash.image_bytes);
                         flash.result = Some(result);
                     }
                 }

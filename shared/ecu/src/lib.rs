@@ -69,8 +69,9 @@ pub trait EcuLogic {
     /// Whether a frame received since the last step carries a command that must take
     /// effect now rather than up to one period later (the brake pedal pressed: at
     /// 100 km/h each millisecond of waiting adds 28 mm to the stop). The runtime then runs
-    /// a step at once and counts the next period from it, so no step follows closer than a
-    /// period. `false` unless the logic says otherwise.
+    /// a step at once and counts the next period from it. Such a step may follow the last
+    /// one closely, so a logic that asks bounds how often (the ABS: once per 100 ms).
+    /// `false` unless the logic says otherwise.
     fn step_requested(&self) -> bool {
         false
     }

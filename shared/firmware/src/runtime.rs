@@ -124,7 +124,7 @@ where
             Either3::Second(frame) => {
                 state.received(&frame);
                 // A command that must act at once (the brake pedal pressed): step now and
-                // count the next period from here, so no two steps come closer than one.
+                // count the next period from here.
                 if state.ecu.step_requested() {
                     state.control_step();
                     ticker.reset();

@@ -248,6 +248,8 @@ try {
 
   // Report scenario 1: the cruise control.
   await flash(desktop, 'cruise', 'cruise-1.1.0-faulty.img');
+  // What a person sees after a flash: the slot written, the bytes sent, the new slot.
+  await desktop.screenshot({ path: `${shots}/desktop-ecus-flashed.png` });
   await view(desktop, 'drive');
   await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
   await accelerateTo(desktop, 90);
