@@ -172,3 +172,63 @@ fn the_brake_acts_as_soon_as_the_pedal_frame_arrives() {
         "PedalBrake at {pressed} us, brake torque at {acting} us"
     );
 }
+
+/// A stop counts from the tick the driver pressed the pedal, at the speed and place of that
+/// tick, not from the first 10 ms trace sample that shows the pedal down: by then the
+/// brakes have already taken speed off and the stop would read shorter than it was (by
+/// 0.14 m from 50 km/h, 1.4 % of the limit on dry asphalt).
+#[test]
+fn a_stop_counts_from_the_tick_the_pedal_went_down() {
+    use autoplug_virtual_car::car::VirtualCar;
+
+    for press_ms in [300u32, 305] {
+        let scenario = inline(&format!(
+            "name = \"press-at-{press_ms}-ms\"\nduration_s = 3.0\n\
+             [initial]\nspeed_kmh = 50.0\ngear = \"N\"\n\
+             [[at]]\nt_s = {}\nbrake = 100.0\n",
+            f64::from(press_ms) / 1000.0
+        ));
+        // The car ticked by hand: where it was at the tick the pedal went down.
+        let mut car = VirtualCar::new(&scenario);
+        let mut at_press = None;
+        while !car.finished() && at_press.is_none() {
+            let before = (car.time_us(), car.vehicle().distance_m, car.vehicle().speed_mps);
+            car.tick();
+            if car.controls().brake > 0.0 {
+                at_press = Some(before);
+            }
+        }
+        let (t_us, distance_m, speed_mps) = at_press.expect("the pedal went down");
+        assert_eq!(t_us, u64::from(press_ms) * 1000);
+        assert_eq!(car.brake_presses().len(), 1);
+        assert_eq!(car.brake_presses()[0].t_us, t_us);
+
+        let r = run(&scenario);
+        let stop = r.summary.stops.first().expect("a stop");
+        assert!(
+            (stop.start_s - f64::from(press_ms) / 1000.0).abs() < 0.006,
+            "press at {press_ms} ms, stop from {} s",
+            stop.start_s
+        );
+        assert!(
+            (stop.from_kmh - speed_mps * 3.6).abs() < 0.01,
+            "from {} km/h, {} km/h at the press",
+            stop.from_kmh,
+            speed_mps * 3.6
+        );
+        let end = r
+            .trace
+            .iter()
+            .find(|row| row.t_s > stop.start_s && row.speed_kmh <= 0.5)
+            .expect("the car came to rest");
+        assert!(
+            (stop.distance_m - (end.distance_m - distance_m)).abs() < 0.006,
+            "{} m, from the press {} m",
+            stop.distance_m,
+            end.distance_m - distance_m
+        );
+        // The first sample with the pedal down is 10 ms (5 ms) later and over 0.05 m on.
+        let first_down = r.trace.iter().find(|row| row.brake_pedal > 0.0).unwrap();
+        assert!(first_down.distance_m - distance_m > 0.05);
+    }
+}

@@ -311,6 +311,23 @@ pub struct VirtualCar {
     node_names: Vec<&'static str>,
     /// Frames the external node (a tester in the process) received, when captured.
     external_rx: Option<Vec<Frame>>,
+    /// Every moment the brake pedal went down, to the tick.
+    brake_presses: Vec<BrakePress>,
+}
+
+/// The car at the tick the driver pressed the brake pedal (from released): where a stop
+/// begins. The 10 ms trace would put it up to a sample later, when the brake has already
+/// taken some of the speed and the stop looks shorter than it was.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrakePress {
+    /// Simulated time of the tick that saw the pedal down, µs.
+    pub t_us: u64,
+    /// Distance travelled then, m.
+    pub distance_m: f64,
+    /// Speed then, km/h.
+    pub speed_kmh: f64,
+    /// Heading then, rad.
+    pub heading_rad: f64,
 }
 
 fn vehicle_gear(gear: GearName) -> VehicleGear {
@@ -437,6 +454,7 @@ impl VirtualCar {
             log: Vec::with_capacity(1 << 16),
             node_names,
             external_rx: None,
+            brake_presses: Vec::new(),
         };
         // Road and fault changes at t = 0 take effect from the first tick, like any other.
         let mut at_start = Vec::new();
@@ -452,6 +470,11 @@ impl VirtualCar {
     /// The car the virtual car simulates: the Lancer Evolution VI of the 2011 report.
     pub fn vehicle_params() -> VehicleParams {
         VehicleParams::evo_vi()
+    }
+
+    /// Every press of the brake pedal so far, in time order.
+    pub fn brake_presses(&self) -> &[BrakePress] {
+        &self.brake_presses
     }
 
     /// Simulated time, µs.
@@ -693,12 +716,23 @@ impl VirtualCar {
         let t_s = t_us as f64 * 1e-6;
 
         // The driver, and the road and fault changes of the timeline.
+        let previous_brake = self.controls.brake;
         let mut road_changes = Vec::new();
         self.controls = self
             .timeline
             .advance(t_s, |event| road_changes.push(event.clone()));
         if let Some(person) = self.manual.as_mut() {
             self.controls = person.controls_at(t_s);
+        }
+        if self.controls.brake > 0.0 && previous_brake <= 0.0 {
+            // The state is still the one at `t_us`: the model integrates below.
+            let s = self.vehicle.state();
+            self.brake_presses.push(BrakePress {
+                t_us,
+                distance_m: s.distance_m,
+                speed_kmh: s.speed_mps * 3.6,
+                heading_rad: s.heading_rad,
+            });
         }
         for event in road_changes {
             self.apply_event(&event);

@@ -2,7 +2,7 @@
 //! Every number is written with a fixed precision and no wall-clock time, so the same
 //! scenario gives byte-identical files.
 
-use crate::car::{LoggedFrame, TraceRow, VirtualCar};
+use crate::car::{BrakePress, LoggedFrame, TraceRow, VirtualCar};
 use crate::decimal;
 use crate::plot::{Axis, Plot, Series};
 use crate::scenario::Scenario;
@@ -248,7 +248,7 @@ impl Summary {
             fuel_used_l: round(first.fuel_l - last.fuel_l, 3),
             shifts: shifts(&gear_sequence),
             gear_sequence,
-            stops: stops(trace, mu),
+            stops: stops(trace, car.brake_presses(), mu),
             cruise: cruise(trace),
             abs_active_s: round(trace.iter().filter(|r| r.abs_active).count() as f64 * dt, 2),
             abs_interventions: abs_interventions(trace),
@@ -369,7 +369,10 @@ impl Summary {
     }
 }
 
-fn stops(trace: &[TraceRow], mu: f64) -> Vec<Stop> {
+/// The stops of a run: from the tick the pedal went down (`presses`; the last sample
+/// before it when a press is missing, which never makes a stop shorter) to the first
+/// sample at rest.
+fn stops(trace: &[TraceRow], presses: &[BrakePress], mu: f64) -> Vec<Stop> {
     let dt = TRACE_PERIOD_US as f64 * 1e-6;
     let mut found = Vec::new();
     let mut i = 1;
@@ -379,7 +382,22 @@ fn stops(trace: &[TraceRow], mu: f64) -> Vec<Stop> {
             i += 1;
             continue;
         }
-        let start = trace[i];
+        // A row holds the pedal of the tick before it, so the press came at or after the
+        // previous row's time and before this one's.
+        let (before, after) = (trace[i - 1].t_s * 1e6, trace[i].t_s * 1e6);
+        let press = presses.iter().rev().find(|p| {
+            let t = p.t_us as f64;
+            t >= before - 0.5 && t < after - 0.5
+        });
+        let start = match press {
+            Some(p) => StopStart {
+                t_s: p.t_us as f64 * 1e-6,
+                speed_kmh: p.speed_kmh,
+                distance_m: p.distance_m,
+                heading_rad: p.heading_rad,
+            },
+            None => StopStart::of(&trace[i - 1]),
+        };
         let mut j = i;
         let (mut lock, mut longest_lock) = (0.0f64, 0.0f64);
         while j < trace.len() && trace[j].speed_kmh > 0.5 && trace[j].brake_pedal > 0.0 {
@@ -409,6 +427,25 @@ fn stops(trace: &[TraceRow], mu: f64) -> Vec<Stop> {
         i = j.max(i + 1);
     }
     found
+}
+
+/// Where a stop began.
+struct StopStart {
+    t_s: f64,
+    speed_kmh: f64,
+    distance_m: f64,
+    heading_rad: f64,
+}
+
+impl StopStart {
+    fn of(row: &TraceRow) -> Self {
+        Self {
+            t_s: row.t_s,
+            speed_kmh: row.speed_kmh,
+            distance_m: row.distance_m,
+            heading_rad: row.heading_rad,
+        }
+    }
 }
 
 fn cruise(trace: &[TraceRow]) -> Option<CruiseFigures> {
