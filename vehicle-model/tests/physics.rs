@@ -3,7 +3,7 @@
 
 use autoplug_vehicle::thermal::cabin_equilibrium_c;
 use autoplug_vehicle::{
-    longitudinal_friction_coefficient, reference_yaw_rate, Actuators, Environment, Gear,
+    longitudinal_friction_coefficient, reference_yaw_rate, shortest_braking_distance, Actuators, Environment, Gear,
     InitialState, Vehicle, VehicleParams, VehicleState, FL, FR, GRAVITY, RL, RR,
 };
 use proptest::prelude::*;
@@ -764,4 +764,80 @@ fn reverse_drives_backwards_and_is_refused_at_speed() {
     });
     assert_eq!(car.state().gear, Gear::Neutral);
     assert!(car.state().shifting);
+}
+
+/// Brakes the model from `kmh` on friction `mu` with an all-knowing controller: every
+/// millisecond it reads each wheel's true slip and load and holds the slip at the tyre's
+/// peak under that load (full brake until then), with none of an ABS's sensing, bus or
+/// valve timing. Returns the stop, m.
+fn stop_holding_the_peak_slip(mu: f64, kmh: f64) -> f64 {
+    let p = VehicleParams::evo_vi();
+    let nominal_load = p.chassis.mass_kg * GRAVITY / 4.0;
+    // C = 1.5, E = 0: the magic formula peaks where 1.5·atan(z) = π/2.
+    let peak_z = (std::f64::consts::FRAC_PI_2 / p.tyre.shape_c).tan();
+    assert_eq!(p.tyre.curvature_e, 0.0);
+    let env = Environment {
+        mu: [mu; 4],
+        ..Environment::default()
+    };
+    let mut car = new_car(env, moving_at(kmh, Gear::Neutral));
+    let start = car.state().distance_m;
+    let (kp, ki) = (16.0, 100.0);
+    let mut command = [1.0f64; 4];
+    let mut holding = [false; 4];
+    let mut last_error = [0.0f64; 4];
+    while car.state().speed_mps > 0.5 / 3.6 && car.state().t_s < 60.0 {
+        let s = car.state();
+        for w in 0..4 {
+            let relative_load = (s.wheel_load_n[w] - nominal_load) / nominal_load;
+            let mu_load = mu * (1.0 - p.tyre.friction_load_sensitivity * relative_load);
+            let target = peak_z * p.tyre.shape_c * mu_load / p.tyre.longitudinal_stiffness_per_load;
+            let error = target + s.wheel_slip[w];
+            if !holding[w] && error <= 0.0 {
+                holding[w] = true;
+                last_error[w] = error;
+            }
+            if holding[w] && s.speed_mps > 1.0 {
+                command[w] =
+                    (command[w] + kp * (error - last_error[w]) + ki * DT * error).clamp(0.0, 1.0);
+                last_error[w] = error;
+            } else {
+                command[w] = 1.0;
+            }
+        }
+        let act = Actuators {
+            accelerator: 0.0,
+            brake: command,
+            steering_wheel_deg: 0.0,
+            gear: Gear::Neutral,
+            torque_split_nm: 0.0,
+            fan: 0.0,
+            headlights: false,
+            brake_lights: true,
+        };
+        car.step(&act, DT);
+    }
+    car.state().distance_m - start
+}
+
+/// `shortest_braking_distance` is what no brake control can beat: a controller that knows
+/// every wheel's slip and load and acts every millisecond stops longer than it, over the
+/// friction and speed range of the ABS sweep, and close to it: the bound is tight, what
+/// separates them is the tyre carcass's lag and the controller's first overshoot against
+/// the brake's release lag, which the bound leaves out.
+#[test]
+fn no_brake_control_beats_the_shortest_braking_distance() {
+    let p = VehicleParams::evo_vi();
+    for mu in [0.3, 1.0] {
+        for kmh in [50.0, 100.0, 200.0] {
+            let best = stop_holding_the_peak_slip(mu, kmh);
+            let bound = shortest_braking_distance(&p, mu, kmh / 3.6);
+            // 1.017 × on µ 0.3 from 50 km/h, where the first overshoot of a 1 ms loop on
+            // the 20 ms release weighs most; 1.0005 × on µ 1.0 from 200 km/h.
+            assert!(
+                best >= bound && best <= 1.02 * bound,
+                "µ {mu} from {kmh} km/h: {best} m, bound {bound} m"
+            );
+        }
+    }
 }

@@ -151,10 +151,11 @@ pub fn run_sweep(
 }
 
 /// The shortest stop the car itself allows from `from_kmh` on friction `mu`, m
-/// ([`shortest_braking_distance`]): every tyre at its peak under the braking load transfer
-/// as soon as the brake pressure has built up to hold it there, drag included. Longer than
-/// v²/(2µg) by the tyres' load sensitivity (3.7 % on µ = 1) and the pressure build-up, so
-/// a stop's excess over this is what the ABS costs.
+/// ([`shortest_braking_distance`]): the brake pressure building up over its 40 ms, each
+/// wheel spun down against its inertia to the tyre's peak slip and held there exactly,
+/// under the braking load transfer, drag and rolling resistance included. Longer than
+/// v²/(2µg) by the tyres' load sensitivity (3.7 % on µ = 1), the pressure build-up and the
+/// spin-down, so a stop's excess over this is what the ABS costs.
 pub fn car_limit_m(mu: f64, from_kmh: f64) -> f64 {
     shortest_braking_distance(&VirtualCar::vehicle_params(), mu, from_kmh / 3.6)
 }
