@@ -224,7 +224,7 @@ impl BusTester {
                 let done = job.take_result().is_some();
                 if done {
                     self.dtc_reads += 1;
-                    self.next_dtc_us = Some(t_us + self.dtc_interval_us);
+                    self.next_dtc_us = Some(t_us.saturating_add(self.dtc_interval_us));
                 }
                 done
             }

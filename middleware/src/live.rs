@@ -169,16 +169,35 @@ pub type Outbox = Rc<RefCell<VecDeque<Frame>>>;
 /// Most frames waiting in an [`Outbox`] (a 4 KiB ISO-TP transfer is 586 frames).
 pub const OUTBOX_CAPACITY: usize = 1024;
 
+/// Frames a [`Transmitting`] source hands to the bus in a row, the observers refilling the
+/// outbox between them, before it reads the bus again: a transfer's consecutive frames
+/// follow each other as fast as the bus takes them (an ISO-TP sender hands out its next
+/// frame only once the last is confirmed), and the bus is still read every so often.
+pub const TX_BURST: usize = 64;
+
 /// A live source that also sends what the gateway's tester queued, before each poll.
+///
+/// Having handed frames to the bus it reports an idle moment at once, without reading the
+/// bus, so the tester (an observer, reached only through the pipeline) confirms them and
+/// queues its next: up to [`TX_BURST`] frames, or until the bus refuses one (its controller
+/// queue is full). Reading the bus between frames instead cost a 1 ms tick of the virtual
+/// car per consecutive frame, or the pipeline's whole idle wait on a real bus that stays
+/// silent while an ECU takes a download.
 pub struct Transmitting<S: FrameSource = Box<dyn FrameSource>> {
     inner: S,
     outbox: Outbox,
+    /// Frames handed over since the bus was last read.
+    burst: usize,
 }
 
 impl<S: FrameSource> Transmitting<S> {
     /// `inner`, sending what `outbox` holds.
     pub fn new(inner: S, outbox: Outbox) -> Self {
-        Self { inner, outbox }
+        Self {
+            inner,
+            outbox,
+            burst: 0,
+        }
     }
 
     /// The source inside (the virtual car, for whoever drives it).
@@ -189,15 +208,24 @@ impl<S: FrameSource> Transmitting<S> {
 
 impl<S: FrameSource> FrameSource for Transmitting<S> {
     fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
-        loop {
+        let mut refused = false;
+        let mut sent = 0;
+        while self.burst < TX_BURST {
             let Some(frame) = self.outbox.borrow_mut().pop_front() else {
                 break;
             };
             if !self.inner.transmit(&frame)? {
                 self.outbox.borrow_mut().push_front(frame);
+                refused = true;
                 break;
             }
+            sent += 1;
+            self.burst += 1;
         }
+        if sent > 0 && !refused && self.burst < TX_BURST {
+            return Ok(Poll::Idle);
+        }
+        self.burst = 0;
         self.inner.poll(max_wait)
     }
 
@@ -298,5 +326,158 @@ impl BusUrl {
                 })
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bus_tester::{BusTester, JobOutcome, UserJob};
+    use crate::tester::{FlashConfig, FlashJob, Phase, TesterConfig};
+    use autoplug_can::Node;
+    use autoplug_gateway::{Pipeline, Strictness};
+    use autoplug_image::{SigningKey, SoftwareVariant, Version};
+    use autoplug_virtual_car::diag::{build_image, FACTORY_PAYLOAD_LEN};
+    use autoplug_virtual_car::scenario::Scenario;
+
+    /// A bus that takes `accepts` frames, then refuses (its queue is full), and is silent.
+    struct Silent {
+        accepts: usize,
+        taken: usize,
+        polls: usize,
+    }
+
+    impl FrameSource for Silent {
+        fn poll(&mut self, _max_wait: Duration) -> Result<Poll, SourceError> {
+            self.polls += 1;
+            Ok(Poll::Idle)
+        }
+
+        fn describe(&self) -> String {
+            "a silent bus".into()
+        }
+
+        fn transmit(&mut self, _frame: &Frame) -> Result<bool, SourceError> {
+            if self.taken == self.accepts {
+                return Ok(false);
+            }
+            self.taken += 1;
+            Ok(true)
+        }
+    }
+
+    fn outbox_of(frames: usize) -> Outbox {
+        let frame = Frame::new(0x70D, &[0x21; 8]).unwrap();
+        Rc::new(RefCell::new((0..frames).map(|_| frame).collect()))
+    }
+
+    #[test]
+    fn handed_frames_let_the_tester_refill_before_the_bus_is_read() {
+        // Frames taken: an idle moment at once, the bus not read (on a silent real bus the
+        // read would wait the pipeline's whole idle time for each frame).
+        let outbox = outbox_of(3);
+        let silent = Silent {
+            accepts: usize::MAX,
+            taken: 0,
+            polls: 0,
+        };
+        let mut source = Transmitting::new(silent, Rc::clone(&outbox));
+        assert!(matches!(source.poll(Duration::ZERO), Ok(Poll::Idle)));
+        assert_eq!((source.inner.taken, source.inner.polls), (3, 0));
+        // Nothing to send: the bus is read.
+        assert!(matches!(source.poll(Duration::ZERO), Ok(Poll::Idle)));
+        assert_eq!(source.inner.polls, 1);
+
+        // A long queue: at most TX_BURST frames between two reads of the bus.
+        let outbox = outbox_of(3 * TX_BURST);
+        let silent = Silent {
+            accepts: usize::MAX,
+            taken: 0,
+            polls: 0,
+        };
+        let mut source = Transmitting::new(silent, Rc::clone(&outbox));
+        source.poll(Duration::ZERO).unwrap();
+        assert_eq!((source.inner.taken, source.inner.polls), (TX_BURST, 1));
+        source.poll(Duration::ZERO).unwrap();
+        assert_eq!((source.inner.taken, source.inner.polls), (2 * TX_BURST, 2));
+
+        // A full controller queue: the frame stays first in the outbox, the bus is read.
+        let outbox = outbox_of(5);
+        let silent = Silent {
+            accepts: 2,
+            taken: 0,
+            polls: 0,
+        };
+        let mut source = Transmitting::new(silent, Rc::clone(&outbox));
+        source.poll(Duration::ZERO).unwrap();
+        assert_eq!((source.inner.taken, source.inner.polls), (2, 1));
+        assert_eq!(outbox.borrow().len(), 3);
+    }
+
+    /// The gateway's tester flashing the virtual car through the pipeline, as the dashboard
+    /// and the fleet's agent do: the transfer runs near the bus's pace (in simulated time).
+    /// When the source read the bus between consecutive frames, each one waited for the
+    /// car's next 1 ms tick and the transfer ran at 3.5 kB/s.
+    #[test]
+    fn the_gateways_tester_keeps_the_bus_busy_during_a_download() {
+        let scenario = Scenario::parse(DASHBOARD_SCENARIO, "dashboard").unwrap();
+        let outbox: Outbox = Rc::default();
+        let mut source = Transmitting::new(
+            VirtualCarSource::new(VirtualCar::new(&scenario)),
+            Rc::clone(&outbox),
+        );
+        let mut tester = BusTester::new(&[Node::Cruise], TesterConfig::DEFAULT, outbox, u64::MAX);
+        let key = SigningKey::from_seed(autoplug_image::dev::SIGNING_SEED);
+        let release = build_image(
+            Node::Cruise,
+            Version::new(1, 2, 0),
+            SoftwareVariant::Standard,
+            FACTORY_PAYLOAD_LEN,
+            &key,
+        );
+        let job = FlashJob::new(FlashConfig::new(
+            Node::Cruise,
+            release,
+            crate::DEV_SECURITY_SECRET,
+        ))
+        .unwrap();
+        let mut pipeline = Pipeline::new(Strictness::Strict);
+        // The car wakes up and the tester reads the ECU's identification first.
+        while source.inner.car().time_us() < 2_000_000 {
+            let mut polls = 0;
+            pipeline
+                .run(&mut source, &mut [&mut tester], &mut || {
+                    polls += 1;
+                    polls > 1000
+                })
+                .unwrap();
+        }
+        tester.queue(UserJob::Flash(Box::new(job))).unwrap();
+        let outcome = loop {
+            let mut polls = 0;
+            pipeline
+                .run(&mut source, &mut [&mut tester], &mut || {
+                    polls += 1;
+                    polls > 1000
+                })
+                .unwrap();
+            if let Some(outcome) = tester.take_outcome() {
+                break outcome;
+            }
+            assert!(
+                source.inner.car().time_us() < 60_000_000,
+                "no outcome in a minute"
+            );
+        };
+        let JobOutcome::Flash(Node::Cruise, Ok(report)) = outcome else {
+            panic!("the flash failed: {outcome:?}");
+        };
+        let throughput = report.transfer_throughput().expect("a whole transfer");
+        println!(
+            "{report}: transfer {:.0} bytes/s over {} us",
+            throughput,
+            report.duration_us(Phase::Transfer).unwrap()
+        );
+        assert!(throughput > 20_000.0, "{throughput:.0} bytes/s");
     }
 }
