@@ -192,7 +192,11 @@ fn a_stop_counts_from_the_tick_the_pedal_went_down() {
         let mut car = VirtualCar::new(&scenario);
         let mut at_press = None;
         while !car.finished() && at_press.is_none() {
-            let before = (car.time_us(), car.vehicle().distance_m, car.vehicle().speed_mps);
+            let before = (
+                car.time_us(),
+                car.vehicle().distance_m,
+                car.vehicle().speed_mps,
+            );
             car.tick();
             if car.controls().brake > 0.0 {
                 at_press = Some(before);

@@ -114,12 +114,7 @@ fn full_braking_up_to_friction_0_8_stays_near_the_limit() {
 /// 60 km/h the car's own limit is at or over 1.05 (see the ignored test above).
 #[test]
 fn full_braking_on_dry_asphalt_stays_near_the_limit_from_80_kmh() {
-    sweep_within_bounds(
-        &[1.0],
-        &[40.0, 80.0, 100.0, 130.0, 160.0, 200.0],
-        &[],
-        &[],
-    );
+    sweep_within_bounds(&[1.0], &[40.0, 80.0, 100.0, 130.0, 160.0, 200.0], &[], &[]);
 }
 
 /// Split friction at every speed of the sweep: no wheel locked and the heading within 10°

@@ -3,8 +3,8 @@
 
 use autoplug_vehicle::thermal::cabin_equilibrium_c;
 use autoplug_vehicle::{
-    longitudinal_friction_coefficient, reference_yaw_rate, shortest_braking_distance, Actuators, Environment, Gear,
-    InitialState, Vehicle, VehicleParams, VehicleState, FL, FR, GRAVITY, RL, RR,
+    longitudinal_friction_coefficient, reference_yaw_rate, shortest_braking_distance, Actuators,
+    Environment, Gear, InitialState, Vehicle, VehicleParams, VehicleState, FL, FR, GRAVITY, RL, RR,
 };
 use proptest::prelude::*;
 use proptest::test_runner::FileFailurePersistence;
