@@ -442,25 +442,23 @@ mod tests {
         ))
         .unwrap();
         let mut pipeline = Pipeline::new(Strictness::Strict);
-        // The car wakes up and the tester reads the ECU's identification first.
-        while source.inner.car().time_us() < 2_000_000 {
+        // A thousand polls of the pipeline, the tester its observer.
+        let mut run = |source: &mut Transmitting<VirtualCarSource>, tester: &mut BusTester| {
             let mut polls = 0;
             pipeline
-                .run(&mut source, &mut [&mut tester], &mut || {
+                .run(source, &mut [tester], &mut || {
                     polls += 1;
                     polls > 1000
                 })
                 .unwrap();
+        };
+        // The car wakes up and the tester reads the ECU's identification first.
+        while source.inner.car().time_us() < 2_000_000 {
+            run(&mut source, &mut tester);
         }
         tester.queue(UserJob::Flash(Box::new(job))).unwrap();
         let outcome = loop {
-            let mut polls = 0;
-            pipeline
-                .run(&mut source, &mut [&mut tester], &mut || {
-                    polls += 1;
-                    polls > 1000
-                })
-                .unwrap();
+            run(&mut source, &mut tester);
             if let Some(outcome) = tester.take_outcome() {
                 break outcome;
             }
