@@ -78,6 +78,8 @@ impl FrameSource for VirtualCarSource {
                 desk.borrow_mut().apply(&mut self.car);
             }
             self.car.tick();
+            // Nothing here sums up stops: a person may drive the car for days.
+            drop(self.car.take_brake_presses());
             // Taken, not copied: a long live run keeps no frames in the car.
             self.pending.extend(
                 self.car
@@ -412,6 +414,19 @@ mod tests {
         source.poll(Duration::ZERO).unwrap();
         assert_eq!((source.inner.taken, source.inner.polls), (2, 1));
         assert_eq!(outbox.borrow().len(), 3);
+    }
+
+    /// A live car runs as long as someone drives it: it keeps no record of the brake
+    /// presses, which only a finished run's summary needs.
+    #[test]
+    fn a_live_car_keeps_no_brake_presses() {
+        let scenario = autoplug_virtual_car::sweep::braking_scenario(1.0, 1.0, 50.0).unwrap();
+        let mut source = VirtualCarSource::new(VirtualCar::new(&scenario));
+        while source.car().time_us() < 500_000 {
+            source.poll(Duration::ZERO).unwrap();
+        }
+        assert!(source.car().controls().brake > 0.0, "the brake is pressed");
+        assert!(source.car().brake_presses().is_empty());
     }
 
     /// The gateway's tester flashing the virtual car through the pipeline, as the dashboard

@@ -294,6 +294,13 @@ pub struct TraceRow {
     pub distance_m: f64,
 }
 
+impl TraceRow {
+    /// The sample's time, µs (the tick it was taken at).
+    pub fn t_us(&self) -> u64 {
+        (self.t_s * 1e6).round() as u64
+    }
+}
+
 /// The running car.
 pub struct VirtualCar {
     scenario: Scenario,
@@ -328,6 +335,18 @@ pub struct BrakePress {
     pub speed_kmh: f64,
     /// Heading then, rad.
     pub heading_rad: f64,
+}
+
+impl BrakePress {
+    /// The car at a trace sample, as a press there would find it.
+    pub fn at(row: &TraceRow) -> Self {
+        Self {
+            t_us: row.t_us(),
+            distance_m: row.distance_m,
+            speed_kmh: row.speed_kmh,
+            heading_rad: row.heading_rad,
+        }
+    }
 }
 
 fn vehicle_gear(gear: GearName) -> VehicleGear {
@@ -472,9 +491,16 @@ impl VirtualCar {
         VehicleParams::evo_vi()
     }
 
-    /// Every press of the brake pedal so far, in time order.
+    /// Every press of the brake pedal so far (since the last
+    /// [`take_brake_presses`](Self::take_brake_presses)), in time order.
     pub fn brake_presses(&self) -> &[BrakePress] {
         &self.brake_presses
+    }
+
+    /// Takes the presses recorded so far: a car that runs for as long as a person drives
+    /// it (the dashboard) keeps none it has no use for.
+    pub fn take_brake_presses(&mut self) -> Vec<BrakePress> {
+        std::mem::take(&mut self.brake_presses)
     }
 
     /// Simulated time, µs.

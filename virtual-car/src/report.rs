@@ -383,20 +383,12 @@ fn stops(trace: &[TraceRow], presses: &[BrakePress], mu: f64) -> Vec<Stop> {
             continue;
         }
         // A row holds the pedal of the tick before it, so the press came at or after the
-        // previous row's time and before this one's.
-        let (before, after) = (trace[i - 1].t_s * 1e6, trace[i].t_s * 1e6);
-        let press = presses.iter().rev().find(|p| {
-            let t = p.t_us as f64;
-            t >= before - 0.5 && t < after - 0.5
-        });
-        let start = match press {
-            Some(p) => StopStart {
-                t_s: p.t_us as f64 * 1e-6,
-                speed_kmh: p.speed_kmh,
-                distance_m: p.distance_m,
-                heading_rad: p.heading_rad,
-            },
-            None => StopStart::of(&trace[i - 1]),
+        // previous row's time and before this one's (the presses are in time order).
+        let (before, after) = (trace[i - 1].t_us(), trace[i].t_us());
+        let next = presses.partition_point(|p| p.t_us < after);
+        let start = match next.checked_sub(1).map(|k| presses[k]) {
+            Some(press) if press.t_us >= before => press,
+            _ => BrakePress::at(&trace[i - 1]),
         };
         let mut j = i;
         let (mut lock, mut longest_lock) = (0.0f64, 0.0f64);
@@ -414,10 +406,10 @@ fn stops(trace: &[TraceRow], presses: &[BrakePress], mu: f64) -> Vec<Stop> {
             let limit = v * v / (2.0 * mu * G);
             let distance = end.distance_m - start.distance_m;
             found.push(Stop {
-                start_s: round(start.t_s, 2),
+                start_s: round(start.t_us as f64 * 1e-6, 2),
                 from_kmh: round(start.speed_kmh, 2),
                 distance_m: round(distance, 2),
-                duration_s: round(end.t_s - start.t_s, 2),
+                duration_s: round(end.t_s - start.t_us as f64 * 1e-6, 2),
                 limit_m: round(limit, 2),
                 ratio_to_limit: round(distance / limit, 3),
                 heading_change_deg: round((end.heading_rad - start.heading_rad).to_degrees(), 2),
@@ -427,25 +419,6 @@ fn stops(trace: &[TraceRow], presses: &[BrakePress], mu: f64) -> Vec<Stop> {
         i = j.max(i + 1);
     }
     found
-}
-
-/// Where a stop began.
-struct StopStart {
-    t_s: f64,
-    speed_kmh: f64,
-    distance_m: f64,
-    heading_rad: f64,
-}
-
-impl StopStart {
-    fn of(row: &TraceRow) -> Self {
-        Self {
-            t_s: row.t_s,
-            speed_kmh: row.speed_kmh,
-            distance_m: row.distance_m,
-            heading_rad: row.heading_rad,
-        }
-    }
 }
 
 fn cruise(trace: &[TraceRow]) -> Option<CruiseFigures> {
