@@ -1,9 +1,10 @@
-//! The dashboard's page and its assets, built by Vite from `gateway/web/ui` (the project's
-//! setup runs `npm ci` and `npm run build` there) and embedded into the binary, so the
-//! gateway serves its dashboard offline, from one file.
+//! The dashboard's page and its assets, built by Vite from `gateway/web/ui` into `ui/dist`
+//! (kept in the repository: `scripts/ui-build` rebuilds it, CI checks it is what its
+//! sources build) and embedded into the binary, so the gateway serves its dashboard
+//! offline, from one file.
 //!
 //! A path that is not an asset gets the page (the views are the page's own routes); a
-//! build without the front end (setup not run) gets a page that says how to build it.
+//! build without the front end (`ui/dist` removed) gets a page that says how to build it.
 
 use axum::http::{header, Method, StatusCode, Uri};
 use axum::response::{IntoResponse, Response};
@@ -24,7 +25,7 @@ pub fn built() -> bool {
 const NOT_BUILT: &str = "<!doctype html><meta charset=utf-8><title>AutoPlug</title>\
 <body style=\"font-family:sans-serif;max-width:40em;margin:3em auto\">\
 <h1>AutoPlug gateway</h1><p>The dashboard's front end was not built into this binary. \
-Run <code>scripts/setup</code> (it builds <code>gateway/web/ui</code> with npm), then build \
+Run <code>scripts/ui-build</code> (it builds <code>gateway/web/ui</code> with npm), then build \
 again. The live stream is at <code>/api/stream</code> meanwhile.</p>";
 
 fn content_type(path: &str) -> &'static str {
@@ -36,6 +37,7 @@ fn content_type(path: &str) -> &'static str {
         Some("png") => "image/png",
         Some("ico") => "image/x-icon",
         Some("json") | Some("webmanifest") => "application/json",
+        Some("txt") => "text/plain; charset=utf-8",
         Some("woff2") => "font/woff2",
         _ => "application/octet-stream",
     }

@@ -227,25 +227,28 @@ fn foreign_origins_and_extra_clients_are_refused_with_a_reason() {
     });
 }
 
+/// A plain HTTP/1.1 GET, the whole response (status line, headers, body).
+fn http_get(server: &WebServer, path: &str) -> String {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+        server.addr()
+    )
+    .expect("request");
+    let mut response = String::new();
+    stream.read_to_string(&mut response).expect("response");
+    response
+}
+
 #[test]
 fn http_errors_say_what_was_wrong() {
     let (table, server) = server(8);
     let mut state = CarState::new();
     state.update(&speed(0, 12.0));
     table.publish(&state);
-    let get = |path: &str| {
-        use std::io::{Read, Write};
-        let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
-        write!(
-            stream,
-            "GET {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
-            server.addr()
-        )
-        .expect("request");
-        let mut response = String::new();
-        stream.read_to_string(&mut response).expect("response");
-        response
-    };
+    let get = |path: &str| http_get(&server, path);
     let missing = get("/api/nothing/here");
     assert!(missing.starts_with("HTTP/1.1 404"), "{missing}");
     assert!(
@@ -285,6 +288,28 @@ fn http_errors_say_what_was_wrong() {
         let _ = stream.write_all(&[0u8; 300]);
     }
     assert!(get("/api/catalog").starts_with("HTTP/1.1 200"));
+}
+
+#[test]
+fn the_kept_front_end_build_is_served_with_its_third_party_licences() {
+    // gateway/web/ui/dist is kept in the repository, so every build embeds the page and the
+    // main command needs no Node.js.
+    assert!(autoplug_web::assets::built(), "ui/dist is missing from the checkout");
+    let (_table, server) = server(8);
+    let get = |path: &str| http_get(&server, path);
+    let page = get("/");
+    assert!(page.starts_with("HTTP/1.1 200"), "{page}");
+    let script = page
+        .split('"')
+        .find(|part| part.starts_with("/assets/") && part.ends_with(".js"))
+        .unwrap_or_else(|| panic!("no bundled script in the page: {page}"));
+    assert!(get(script).starts_with("HTTP/1.1 200"));
+    // The bundle holds uPlot (MIT): its licence is served beside it.
+    let licences = get("/third-party-licenses.txt");
+    assert!(licences.starts_with("HTTP/1.1 200"), "{licences}");
+    assert!(licences.contains("text/plain"), "{licences}");
+    assert!(licences.contains("uplot 1.6.32 (MIT)"), "{licences}");
+    assert!(licences.contains("Permission is hereby granted"), "{licences}");
 }
 
 #[test]
