@@ -24,7 +24,7 @@ import sys
 try:
     from elftools.elf.elffile import ELFFile
 except ImportError:
-    sys.exit("firmware-size: needs pyelftools (scripts/setup installs it: pip install pyelftools==0.33)")
+    sys.exit("firmware-size: needs pyelftools (scripts/setup-tests installs it into .venv)")
 
 FLASH = (0x0800_0000, 0x0808_0000)  # 512 KiB on the F446RE
 RAM = (0x2000_0000, 0x2002_0000)  # 128 KiB

@@ -23,7 +23,7 @@ try:
     import cantools
     import cantools.logreader
 except ImportError as e:  # pragma: no cover
-    sys.exit(f"recording-check: {e}; install with: pip install python-can cantools")
+    sys.exit(f"recording-check: {e}; run scripts/setup-tests (it installs them into .venv)")
 
 
 def seconds(timestamp):
@@ -52,7 +52,7 @@ def check_mcap(db, catalogue, rec, path, failures):
     try:
         from mcap.reader import make_reader
     except ImportError as e:  # pragma: no cover
-        sys.exit(f"recording-check: {e}; install with: pip install mcap")
+        sys.exit(f"recording-check: {e}; run scripts/setup-tests (it installs it into .venv)")
     raw, decoded = [], []
     with open(path, "rb") as f:
         for _schema, channel, message in make_reader(f).iter_messages(log_time_order=False):

@@ -40,7 +40,7 @@ impl PgSchema {
         let base = postgres_url();
         let mut admin = postgres::Client::connect(&base, postgres::NoTls).unwrap_or_else(|e| {
             panic!(
-                "PostgreSQL at {base} (AUTOPLUG_TEST_POSTGRES): {e}; scripts/setup installs and starts one"
+                "PostgreSQL at {base} (AUTOPLUG_TEST_POSTGRES): {e}; scripts/setup-tests installs and starts one"
             )
         });
         admin

@@ -60,7 +60,7 @@ fn reports_through_the_broker_are_stored_once_and_bad_ones_refused() {
         ];
         let link = MqttLink::connect(rt.handle(), &broker, options);
         link.wait_connected(Duration::from_secs(5))
-            .unwrap_or_else(|e| panic!("{e} (scripts/setup installs and starts Mosquitto)"));
+            .unwrap_or_else(|e| panic!("{e} (scripts/setup-tests installs and starts Mosquitto)"));
         while link.status().granted.len() < 2 {
             std::thread::sleep(Duration::from_millis(10));
         }

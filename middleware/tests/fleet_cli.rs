@@ -112,7 +112,7 @@ fn a_campaign_from_the_command_line_reaches_its_vehicle_and_the_report_comes_bac
     options.subscriptions = vec![topics::command(&vins[0])];
     let mut car = MqttLink::connect(runtime.handle(), &broker, options);
     car.wait_connected(Duration::from_secs(5))
-        .unwrap_or_else(|e| panic!("{e} (scripts/setup installs and starts Mosquitto)"));
+        .unwrap_or_else(|e| panic!("{e} (scripts/setup-tests installs and starts Mosquitto)"));
     while car.status().granted.is_empty() {
         std::thread::sleep(Duration::from_millis(10));
     }

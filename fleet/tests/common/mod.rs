@@ -1,7 +1,7 @@
 //! The two engines every fleet test runs on: a fresh SQLite file, and a schema of its own on
 //! the PostgreSQL server at `AUTOPLUG_TEST_POSTGRES` (default: the local server, database
 //! `test`). The real server, never a stand-in: a test fails, naming the address, when it is
-//! not there (`scripts/setup` installs and starts one).
+//! not there (`scripts/setup-tests` installs and starts one).
 
 #![allow(dead_code)]
 
@@ -91,7 +91,7 @@ impl PrivateBroker {
             .stderr(std::process::Stdio::null())
             .spawn()
             .unwrap_or_else(|e| {
-                panic!("cannot run {binary} (scripts/setup installs Mosquitto): {e}")
+                panic!("cannot run {binary} (scripts/setup-tests installs Mosquitto): {e}")
             })
     }
 
