@@ -486,16 +486,21 @@ pub struct ReadArgs {
     pub timing: TimingArgs,
 }
 
-/// UDS timing options.
+/// UDS timing options (ISO 14229-2: the tester waits P2server + ΔP2 from its request's
+/// transmission confirmation).
 #[derive(Debug, Clone, Copy, Args)]
 pub struct TimingArgs {
-    /// P2: the longest wait for a response, in ms (add the latency of a remote socketcand
-    /// link to the ECUs' 50 ms).
+    /// P2server: how long the ECU may take to start its response, in ms (the AutoPlug ECUs
+    /// announce 50).
     #[arg(long, value_name = "MS", default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..=60_000))]
     pub p2_ms: u64,
-    /// P2*: the longest wait after each "response pending", in ms.
+    /// P2*server: the longest wait after each "response pending", in ms.
     #[arg(long, value_name = "MS", default_value_t = 5000, value_parser = clap::value_parser!(u64).range(1..=600_000))]
     pub p2_star_ms: u64,
+    /// ΔP2: what the network adds to every wait, in ms (default: the transport's, 50 for
+    /// socketcand, 10 for SocketCAN; more for a socketcand link over a slow network).
+    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(0..=60_000))]
+    pub network_delay_ms: Option<u64>,
 }
 
 impl TimingArgs {
@@ -504,10 +509,11 @@ impl TimingArgs {
         TesterConfig {
             p2_us: self.p2_ms * 1000,
             p2_star_us: self.p2_star_ms * 1000,
-            // A link slow enough to need a longer P2 is as slow for functional answers.
+            // An ECU slow enough to need a longer P2 is as slow for functional answers.
             functional_window_us: TesterConfig::DEFAULT
                 .functional_window_us
                 .max(self.p2_ms * 1000),
+            network_delay_us: self.network_delay_ms.map(|ms| ms * 1000),
             ..TesterConfig::DEFAULT
         }
     }

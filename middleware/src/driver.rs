@@ -1,9 +1,12 @@
 //! Runs a sans-IO [`Job`] over a real-time [`Transport`] with the wall clock.
 //!
-//! The loop: poll the job, hand every frame it has to the transport (a frame counts as on
-//! the bus once the transport has taken it), then wait for a frame until the job's next
-//! deadline. Frames of a block go out back to back: the ECUs advertise block size 0 and
-//! STmin 0, and waiting for the socket between them would only slow the transfer down.
+//! The loop: poll the job, hand its frames to the transport while the transport takes
+//! them, then wait for a frame or a confirmation until the job's next deadline. The job's
+//! tester hands out as many frames as the transport queues ([`Transport::transmit_window`])
+//! and learns when each is on the bus from the transport's confirmations, so the frames of
+//! a block follow each other as fast as the bus takes them (the ECUs advertise block size 0
+//! and STmin 0) and P2 starts when the request's last frame is on the bus, not when it was
+//! queued; the tester's ΔP2 is the transport's unless the job's configuration names one.
 
 use std::fmt;
 use std::time::{Duration, Instant as WallInstant};
@@ -11,7 +14,7 @@ use std::time::{Duration, Instant as WallInstant};
 use autoplug_ecu::Instant;
 
 use crate::tester::Job;
-use crate::transport::{Transport, TransportError};
+use crate::transport::{Incoming, Transport, TransportError};
 
 /// The longest the loop sleeps in the transport, even without a deadline: a bound on how
 /// late a timer set by a callback (e.g. a progress bar) is noticed.
@@ -19,6 +22,10 @@ pub const MAX_WAIT: Duration = Duration::from_millis(10);
 
 /// Frames taken from the transport before the job gets to send again.
 const MAX_BATCH: usize = 64;
+
+/// How long a finished job's frames may take to be confirmed before the transport is
+/// handed back (the next job would take their confirmations for its own).
+const SETTLE_LIMIT: Duration = Duration::from_secs(1);
 
 /// The wall clock as the sans-IO code sees it: microseconds since the clock was made.
 #[derive(Debug, Clone, Copy)]
@@ -79,14 +86,26 @@ pub fn run<J: Job + ?Sized>(
     job: &mut J,
 ) -> Result<J::Output, DriveError<J::Error>> {
     let clock = WallClock::new();
+    let delta_p2_us = transport.network_delay().as_micros() as u64;
+    job.tester_mut()
+        .set_transport(transport.transmit_window(), delta_p2_us);
+    // A frame the transport refused (its queue full), offered again first.
+    let mut held = None;
+    // Frames the transport took and has not confirmed yet.
+    let mut unconfirmed = 0usize;
     loop {
         let now = clock.now();
         job.poll(now);
-        while let Some(frame) = job.poll_transmit(now) {
-            transport.send(&frame).map_err(DriveError::Transport)?;
-            job.confirm_transmit(clock.now());
+        while let Some(frame) = held.take().or_else(|| job.poll_transmit(now)) {
+            if transport.send(&frame).map_err(DriveError::Transport)? {
+                unconfirmed += 1;
+            } else {
+                held = Some(frame);
+                break;
+            }
         }
         if let Some(result) = job.take_result() {
+            settle(transport, unconfirmed).map_err(DriveError::Transport)?;
             return result.map_err(DriveError::Job);
         }
         let now = clock.now();
@@ -101,12 +120,32 @@ pub fn run<J: Job + ?Sized>(
         // frames and timers), then back to the job.
         for _ in 0..MAX_BATCH {
             match transport.recv(timeout).map_err(DriveError::Transport)? {
-                Some((frame, _)) => job.on_frame(clock.now(), &frame),
+                Some(Incoming::Frame(frame, _)) => job.on_frame(clock.now(), &frame),
+                Some(Incoming::Sent) => {
+                    unconfirmed = unconfirmed.saturating_sub(1);
+                    job.confirm_transmit(clock.now());
+                }
                 None => break,
             }
             timeout = Duration::ZERO;
         }
     }
+}
+
+/// Waits (at most [`SETTLE_LIMIT`]) for the confirmations of `unconfirmed` frames a
+/// finished job left on the way; what else arrives meanwhile was the job's.
+fn settle(transport: &mut dyn Transport, mut unconfirmed: usize) -> Result<(), TransportError> {
+    let give_up = WallInstant::now() + SETTLE_LIMIT;
+    while unconfirmed > 0 {
+        let left = give_up.saturating_duration_since(WallInstant::now());
+        match transport.recv(left.min(MAX_WAIT))? {
+            Some(Incoming::Sent) => unconfirmed -= 1,
+            Some(Incoming::Frame(..)) => {}
+            None if left.is_zero() => break,
+            None => {}
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -124,12 +163,12 @@ mod tests {
     /// that breaks at the first frame.
     struct Scripted {
         broken: bool,
-        inbox: VecDeque<Frame>,
+        inbox: VecDeque<Incoming>,
         sent: usize,
     }
 
     impl Transport for Scripted {
-        fn send(&mut self, frame: &Frame) -> Result<(), TransportError> {
+        fn send(&mut self, frame: &Frame) -> Result<bool, TransportError> {
             if self.broken {
                 return Err(TransportError::Io {
                     context: "writing to the test link".into(),
@@ -137,26 +176,26 @@ mod tests {
                 });
             }
             self.sent += 1;
+            // On the bus at once: its confirmation first, then the ECU's answer.
+            self.inbox.push_back(Incoming::Sent);
             let data = frame.data();
             if frame.id() == 0x70D && data[1] == 0x22 {
                 let answer = [0x05, 0x62, data[2], data[3], b'A', b'B', 0xCC, 0xCC];
-                self.inbox.push_back(Frame::new(0x78D, &answer).unwrap());
+                let timestamp = Timestamp {
+                    host: WallInstant::now(),
+                    bus_us: None,
+                };
+                self.inbox.push_back(Incoming::Frame(
+                    Frame::new(0x78D, &answer).unwrap(),
+                    timestamp,
+                ));
             }
-            Ok(())
+            Ok(true)
         }
 
-        fn recv(
-            &mut self,
-            timeout: Duration,
-        ) -> Result<Option<(Frame, Timestamp)>, TransportError> {
+        fn recv(&mut self, timeout: Duration) -> Result<Option<Incoming>, TransportError> {
             match self.inbox.pop_front() {
-                Some(frame) => Ok(Some((
-                    frame,
-                    Timestamp {
-                        host: WallInstant::now(),
-                        bus_us: None,
-                    },
-                ))),
+                Some(incoming) => Ok(Some(incoming)),
                 None => {
                     std::thread::sleep(timeout);
                     Ok(None)
@@ -166,6 +205,14 @@ mod tests {
 
         fn describe(&self) -> String {
             "scripted".into()
+        }
+
+        fn transmit_window(&self) -> usize {
+            1
+        }
+
+        fn network_delay(&self) -> Duration {
+            Duration::ZERO
         }
     }
 

@@ -14,7 +14,7 @@ use autoplug_logs::LogFrame;
 use autoplug_virtual_car::car::VirtualCar;
 use autoplug_virtual_car::scenario::Scenario;
 
-use crate::transport::{Transport, TransportError, Via};
+use crate::transport::{Incoming, Transport, TransportError, Via};
 
 /// The virtual car's bus as a live source: each poll runs the car on until it has put
 /// frames on the bus, and hands them over in bus order with their bus time. The gateway
@@ -127,7 +127,10 @@ impl TransportSource {
 impl FrameSource for TransportSource {
     fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
         match self.transport.recv(max_wait) {
-            Ok(Some((frame, at))) => {
+            // A frame of the gateway's own is on the bus: the queue has room again, which
+            // the next transmit finds out for itself.
+            Ok(Some(Incoming::Sent)) => Ok(Poll::Idle),
+            Ok(Some(Incoming::Frame(frame, at))) => {
                 let t_us = at.bus_us.unwrap_or_else(|| {
                     at.host.saturating_duration_since(self.opened).as_micros() as u64
                 });
@@ -153,13 +156,10 @@ impl FrameSource for TransportSource {
     }
 
     fn transmit(&mut self, frame: &Frame) -> Result<bool, SourceError> {
-        self.transport
-            .send(frame)
-            .map(|()| true)
-            .map_err(|error| SourceError {
-                source: self.transport.describe(),
-                message: error.to_string(),
-            })
+        self.transport.send(frame).map_err(|error| SourceError {
+            source: self.transport.describe(),
+            message: error.to_string(),
+        })
     }
 }
 

@@ -13,11 +13,19 @@ use autoplug_middleware::driver;
 use autoplug_middleware::names::ECUS;
 use autoplug_middleware::tester::{IdentJob, TesterConfig};
 use autoplug_middleware::transport::socketcand::SocketcandClient;
-use autoplug_middleware::transport::{Transport, TransportError};
+use autoplug_middleware::transport::{Incoming, Timestamp, Transport, TransportError};
 use autoplug_virtual_car::socketcand::SocketcandServer;
 use common::{wait_for_raw_client, EcuServer};
 
 const TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The next thing the client hands over, which must be a frame.
+fn next_frame(client: &mut SocketcandClient) -> (Frame, Timestamp) {
+    match client.recv(TIMEOUT).unwrap() {
+        Some(Incoming::Frame(frame, time)) => (frame, time),
+        other => panic!("expected a frame, got {other:?}"),
+    }
+}
 
 /// Reads one `< ... >` message from a scripted server's side of the connection.
 fn read_message(reader: &mut impl Read) -> String {
@@ -74,23 +82,33 @@ fn frames_both_ways_with_a_scripted_server() {
         client.describe(),
         format!("socketcand 127.0.0.1:{port} bus can0")
     );
-    let (frame, _) = client.recv(TIMEOUT).unwrap().expect("the early frame");
+    let (frame, _) = next_frame(&mut client);
     assert_eq!(frame, Frame::new(0x100, &[0xAA]).unwrap());
 
-    let (frame, time) = client.recv(TIMEOUT).unwrap().expect("a frame");
+    let (frame, time) = next_frame(&mut client);
     assert_eq!(
         frame,
         Frame::new(0x78D, &[0x02, 0x50, 0x03, 0x00, 0x32]).unwrap()
     );
     assert_eq!(time.bus_us, Some(12_000_100));
-    let (frame, time) = client.recv(TIMEOUT).unwrap().expect("a frame");
+    let (frame, time) = next_frame(&mut client);
     assert_eq!(frame, Frame::new(0x123, &[]).unwrap());
     assert_eq!(time.bus_us, Some(13_500_000));
     assert_eq!(client.skipped(), 2, "the echo and the 29-bit frame");
 
     let request = Frame::new(0x70D, &[0x02, 0x10, 0x03, 0xCC, 0xCC, 0xCC, 0xCC, 0xCC]).unwrap();
-    client.send(&request).unwrap();
-    let (frame, _) = client.recv(TIMEOUT).unwrap().expect("a frame");
+    let sent_at = WallInstant::now();
+    assert!(client.send(&request).unwrap());
+    // The server never echoes it: the client confirms it once the bus could have sent it
+    // (an 8-byte frame at 500 kbit/s takes about a quarter of a millisecond).
+    assert_eq!(client.recv(TIMEOUT).unwrap(), Some(Incoming::Sent));
+    let confirmed_after = sent_at.elapsed();
+    assert!(
+        confirmed_after >= Duration::from_micros(220)
+            && confirmed_after < Duration::from_millis(15),
+        "{confirmed_after:?}"
+    );
+    let (frame, _) = next_frame(&mut client);
     assert_eq!(frame, Frame::new(0x7E8, &[0x03, 0x41, 0x0D, 0x57]).unwrap());
     // Nothing more: a timeout is not an error.
     let started = WallInstant::now();
@@ -185,14 +203,14 @@ fn frames_both_ways_with_the_virtual_cars_server() {
     server.broadcast(1_234_567, &from_car, None);
     let empty = Frame::new(0x7FF, &[]).unwrap();
     server.broadcast(1_300_000, &empty, None);
-    let (frame, time) = client.recv(TIMEOUT).unwrap().expect("the car's frame");
+    let (frame, time) = next_frame(&mut client);
     assert_eq!(frame, from_car);
     assert_eq!(time.bus_us, Some(1_234_567));
-    assert_eq!(client.recv(TIMEOUT).unwrap().expect("a frame").0, empty);
+    assert_eq!(next_frame(&mut client).0, empty);
 
     let to_car = Frame::new(0x7DF, &[0x02, 0x3E, 0x80, 0xCC, 0xCC, 0xCC, 0xCC, 0xCC]).unwrap();
-    client.send(&to_car).unwrap();
-    client.send(&empty).unwrap();
+    assert!(client.send(&to_car).unwrap());
+    assert!(client.send(&empty).unwrap());
     let give_up = WallInstant::now() + TIMEOUT;
     let mut received = Vec::new();
     while received.len() < 2 && WallInstant::now() < give_up {

@@ -23,6 +23,10 @@ use autoplug_virtual_bus::{AcceptanceFilter, BusConfig, NodeId, Outcome, Virtual
 /// Simulated time per tick.
 pub const TICK_US: u64 = 1_000;
 
+/// The name of the bus node through which outside tools (socketcand clients, a tester in
+/// the process) send.
+pub const EXTERNAL_SENDER: &str = "External";
+
 /// A frame that was on the bus, for the log.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LoggedFrame {
@@ -30,7 +34,7 @@ pub struct LoggedFrame {
     pub t_us: u64,
     /// The frame.
     pub frame: Frame,
-    /// The sender's DBC name, or "External" for a socketcand client.
+    /// The sender's DBC name, or [`EXTERNAL_SENDER`] for a socketcand client or a tester.
     pub sender: &'static str,
 }
 
@@ -456,7 +460,7 @@ impl VirtualCar {
         };
         // The gateway listens to everything (and acknowledges), like the middleware on
         // the bench; tools attached over socketcand send through this node too.
-        let external = bus.attach("External", AcceptanceFilter::All);
+        let external = bus.attach(EXTERNAL_SENDER, AcceptanceFilter::All);
         let node_names = bus.nodes().map(|n| node_name(bus.node_name(n))).collect();
         let timeline = Timeline::new(scenario);
         let mut car = Self {
@@ -912,5 +916,5 @@ fn node_name(name: &str) -> &'static str {
     Node::ALL
         .iter()
         .find(|n| n.name() == name)
-        .map_or("External", |n| n.name())
+        .map_or(EXTERNAL_SENDER, |n| n.name())
 }

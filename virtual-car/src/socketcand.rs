@@ -61,6 +61,61 @@ pub const MAX_MESSAGE_BYTES: usize = 4096;
 /// is not left holding a place).
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(30);
 
+/// The car's side of the server: after each tick of the car, the clients' frames go to its
+/// external node (as many as its transmit queue takes, the rest wait in the server's
+/// per-client queues, taken in turn) and the frames the bus carried go to the clients. A
+/// client's own frame goes to the other clients once it is on the bus, not back to it, as
+/// sockets on one SocketCAN interface see it.
+#[derive(Debug, Default)]
+pub struct CarBridge {
+    /// A client frame the external node's queue could not take yet.
+    held: Option<ClientFrame>,
+    /// Client frames handed to the external node and not yet seen on the bus.
+    on_the_way: VecDeque<ClientFrame>,
+}
+
+impl CarBridge {
+    /// A bridge with nothing on the way.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Exchanges frames between `server`'s clients and `car`, whose bus carried `frames`
+    /// in the tick just run.
+    pub fn exchange(
+        &mut self,
+        server: &SocketcandServer,
+        car: &mut crate::car::VirtualCar,
+        frames: &[crate::car::LoggedFrame],
+    ) {
+        while let Some(sent) = self.held.take().or_else(|| server.try_recv()) {
+            if !car.inject(sent.frame) {
+                self.held = Some(sent);
+                break;
+            }
+            self.on_the_way.push_back(sent);
+        }
+        for entry in frames {
+            let from_client = if entry.sender == crate::car::EXTERNAL_SENDER {
+                // The external node sends its queue by priority: find the frame, not just
+                // the oldest.
+                self.on_the_way
+                    .iter()
+                    .position(|c| c.frame == entry.frame)
+                    .and_then(|i| self.on_the_way.remove(i))
+                    .map(|c| c.client)
+            } else {
+                None
+            };
+            server.broadcast(entry.t_us, &entry.frame, from_client);
+        }
+        // A frame the bus never carried (lost in an error) is not waited for forever.
+        while self.on_the_way.len() > 64 {
+            self.on_the_way.pop_front();
+        }
+    }
+}
+
 /// A frame a client sent, and which client.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ClientFrame {

@@ -294,7 +294,10 @@ fn http_errors_say_what_was_wrong() {
 fn the_kept_front_end_build_is_served_with_its_third_party_licences() {
     // gateway/web/ui/dist is kept in the repository, so every build embeds the page and the
     // main command needs no Node.js.
-    assert!(autoplug_web::assets::built(), "ui/dist is missing from the checkout");
+    assert!(
+        autoplug_web::assets::built(),
+        "ui/dist is missing from the checkout"
+    );
     let (_table, server) = server(8);
     let get = |path: &str| http_get(&server, path);
     let page = get("/");
@@ -309,7 +312,10 @@ fn the_kept_front_end_build_is_served_with_its_third_party_licences() {
     assert!(licences.starts_with("HTTP/1.1 200"), "{licences}");
     assert!(licences.contains("text/plain"), "{licences}");
     assert!(licences.contains("uplot 1.6.32 (MIT)"), "{licences}");
-    assert!(licences.contains("Permission is hereby granted"), "{licences}");
+    assert!(
+        licences.contains("Permission is hereby granted"),
+        "{licences}"
+    );
 }
 
 #[test]

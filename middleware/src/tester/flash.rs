@@ -196,6 +196,12 @@ pub enum FlashFailure {
     },
     /// The job cannot run as configured (no image, an image too large for a download).
     Invalid(String),
+    /// The ECU kept refusing the programming session with conditionsNotCorrect: it has not
+    /// seen the car stand.
+    NotStanding {
+        /// How long the tester kept asking, µs.
+        waited_us: u64,
+    },
 }
 
 impl fmt::Display for FlashFailure {
@@ -208,6 +214,12 @@ impl fmt::Display for FlashFailure {
                 *waited_us as f64 / 1e6
             ),
             FlashFailure::Invalid(reason) => f.write_str(reason),
+            FlashFailure::NotStanding { waited_us } => write!(
+                f,
+                "the ECU refused the programming session for {:.1} s (NRC 0x22 conditionsNotCorrect): it reprograms only a car it has seen stand, VehicleSpeedMsg under 1 km/h for {} ms; stop the car and flash again",
+                *waited_us as f64 / 1e6,
+                autoplug_uds::STANDSTILL_WINDOW_US / 1000
+            ),
         }
     }
 }
@@ -285,6 +297,11 @@ pub struct FlashConfig {
     /// How often a TransferData block whose response is lost is sent again (the ECU
     /// acknowledges a repeated block without writing it twice).
     pub transfer_retries: u8,
+    /// How long the job keeps asking for the programming session while the ECU answers
+    /// conditionsNotCorrect (0x22: it enters it only once it has seen the car stand for
+    /// [`autoplug_uds::STANDSTILL_WINDOW_US`], so right after the car started, or just
+    /// after it stopped), asking every [`FlashConfig::reset_probe_interval_us`], µs.
+    pub standstill_wait_us: u64,
 }
 
 impl FlashConfig {
@@ -300,9 +317,14 @@ impl FlashConfig {
             reset_timeout_us: 30_000_000,
             reset_probe_interval_us: 100_000,
             transfer_retries: 1,
+            // Six standstill windows: a car that stands gets its programming session.
+            standstill_wait_us: 6 * autoplug_uds::STANDSTILL_WINDOW_US,
         }
     }
 }
+
+/// The NRC an ECU answers a programming request with while the car does not stand.
+const NRC_CONDITIONS_NOT_CORRECT: u8 = 0x22;
 
 /// One request of the sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -398,6 +420,8 @@ pub struct FlashJob {
     blocks: u32,
     retries_left: u8,
     probe_at: Option<Instant>,
+    /// Since when the ECU refuses the programming session because the car does not stand.
+    refused_since: Option<Instant>,
     return_deadline: Option<Instant>,
     reset_at: Option<Instant>,
     failure: Option<(Phase, Step, FlashFailure)>,
@@ -471,6 +495,7 @@ impl FlashJob {
             blocks: 0,
             retries_left: config.transfer_retries,
             probe_at: None,
+            refused_since: None,
             return_deadline: None,
             reset_at: None,
             image: ImageSet::parse(&config.image)
@@ -662,6 +687,29 @@ impl FlashJob {
                 } else {
                     self.probe_at = Some(now.plus_micros(self.config.reset_probe_interval_us));
                     Ok(Step::AwaitReturn)
+                }
+            }
+            (
+                Step::Programming,
+                Err(UdsError::Negative {
+                    nrc: NRC_CONDITIONS_NOT_CORRECT,
+                    ..
+                }),
+            ) => {
+                // The ECU has not seen the car stand long enough (it just started, or the
+                // car just stopped): ask again shortly, for a while.
+                let since = *self.refused_since.get_or_insert(now);
+                let waited_us = now.micros_since(since);
+                if waited_us >= self.config.standstill_wait_us {
+                    Err(FlashFailure::NotStanding { waited_us })
+                } else {
+                    if waited_us == 0 {
+                        self.notes.push(
+                            "the ECU refused the programming session until it saw the car stand (NRC 0x22 conditionsNotCorrect): asked again".into(),
+                        );
+                    }
+                    self.probe_at = Some(now.plus_micros(self.config.reset_probe_interval_us));
+                    Ok(Step::Programming)
                 }
             }
             (Step::Reset, Err(UdsError::Timeout { .. })) => {
@@ -929,7 +977,7 @@ impl Job for FlashJob {
                 self.finish(now);
                 break;
             }
-            if self.step == Step::AwaitReturn {
+            if matches!(self.step, Step::AwaitReturn | Step::Programming) {
                 match self.probe_at {
                     Some(at) if now < at => break,
                     _ => self.probe_at = None,
@@ -943,7 +991,7 @@ impl Job for FlashJob {
     }
 
     fn own_deadline(&self) -> Option<Instant> {
-        if self.step == Step::AwaitReturn && !self.in_flight {
+        if matches!(self.step, Step::AwaitReturn | Step::Programming) && !self.in_flight {
             self.probe_at
         } else {
             None

@@ -17,9 +17,12 @@
 //!
 //! - a physical request ([`Tester::request`]) goes to one ECU on its request identifier
 //!   (0x700 + node number) and ends with its positive response, its negative response
-//!   ([`UdsError::Negative`], with the NRC's ISO 14229-1 name), or a timeout. P2 (50 ms by
-//!   default) runs from the request's last frame on the bus to the first frame of the
-//!   response; each 0x78 "response pending" restarts the wait with P2* (5000 ms);
+//!   ([`UdsError::Negative`], with the NRC's ISO 14229-1 name), or a timeout. As ISO
+//!   14229-2 has it, P2client = P2server (50 ms, as the ECUs announce) + ΔP2 (what the
+//!   network adds: [`TesterConfig::network_delay_us`]) runs from the transmission
+//!   confirmation of the request's last frame (the transport saying it is on the bus) to the
+//!   first frame of the response; each 0x78 "response pending" restarts the wait with
+//!   P2*server (5000 ms) + ΔP2;
 //! - a functional request ([`Tester::request_functional`]) is a single frame on 0x7DF that
 //!   every ECU receives; the responses that arrive within a window (extended by P2* for an
 //!   ECU that answers "pending") are collected, whoever sent them.
@@ -31,6 +34,16 @@
 //! Every ECU has its own ISO-TP channel in the tester (responses come on 0x780 + node
 //! number), so a multi-frame response to a functional request gets its flow control like
 //! any other.
+//!
+//! # Frames in flight
+//!
+//! A transport with a transmit queue (SocketCAN, socketcand) confirms a frame only once it
+//! is on the bus, a queue's length after it took it. With a transmit window above one
+//! ([`Tester::set_transmit_window`]) the tester hands out up to that many frames before
+//! their confirmations come back, so the queue never runs dry during a transfer; the
+//! confirmations, in order, then say which request is on the bus, and P2 starts at its last
+//! frame's. The ISO-TP channel counts a frame sent once it is handed out, and the tester
+//! keeps N_As itself: a frame unconfirmed for that long ends the request.
 
 mod clear;
 mod dtcs;
@@ -80,6 +93,11 @@ pub struct TesterConfig {
     pub tester_present_interval_us: u64,
     /// The byte that pads every frame to 8 bytes (ISO 15765-4 wants DLC 8).
     pub padding: u8,
+    /// ΔP2 (ISO 14229-2): what the network adds to every wait for a response, P2, P2* and
+    /// the functional window: the response's way back to the tester, and how late a
+    /// transport's confirmation may be. `None`: the transport's own
+    /// ([`crate::transport::Transport::network_delay`]; none on a simulated bus).
+    pub network_delay_us: Option<u64>,
 }
 
 impl TesterConfig {
@@ -93,7 +111,13 @@ impl TesterConfig {
         functional_window_us: 100_000,
         tester_present_interval_us: 2_000_000,
         padding: 0xCC,
+        network_delay_us: None,
     };
+
+    /// ΔP2 as set, or none.
+    pub fn delta_p2_us(&self) -> u64 {
+        self.network_delay_us.unwrap_or(0)
+    }
 }
 
 impl Default for TesterConfig {
@@ -271,19 +295,26 @@ enum Purpose {
     Request,
 }
 
-/// The frame handed out by `poll_transmit` and not confirmed yet.
+/// A frame handed out by `poll_transmit` and not confirmed yet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Handed {
-    Nothing,
     Functional(Purpose),
-    /// A frame of link `.0` carrying `.1` bytes of its PDU.
-    Link(usize, usize),
+    /// A frame of link `link` carrying `bytes` bytes of its PDU, handed out at `at`, of
+    /// the physical request numbered `request` (none for a flow control).
+    Link {
+        link: usize,
+        bytes: usize,
+        at: Instant,
+        request: Option<u32>,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Wait {
     /// The request's frames are going out.
     Sending,
+    /// All its frames are handed out; the last ones' confirmations are due.
+    Confirming,
     /// Waiting for the (first frame of the) response until `deadline`.
     Awaiting { deadline: Instant },
     /// A multi-frame response is coming in (ISO-TP's N_Cr guards it).
@@ -292,6 +323,8 @@ enum Wait {
 
 #[derive(Debug)]
 struct Physical {
+    /// The request's number (they are counted), to tell its frames from earlier ones'.
+    id: u32,
     link: usize,
     service: u8,
     /// What a positive response must repeat after its SID.
@@ -324,7 +357,12 @@ pub struct Tester {
     config: TesterConfig,
     links: Vec<Link>,
     functional_queue: VecDeque<(Frame, Purpose)>,
-    handed: Handed,
+    /// Frames handed out and not confirmed yet, oldest first (at most `window`).
+    handed: VecDeque<Handed>,
+    /// Frames that may be handed out before their confirmations come back.
+    window: usize,
+    /// Physical requests started so far.
+    requests: u32,
     in_flight: InFlight,
     outcome: Option<Result<Response, UdsError>>,
     last_pending: u32,
@@ -351,7 +389,9 @@ impl Tester {
             config,
             links,
             functional_queue: VecDeque::new(),
-            handed: Handed::Nothing,
+            handed: VecDeque::new(),
+            window: 1,
+            requests: 0,
             in_flight: InFlight::Idle,
             outcome: None,
             last_pending: 0,
@@ -363,6 +403,23 @@ impl Tester {
     /// The timing parameters.
     pub fn config(&self) -> &TesterConfig {
         &self.config
+    }
+
+    /// Adopts a transport's properties: how many frames it takes before their
+    /// confirmations (at least one), and its ΔP2 unless the configuration names one.
+    pub fn set_transport(&mut self, window: usize, network_delay_us: u64) {
+        self.window = window.max(1);
+        self.config.network_delay_us.get_or_insert(network_delay_us);
+    }
+
+    /// How many frames the tester hands out before their confirmations come back.
+    pub fn transmit_window(&self) -> usize {
+        self.window
+    }
+
+    /// P2client: P2server + ΔP2, µs.
+    fn p2_client_us(&self) -> u64 {
+        self.config.p2_us + self.config.delta_p2_us()
     }
 
     /// Starts a physical request to `ecu`. Its outcome comes from [`Tester::take_response`].
@@ -399,7 +456,9 @@ impl Tester {
         channel
             .send(now, request)
             .map_err(|error| UdsError::Unsendable { service, error })?;
+        self.requests = self.requests.wrapping_add(1);
         self.in_flight = InFlight::Physical(Physical {
+            id: self.requests,
             link,
             service,
             echo: request
@@ -410,7 +469,7 @@ impl Tester {
             len: request.len(),
             sent: 0,
             wait: Wait::Sending,
-            timeout_us: self.config.p2_us,
+            timeout_us: self.p2_client_us(),
             pending: 0,
         });
         Ok(())
@@ -501,6 +560,7 @@ impl Tester {
         for link in 0..self.links.len() {
             self.drain_link(now, link);
         }
+        self.check_confirmations(now);
         match &mut self.in_flight {
             InFlight::Physical(p) => {
                 if let Wait::Awaiting { deadline } = p.wait {
@@ -544,44 +604,107 @@ impl Tester {
         }
     }
 
-    /// The next frame to put on the bus, if any; none while the previous one awaits
-    /// [`Tester::confirm_transmit`].
+    /// The next frame to put on the bus, if any; none while the transmit window's worth of
+    /// frames await [`Tester::confirm_transmit`] (one, unless a transport set more).
     pub fn poll_transmit(&mut self, now: Instant) -> Option<Frame> {
-        if self.handed != Handed::Nothing {
+        if self.handed.len() >= self.window {
             return None;
         }
         if let Some((frame, purpose)) = self.functional_queue.pop_front() {
-            self.handed = Handed::Functional(purpose);
+            self.handed.push_back(Handed::Functional(purpose));
             return Some(frame);
         }
-        for (index, link) in self.links.iter_mut().enumerate() {
-            if let Some(frame) = link.channel.poll_transmit(now) {
-                self.handed = Handed::Link(index, pdu_bytes(&frame));
-                return Some(frame);
+        for index in 0..self.links.len() {
+            let Some(frame) = self.links[index].channel.poll_transmit(now) else {
+                continue;
+            };
+            let request = match &self.in_flight {
+                InFlight::Physical(p) if p.link == index && p.wait == Wait::Sending => Some(p.id),
+                _ => None,
+            };
+            self.handed.push_back(Handed::Link {
+                link: index,
+                bytes: pdu_bytes(&frame),
+                at: now,
+                request,
+            });
+            if self.window > 1 {
+                // The channel hands out its next frame only once this one counts as sent:
+                // the transport's queue, not the channel, holds the frames in flight.
+                self.links[index].channel.confirm_transmit(now);
+                self.drain_link(now, index);
             }
+            return Some(frame);
         }
         None
     }
 
-    /// The frame last handed out by [`Tester::poll_transmit`] is on the bus.
+    /// The oldest frame handed out by [`Tester::poll_transmit`] and not confirmed yet is on
+    /// the bus (frames are confirmed in the order they were handed out).
     pub fn confirm_transmit(&mut self, now: Instant) {
-        match std::mem::replace(&mut self.handed, Handed::Nothing) {
-            Handed::Nothing => {}
-            Handed::Functional(Purpose::TesterPresent) => {}
-            Handed::Functional(Purpose::Request) => {
+        match self.handed.pop_front() {
+            None | Some(Handed::Functional(Purpose::TesterPresent)) => {}
+            Some(Handed::Functional(Purpose::Request)) => {
+                let window_us = self.config.functional_window_us + self.config.delta_p2_us();
                 if let InFlight::Functional(f) = &mut self.in_flight {
-                    f.deadline
-                        .get_or_insert(now.plus_micros(self.config.functional_window_us));
+                    f.deadline.get_or_insert(now.plus_micros(window_us));
                 }
             }
-            Handed::Link(link, bytes) => {
-                self.links[link].channel.confirm_transmit(now);
+            Some(Handed::Link {
+                link,
+                bytes,
+                request,
+                ..
+            }) => {
+                if self.window == 1 {
+                    self.links[link].channel.confirm_transmit(now);
+                }
+                let still_handed = request.is_some_and(|id| self.handed_of(id));
                 if let InFlight::Physical(p) = &mut self.in_flight {
-                    if p.link == link && p.wait == Wait::Sending {
+                    if request == Some(p.id) {
                         p.sent += bytes;
+                        if p.wait == Wait::Confirming && !still_handed {
+                            // The request's last frame is on the bus: P2 from here.
+                            p.sent = p.len;
+                            p.wait = Wait::Awaiting {
+                                deadline: now.plus_micros(p.timeout_us),
+                            };
+                        }
                     }
                 }
                 self.drain_link(now, link);
+            }
+        }
+    }
+
+    /// Whether frames of the physical request numbered `id` await their confirmation.
+    fn handed_of(&self, id: u32) -> bool {
+        self.handed
+            .iter()
+            .any(|h| matches!(h, Handed::Link { request: Some(r), .. } if *r == id))
+    }
+
+    /// N_As for frames in flight (the channel does not see them once handed out): the
+    /// oldest one unconfirmed that long ends its request, and the frames handed after it.
+    fn check_confirmations(&mut self, now: Instant) {
+        if self.window == 1 {
+            return;
+        }
+        let Some(&Handed::Link { link, at, .. }) = self.handed.front() else {
+            return;
+        };
+        if now.micros_since(at) < self.links[link].channel.config().n_as_us {
+            return;
+        }
+        self.handed.clear();
+        self.links[link].channel.abort();
+        if let InFlight::Physical(p) = &self.in_flight {
+            if p.link == link {
+                let error = UdsError::Transport {
+                    service: p.service,
+                    error: ChannelError::TimeoutAs,
+                };
+                self.finish(Err(error));
             }
         }
     }
@@ -609,8 +732,14 @@ impl Tester {
         if self.tester_present {
             take(Some(self.tester_present_due.unwrap_or(Instant::ZERO)));
         }
-        if self.handed == Handed::Nothing && !self.functional_queue.is_empty() {
+        if self.handed.len() < self.window && !self.functional_queue.is_empty() {
             take(Some(Instant::ZERO));
+        }
+        if let (true, Some(Handed::Link { link, at, .. })) = (self.window > 1, self.handed.front())
+        {
+            take(Some(
+                at.plus_micros(self.links[*link].channel.config().n_as_us),
+            ));
         }
         earliest
     }
@@ -647,12 +776,22 @@ impl Tester {
                 self.on_response(now, link, pdu);
             }
             Event::Sent => {
+                let still_handed = match &self.in_flight {
+                    InFlight::Physical(p) => self.handed_of(p.id),
+                    _ => false,
+                };
                 if let InFlight::Physical(p) = &mut self.in_flight {
                     if p.link == link && p.wait == Wait::Sending {
-                        p.sent = p.len;
-                        p.wait = Wait::Awaiting {
-                            deadline: now.plus_micros(p.timeout_us),
-                        };
+                        if still_handed {
+                            // Handed out whole, not all on the bus yet: P2 starts at the
+                            // last frame's confirmation (`confirm_transmit`).
+                            p.wait = Wait::Confirming;
+                        } else {
+                            p.sent = p.len;
+                            p.wait = Wait::Awaiting {
+                                deadline: now.plus_micros(p.timeout_us),
+                            };
+                        }
                     }
                 }
             }
@@ -683,7 +822,9 @@ impl Tester {
         let config = self.config;
         match &mut self.in_flight {
             // Nothing answers a request before it is on the bus: whatever comes meanwhile
-            // is a late answer to an earlier one.
+            // is a late answer to an earlier one. An answer before the request's
+            // confirmation shows it was on the bus (a transport that models its
+            // confirmations may be later than the bus).
             InFlight::Physical(p) if p.link == link && p.wait != Wait::Sending => {
                 let mut answer = classify(p.service, &pdu);
                 if matches!(answer, Answer::Positive)
@@ -695,7 +836,7 @@ impl Tester {
                 match answer {
                     Answer::Pending => {
                         p.pending += 1;
-                        p.timeout_us = config.p2_star_us;
+                        p.timeout_us = config.p2_star_us + config.delta_p2_us();
                         p.wait = Wait::Awaiting {
                             deadline: now.plus_micros(p.timeout_us),
                         };
@@ -721,7 +862,8 @@ impl Tester {
                 match classify(f.service, &pdu) {
                     Answer::Pending => {
                         if let Some(deadline) = &mut f.deadline {
-                            *deadline = (*deadline).max(now.plus_micros(config.p2_star_us));
+                            let wait_us = config.p2_star_us + config.delta_p2_us();
+                            *deadline = (*deadline).max(now.plus_micros(wait_us));
                         }
                     }
                     Answer::Negative(nrc) => f.responses.push(FunctionalResponse {

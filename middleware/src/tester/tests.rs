@@ -298,3 +298,135 @@ fn nothing_answers_a_request_that_is_still_going_out() {
         Some(Ok(Response::Positive(vec![0x76, 0x01])))
     );
 }
+
+/// A tester for a transport that queues `window` frames, with ΔP2 `delta_ms`.
+fn over_a_queue(window: usize, delta_ms: u64) -> Tester {
+    let mut tester = Tester::new(TesterConfig::default());
+    tester.set_transport(window, delta_ms * 1000);
+    tester
+}
+
+/// The ECU's flow control after a first frame: block size 0, STmin 0.
+fn flow_control(ecu: Node) -> Frame {
+    let mut data = [0xCC; 8];
+    data[..3].copy_from_slice(&[0x30, 0x00, 0x00]);
+    Frame::new(u32::from(ecu.diag_response_id().unwrap()), &data).unwrap()
+}
+
+#[test]
+fn a_queue_gets_a_windows_worth_of_frames_and_p2_starts_at_the_last_ones_confirmation() {
+    let mut tester = over_a_queue(3, 20);
+    // 50 bytes: a first frame and seven consecutive frames.
+    let request: Vec<u8> = [0x36, 0x01].into_iter().chain(0..48).collect();
+    tester.request(ms(0), Node::Cruise, &request).unwrap();
+    let first = tester.poll_transmit(ms(0)).expect("the first frame");
+    assert_eq!(first.data()[0] >> 4, 1);
+    assert_eq!(
+        tester.poll_transmit(ms(0)),
+        None,
+        "no more before the flow control"
+    );
+    tester.confirm_transmit(ms(1));
+    tester.on_frame(ms(2), &flow_control(Node::Cruise));
+    // Three in the queue at once, then one more per confirmation.
+    let mut handed = Vec::new();
+    while let Some(frame) = tester.poll_transmit(ms(2)) {
+        handed.push(frame);
+    }
+    assert_eq!(handed.len(), 3);
+    for confirmed in 0..4 {
+        tester.confirm_transmit(ms(3 + confirmed));
+        while let Some(frame) = tester.poll_transmit(ms(3 + confirmed)) {
+            handed.push(frame);
+        }
+    }
+    assert_eq!(handed.len(), 7, "every consecutive frame handed out");
+    assert_eq!(tester.request_progress(), Some((4 * 7 + 6, 50)));
+    // All handed out, three on their way: no P2 yet, whatever the time.
+    tester.poll(ms(500));
+    assert_eq!(tester.take_response(), None);
+    tester.confirm_transmit(ms(501));
+    tester.confirm_transmit(ms(502));
+    tester.poll(ms(600));
+    assert_eq!(tester.take_response(), None, "one frame still on its way");
+    tester.confirm_transmit(ms(603));
+    assert_eq!(tester.request_progress(), Some((50, 50)));
+    // P2client = P2server 50 ms + ΔP2 20 ms from the last confirmation.
+    assert_eq!(tester.next_deadline(), Some(ms(673)));
+    tester.poll(Instant::from_micros(672_999));
+    assert_eq!(tester.take_response(), None);
+    tester.poll(ms(673));
+    assert_eq!(
+        tester.take_response(),
+        Some(Err(UdsError::Timeout {
+            service: 0x36,
+            waited_us: 70_000,
+            pending: 0
+        }))
+    );
+}
+
+#[test]
+fn an_answer_before_the_confirmation_shows_the_request_was_on_the_bus() {
+    let mut tester = over_a_queue(10, 50);
+    tester.request(ms(0), Node::Cruise, &[0x10, 0x02]).unwrap();
+    assert!(tester.poll_transmit(ms(0)).is_some());
+    // A transport that models its confirmations may confirm after the bus did.
+    tester.on_frame(
+        ms(1),
+        &from_ecu(Node::Cruise, &[0x50, 0x02, 0, 50, 1, 0xF4]),
+    );
+    assert_eq!(
+        tester.take_response(),
+        Some(Ok(Response::Positive(vec![0x50, 0x02, 0, 50, 1, 0xF4])))
+    );
+    // Its confirmation, late, belongs to that request, not to the next one.
+    tester.request(ms(2), Node::Cruise, &[0x27, 0x01]).unwrap();
+    assert!(tester.poll_transmit(ms(2)).is_some());
+    tester.confirm_transmit(ms(3));
+    assert_eq!(tester.request_progress(), Some((0, 2)));
+    tester.confirm_transmit(ms(4));
+    assert_eq!(tester.request_progress(), Some((2, 2)));
+    assert_eq!(tester.next_deadline(), Some(ms(104)));
+}
+
+#[test]
+fn a_frame_the_queue_never_confirms_ends_its_request_after_n_as() {
+    let mut tester = over_a_queue(10, 0);
+    tester.request(ms(0), Node::Cruise, &[0x10, 0x02]).unwrap();
+    assert!(tester.poll_transmit(ms(0)).is_some());
+    assert_eq!(tester.next_deadline(), Some(ms(1000)));
+    tester.poll(ms(999));
+    assert_eq!(tester.take_response(), None);
+    tester.poll(ms(1000));
+    assert_eq!(
+        tester.take_response(),
+        Some(Err(UdsError::Transport {
+            service: 0x10,
+            error: ChannelError::TimeoutAs
+        }))
+    );
+}
+
+#[test]
+fn delta_p2_lengthens_every_wait_and_a_configured_one_stays() {
+    let mut tester = over_a_queue(1, 30);
+    tester.request(ms(0), Node::Cruise, &[0x10, 0x02]).unwrap();
+    flush(&mut tester, ms(0));
+    assert_eq!(tester.next_deadline(), Some(ms(80)));
+    tester.on_frame(ms(10), &from_ecu(Node::Cruise, &[0x7F, 0x10, 0x78]));
+    assert_eq!(tester.next_deadline(), Some(ms(10 + 5000 + 30)));
+
+    let config = TesterConfig {
+        network_delay_us: Some(5_000),
+        ..TesterConfig::default()
+    };
+    let mut tester = Tester::new(config);
+    tester.set_transport(10, 50_000);
+    assert_eq!(
+        tester.config().delta_p2_us(),
+        5_000,
+        "the user's ΔP2 is kept"
+    );
+    assert_eq!(tester.transmit_window(), 10);
+}

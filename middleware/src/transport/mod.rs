@@ -7,7 +7,13 @@
 //!
 //! Which one is named by a URL ([`Via`]): `socketcand://HOST:PORT/BUS` or
 //! `socketcan://IFACE`. [`crate::driver`] runs a job over any of them with the wall clock.
+//!
+//! A transport takes only as many frames as its transmit queue holds and confirms each
+//! once it is on the bus, so a sender is paced by the bus, whatever queues lie between:
+//! SocketCAN with the kernel's echo of each frame sent, socketcand (whose server never
+//! echoes) with a model of the bus ([`pace::BusModel`]).
 
+pub mod pace;
 #[cfg(target_os = "linux")]
 pub mod socketcan;
 pub mod socketcand;
@@ -31,30 +37,61 @@ pub struct Timestamp {
     pub bus_us: Option<u64>,
 }
 
+/// What a transport hands over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Incoming {
+    /// A frame another node sent.
+    Frame(Frame, Timestamp),
+    /// The oldest frame this side sent and not confirmed yet is on the bus: its
+    /// transmission confirmation (ISO 15765-2's L_Data.con). Frames are confirmed in the
+    /// order they were sent.
+    Sent,
+}
+
 /// A way to put frames on a bus and take them off it, blocking with timeouts.
 pub trait Transport {
-    /// Puts `frame` on the bus (returns once the transport has taken it).
-    fn send(&mut self, frame: &Frame) -> Result<(), TransportError>;
+    /// Offers `frame` for the bus. `Ok(true)`: taken, and an [`Incoming::Sent`] will say
+    /// when it is on the bus. `Ok(false)`: the transmit queue is full (at most
+    /// [`Transport::transmit_window`] frames wait for the bus): offer it again after a
+    /// confirmation.
+    fn send(&mut self, frame: &Frame) -> Result<bool, TransportError>;
 
-    /// The next frame from the bus, waiting at most `timeout`; `Ok(None)` when none came.
-    /// Frames this side sent are not received back.
-    fn recv(&mut self, timeout: Duration) -> Result<Option<(Frame, Timestamp)>, TransportError>;
+    /// The next frame from the bus or confirmation of a frame sent, waiting at most
+    /// `timeout`; `Ok(None)` when nothing came. Frames this side sent are not received
+    /// back as frames.
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Incoming>, TransportError>;
 
     /// What the transport is connected to, for messages (`socketcand 127.0.0.1:29536 can0`).
     fn describe(&self) -> String;
+
+    /// Frames the transport takes before the first of them is confirmed.
+    fn transmit_window(&self) -> usize;
+
+    /// ΔP2 (ISO 14229-2): the most the transport adds to the wait for a response, from
+    /// an ECU's response on the bus to its arrival here, and from a frame on the bus to its
+    /// confirmation here.
+    fn network_delay(&self) -> Duration;
 }
 
 impl<T: Transport + ?Sized> Transport for Box<T> {
-    fn send(&mut self, frame: &Frame) -> Result<(), TransportError> {
+    fn send(&mut self, frame: &Frame) -> Result<bool, TransportError> {
         (**self).send(frame)
     }
 
-    fn recv(&mut self, timeout: Duration) -> Result<Option<(Frame, Timestamp)>, TransportError> {
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Incoming>, TransportError> {
         (**self).recv(timeout)
     }
 
     fn describe(&self) -> String {
         (**self).describe()
+    }
+
+    fn transmit_window(&self) -> usize {
+        (**self).transmit_window()
+    }
+
+    fn network_delay(&self) -> Duration {
+        (**self).network_delay()
     }
 }
 

@@ -4,18 +4,36 @@
 //! (`ip link set can0 up type can bitrate 500000`): configuring it needs privileges a
 //! flash tool should not have. Remote, error and 29-bit frames are skipped; the AutoPlug
 //! bus carries 11-bit data frames only.
+//!
+//! Each frame sent is confirmed by the kernel's echo of it (`CAN_RAW_RECV_OWN_MSGS`), which
+//! comes once the controller has sent it, so a sender goes at the bus's pace. The echo is
+//! told from other nodes' frames by its content: the oldest of this socket's frames not
+//! confirmed yet (the tester's request identifiers are its own). At most
+//! [`TRANSMIT_WINDOW`] frames wait for their echo, the interface's default queue length; a
+//! queue full all the same (`ENOBUFS`, other sockets' frames in it) refuses the frame, to
+//! be offered again.
 
+use std::collections::VecDeque;
 use std::io;
 use std::time::{Duration, Instant as WallInstant};
 
 use autoplug_can::Frame;
-use socketcan::{CanDataFrame, CanFrame, CanSocket, EmbeddedFrame, Id, Socket, StandardId};
+use socketcan::{
+    CanDataFrame, CanFrame, CanSocket, EmbeddedFrame, Id, Socket, SocketOptions, StandardId,
+};
 
-use super::{Timestamp, Transport, TransportError};
+use super::{Incoming, Timestamp, Transport, TransportError};
 
-/// How long `send` retries while the interface's transmit queue is full (ENOBUFS): the
-/// tester hands out a whole TransferData block at once, faster than 500 kbit/s drains it.
-const SEND_RETRY_LIMIT: Duration = Duration::from_secs(1);
+/// Frames sent and not echoed yet, at most: the kernel's default transmit queue length
+/// (`txqueuelen` 10) for CAN interfaces.
+pub const TRANSMIT_WINDOW: usize = 10;
+
+/// ΔP2 on a local interface: the scheduler's latency both ways, and a response that waits
+/// behind a few higher-priority frames.
+pub const NETWORK_DELAY: Duration = Duration::from_millis(10);
+
+/// `ENOBUFS`: the interface's transmit queue is full.
+const ENOBUFS: i32 = 105;
 
 /// The kernel's frame for `frame`.
 pub fn to_socketcan(frame: &Frame) -> CanFrame {
@@ -43,6 +61,8 @@ pub fn from_socketcan(frame: &CanFrame) -> Option<Frame> {
 pub struct SocketCanTransport {
     socket: CanSocket,
     interface: String,
+    /// Frames sent and not echoed yet, oldest first.
+    unconfirmed: VecDeque<Frame>,
 }
 
 impl SocketCanTransport {
@@ -54,59 +74,73 @@ impl SocketCanTransport {
             ),
             source,
         })?;
+        socket
+            .set_recv_own_msgs(true)
+            .map_err(|source| TransportError::Io {
+                context: format!(
+                    "asking '{interface}' to confirm the frames sent (CAN_RAW_RECV_OWN_MSGS)"
+                ),
+                source,
+            })?;
         Ok(Self {
             socket,
             interface: interface.to_string(),
+            unconfirmed: VecDeque::new(),
         })
+    }
+
+    /// Whether `frame` read from the socket is the echo of one sent here; takes it off
+    /// the unconfirmed ones.
+    fn is_echo(&mut self, frame: &Frame) -> bool {
+        match self.unconfirmed.iter().position(|sent| sent == frame) {
+            Some(index) => {
+                self.unconfirmed.remove(index);
+                true
+            }
+            None => false,
+        }
     }
 }
 
 impl Transport for SocketCanTransport {
-    fn send(&mut self, frame: &Frame) -> Result<(), TransportError> {
-        let frame = to_socketcan(frame);
-        let give_up = WallInstant::now() + SEND_RETRY_LIMIT;
-        loop {
-            match self.socket.write_frame(&frame) {
-                Ok(()) => return Ok(()),
-                // The transmit queue is full: wait for the bus to drain it.
-                Err(error)
-                    if error.raw_os_error() == Some(105 /* ENOBUFS */)
-                        || error.kind() == io::ErrorKind::WouldBlock =>
-                {
-                    if WallInstant::now() >= give_up {
-                        return Err(TransportError::Io {
-                            context: format!(
-                                "the transmit queue of {} stayed full for {} s (is the bus connected and terminated?)",
-                                self.interface,
-                                SEND_RETRY_LIMIT.as_secs()
-                            ),
-                            source: error,
-                        });
-                    }
-                    std::thread::sleep(Duration::from_micros(200));
-                }
-                Err(source) => {
-                    return Err(TransportError::Io {
-                        context: format!("sending on {}", self.interface),
-                        source,
-                    })
-                }
+    fn send(&mut self, frame: &Frame) -> Result<bool, TransportError> {
+        if self.unconfirmed.len() >= TRANSMIT_WINDOW {
+            return Ok(false);
+        }
+        match self.socket.write_frame(&to_socketcan(frame)) {
+            Ok(()) => {
+                self.unconfirmed.push_back(*frame);
+                Ok(true)
             }
+            // The queue is full all the same: offered again once the bus has drained some.
+            Err(error)
+                if error.raw_os_error() == Some(ENOBUFS)
+                    || error.kind() == io::ErrorKind::WouldBlock =>
+            {
+                Ok(false)
+            }
+            Err(source) => Err(TransportError::Io {
+                context: format!("sending on {}", self.interface),
+                source,
+            }),
         }
     }
 
-    fn recv(&mut self, timeout: Duration) -> Result<Option<(Frame, Timestamp)>, TransportError> {
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Incoming>, TransportError> {
         let deadline = WallInstant::now() + timeout;
         loop {
             let remaining = deadline.saturating_duration_since(WallInstant::now());
             match self.socket.read_frame_timeout(remaining) {
                 Ok(frame) => {
                     if let Some(frame) = from_socketcan(&frame) {
+                        if self.is_echo(&frame) {
+                            return Ok(Some(Incoming::Sent));
+                        }
                         let timestamp = Timestamp {
                             host: WallInstant::now(),
                             bus_us: None,
                         };
-                        return Ok(Some((frame, timestamp)));
+                        return Ok(Some(Incoming::Frame(frame, timestamp)));
                     }
                     if remaining.is_zero() {
                         return Ok(None);
@@ -134,6 +168,14 @@ impl Transport for SocketCanTransport {
 
     fn describe(&self) -> String {
         format!("SocketCAN {}", self.interface)
+    }
+
+    fn transmit_window(&self) -> usize {
+        TRANSMIT_WINDOW
+    }
+
+    fn network_delay(&self) -> Duration {
+        NETWORK_DELAY
     }
 }
 

@@ -11,8 +11,10 @@
 //!
 //! Identifiers are hex (3 digits for 11-bit ones, 8 for 29-bit ones), lengths decimal,
 //! bytes hex: separated by spaces in `send`, contiguous in `frame`. The server never echoes
-//! a client's own frames. Frames with 29-bit identifiers, and `< error ... >` bus error
-//! notifications, are skipped: the AutoPlug bus uses 11-bit identifiers only.
+//! a client's own frames, so the client confirms them by a model of the bus
+//! ([`BusModel`]) and takes at most [`TRANSMIT_WINDOW`] frames ahead of it. Frames with
+//! 29-bit identifiers, and `< error ... >` bus error notifications, are skipped: the
+//! AutoPlug bus uses 11-bit identifiers only.
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
@@ -20,8 +22,18 @@ use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
 use std::time::{Duration, Instant as WallInstant};
 
 use autoplug_can::Frame;
+use autoplug_virtual_bus::DEFAULT_BITRATE;
 
-use super::{Timestamp, Transport, TransportError};
+use super::pace::BusModel;
+use super::{Incoming, Timestamp, Transport, TransportError};
+
+/// Frames the client sends ahead of the bus model (a SocketCAN interface's default transmit
+/// queue, what the daemon on a bench writes into): 2.7 ms of 8-byte frames at 500 kbit/s.
+pub const TRANSMIT_WINDOW: usize = 10;
+
+/// ΔP2 over socketcand: the TCP link both ways, the server's own queues, and whatever the
+/// bus model did not see in time (other nodes' frames still on their way to the client).
+pub const NETWORK_DELAY: Duration = Duration::from_millis(50);
 
 /// How long connecting and each handshake reply may take.
 pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
@@ -135,6 +147,8 @@ pub struct SocketcandClient {
     skipped: u64,
     /// Frames that arrived during the handshake.
     early: VecDeque<(Frame, u64)>,
+    /// When this client's frames are on the bus (the server does not say).
+    bus_model: BusModel,
 }
 
 impl SocketcandClient {
@@ -198,6 +212,8 @@ impl SocketcandClient {
             bus: bus.to_string(),
             skipped: 0,
             early: VecDeque::new(),
+            // The AutoPlug bus's rate (spec section 3).
+            bus_model: BusModel::new(DEFAULT_BITRATE),
         };
         match client.expect_reply(timeout, "the greeting '< hi >'")? {
             ServerMessage::Hi => {}
@@ -340,47 +356,84 @@ impl SocketcandClient {
     }
 }
 
-impl Transport for SocketcandClient {
-    fn send(&mut self, frame: &Frame) -> Result<(), TransportError> {
-        self.write_text(&format_send(frame))
-    }
-
-    fn recv(&mut self, timeout: Duration) -> Result<Option<(Frame, Timestamp)>, TransportError> {
+impl SocketcandClient {
+    /// The next frame already read, if any (the handshake's first); malformed messages
+    /// are an error, others are skipped.
+    fn buffered_frame(&mut self) -> Result<Option<Incoming>, TransportError> {
         if let Some((frame, bus_us)) = self.early.pop_front() {
-            let timestamp = Timestamp {
-                host: WallInstant::now(),
-                bus_us: Some(bus_us),
-            };
-            return Ok(Some((frame, timestamp)));
+            self.bus_model.seen(&frame);
+            return Ok(Some(received(frame, bus_us)));
         }
-        let deadline = WallInstant::now() + timeout;
-        loop {
-            while let Some(message) = take_message(&mut self.buffer) {
-                match parse_server_message(&message) {
-                    Ok(ServerMessage::Frame { frame, bus_us }) => {
-                        let timestamp = Timestamp {
-                            host: WallInstant::now(),
-                            bus_us: Some(bus_us),
-                        };
-                        return Ok(Some((frame, timestamp)));
-                    }
-                    Ok(_) => self.skipped += 1,
-                    Err(reason) => {
-                        return Err(TransportError::Protocol(format!(
-                            "{} sent a malformed message '< {message} >': {reason}",
-                            self.peer
-                        )))
-                    }
+        while let Some(message) = take_message(&mut self.buffer) {
+            match parse_server_message(&message) {
+                Ok(ServerMessage::Frame { frame, bus_us }) => {
+                    self.bus_model.seen(&frame);
+                    return Ok(Some(received(frame, bus_us)));
+                }
+                Ok(_) => self.skipped += 1,
+                Err(reason) => {
+                    return Err(TransportError::Protocol(format!(
+                        "{} sent a malformed message '< {message} >': {reason}",
+                        self.peer
+                    )))
                 }
             }
-            if !self.read_more(deadline)? {
+        }
+        Ok(None)
+    }
+}
+
+fn received(frame: Frame, bus_us: u64) -> Incoming {
+    let timestamp = Timestamp {
+        host: WallInstant::now(),
+        bus_us: Some(bus_us),
+    };
+    Incoming::Frame(frame, timestamp)
+}
+
+impl Transport for SocketcandClient {
+    fn send(&mut self, frame: &Frame) -> Result<bool, TransportError> {
+        if self.bus_model.in_flight() >= TRANSMIT_WINDOW {
+            return Ok(false);
+        }
+        self.write_text(&format_send(frame))?;
+        self.bus_model.sent(WallInstant::now(), frame);
+        Ok(true)
+    }
+
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Incoming>, TransportError> {
+        let deadline = WallInstant::now() + timeout;
+        let mut read = false;
+        loop {
+            if self.bus_model.confirm_due(WallInstant::now()) {
+                return Ok(Some(Incoming::Sent));
+            }
+            if let Some(incoming) = self.buffered_frame()? {
+                return Ok(Some(incoming));
+            }
+            // At least one look at the socket, even with no time to wait.
+            if read && WallInstant::now() >= deadline {
                 return Ok(None);
             }
+            let wake = self
+                .bus_model
+                .next_confirmation()
+                .map_or(deadline, |due| due.min(deadline));
+            self.read_more(wake)?;
+            read = true;
         }
     }
 
     fn describe(&self) -> String {
         format!("socketcand {} bus {}", self.peer, self.bus)
+    }
+
+    fn transmit_window(&self) -> usize {
+        TRANSMIT_WINDOW
+    }
+
+    fn network_delay(&self) -> Duration {
+        NETWORK_DELAY
     }
 }
 

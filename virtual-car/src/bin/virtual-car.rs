@@ -9,7 +9,7 @@ use autoplug_vin::Vin;
 use autoplug_virtual_car::console::ReaderMayLeave;
 use autoplug_virtual_car::report::{self, RunRecord};
 use autoplug_virtual_car::scenario::Scenario;
-use autoplug_virtual_car::socketcand::{ClientFrame, SocketcandServer};
+use autoplug_virtual_car::socketcand::{CarBridge, SocketcandServer};
 use clap::{Parser, Subcommand};
 use std::fs::File;
 use std::io::BufWriter;
@@ -237,51 +237,14 @@ fn run_one(
     std::fs::create_dir_all(&dir)?;
     let mut bus_log = BufWriter::new(File::create(dir.join("bus.log"))?);
     let mut trace = BufWriter::new(File::create(dir.join("trace.csv"))?);
-    // A client frame the external node's transmit queue could not take yet waits here; the
-    // rest wait in the server's bounded per-client queues, taken in turn.
-    let mut held: Option<ClientFrame> = None;
-    // Client frames handed to the external node and not yet seen on the bus, with their
-    // sender: when one appears on the bus, the other clients get it (as on a SocketCAN
-    // interface, where every socket but the sender's sees a frame) and its sender does not.
-    let mut on_the_way: std::collections::VecDeque<ClientFrame> = std::collections::VecDeque::new();
+    let mut bridge = CarBridge::new();
     let record: RunRecord = report::run_streaming(
         scenario,
         &mut bus_log,
         &mut trace,
         |car, frames| {
             if let Some(server) = server {
-                loop {
-                    let sent = match held.take() {
-                        Some(sent) => sent,
-                        None => match server.try_recv() {
-                            Some(sent) => sent,
-                            None => break,
-                        },
-                    };
-                    if !car.inject(sent.frame) {
-                        held = Some(sent);
-                        break;
-                    }
-                    on_the_way.push_back(sent);
-                }
-                for entry in frames {
-                    let from_client = if entry.sender == "External" {
-                        // The external node sends its queue by priority: find the frame, not
-                        // just the oldest.
-                        on_the_way
-                            .iter()
-                            .position(|c| c.frame == entry.frame)
-                            .and_then(|i| on_the_way.remove(i))
-                            .map(|c| c.client)
-                    } else {
-                        None
-                    };
-                    server.broadcast(entry.t_us, &entry.frame, from_client);
-                }
-                // A frame the bus never carried (lost in an error) is not waited for forever.
-                while on_the_way.len() > 64 {
-                    on_the_way.pop_front();
-                }
+                bridge.exchange(server, car, frames);
             }
             if realtime && car.time_us() % 10_000 == 0 {
                 let target = Duration::from_micros(car.time_us());
