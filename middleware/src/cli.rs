@@ -113,6 +113,9 @@ pub enum Command {
         /// Skip malformed lines and count them, instead of stopping at the first.
         #[arg(long)]
         lenient: bool,
+        /// Judge the ECUs even on a bus that is not an AutoPlug car.
+        #[arg(long)]
+        force: bool,
         /// Also store the log's trips in this database (SQLite).
         #[arg(long, value_name = "FILE")]
         db: Option<PathBuf>,
@@ -251,8 +254,10 @@ pub enum Command {
     #[command(subcommand)]
     Log(LogCommand),
     /// Judge every ECU from a recorded log: verdict (ok, suspect, faulty, no data), number,
-    /// unit, thresholds and evidence window. Exit status 0 when no ECU is faulty, 3 when
-    /// one is (1 for an error, 2 for a wrong command line).
+    /// unit, thresholds and evidence window; first, whether the bus is an AutoPlug car at
+    /// all. Exit status 0 when no ECU is faulty, 3 when one is, 4 when the log could not be
+    /// read to its end (what precedes the damage is judged), 5 when the bus is not an
+    /// AutoPlug car and nothing was judged (1 for an error, 2 for a wrong command line).
     Diagnose {
         /// The log file (candump .log, Vector .asc or .blf).
         #[arg(value_name = "LOG")]
@@ -263,6 +268,9 @@ pub enum Command {
         /// Skip malformed lines and count them, instead of stopping at the first.
         #[arg(long)]
         lenient: bool,
+        /// Judge the ECUs even on a bus that is not an AutoPlug car.
+        #[arg(long)]
+        force: bool,
     },
     /// Run one of the report's demonstrations on the virtual car, the flashing done over
     /// CAN by this tool: `cruise` (scenario 1, the broken cruise control) or `abs`
@@ -593,6 +601,11 @@ pub enum CliError {
     /// The diagnosis judged at least one ECU faulty (exit status 3; the report was
     /// printed).
     FaultyEcu(String),
+    /// The log could not be read to its end (exit status 4; what precedes the damage was
+    /// reported, exported or judged).
+    Incomplete(String),
+    /// The bus is not an AutoPlug car: no ECU was judged (exit status 5).
+    NotAutoPlug(String),
 }
 
 impl fmt::Display for CliError {
@@ -601,6 +614,8 @@ impl fmt::Display for CliError {
             CliError::Demo(why) => write!(f, "demonstration: {why}"),
             CliError::Log(why) | CliError::Fleet(why) => f.write_str(why),
             CliError::FaultyEcu(which) => write!(f, "faulty: {which}"),
+            CliError::Incomplete(why) => write!(f, "incomplete: {why}"),
+            CliError::NotAutoPlug(why) => write!(f, "not judged: {why}"),
             CliError::Image(error) => error.fmt(f),
             CliError::Transport(error) => error.fmt(f),
             CliError::Flash(error) => error.fmt(f),
@@ -787,6 +802,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             log,
             speed,
             lenient,
+            force,
             db,
             vehicle,
         } => {
@@ -798,18 +814,25 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 .map_err(CliError::Log)?;
             let state = run.pipeline.state();
             writeln!(out, "{}", log.display())?;
-            crate::gateway::bus_summary(state, run.pipeline.malformed(), out)?;
+            crate::gateway::bus_summary(&run, out)?;
             writeln!(out)?;
             crate::gateway::signal_table(state, out)?;
             writeln!(out)?;
-            crate::gateway::verdict_table(&run.diagnoses, out)?;
+            if run.recognition.autoplug || force {
+                crate::gateway::verdict_table(&run.diagnoses, out)?;
+            } else {
+                writeln!(out, "no ECU judged: {}", not_judged(&run))?;
+            }
             crate::gateway::heard_dtcs(&run.dtcs, out)?;
             writeln!(out)?;
             crate::gateway::trips_table(&run.trips, out)?;
             if let Some(trip_log) = &run.trip_log {
                 report_trip_log(trip_log, out)?;
             }
-            Ok(())
+            match incomplete(&log, &run) {
+                Some(why) => Err(CliError::Incomplete(why)),
+                None => Ok(()),
+            }
         }
         Command::Gateway {
             bus,
@@ -968,13 +991,22 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             out: file,
             lenient,
         }) => export_log(&log, format, &file, lenient, out),
-        Command::Diagnose { log, json, lenient } => {
+        Command::Diagnose {
+            log,
+            json,
+            lenient,
+            force,
+        } => {
             let run = crate::gateway::run_log(&log, strictness(lenient), None, None)
                 .map_err(CliError::Log)?;
+            let judged = run.recognition.autoplug || force;
             if json {
-                writeln!(out, "{}", crate::gateway::verdict_json(&log, &run))?;
+                writeln!(out, "{}", crate::gateway::verdict_json(&log, &run, judged))?;
             } else {
-                crate::gateway::verdict_table(&run.diagnoses, out)?;
+                writeln!(out, "bus: {}", run.recognition.summary())?;
+                if judged {
+                    crate::gateway::verdict_table(&run.diagnoses, out)?;
+                }
                 if let Some(first) = run.pipeline.first_malformed() {
                     writeln!(
                         out,
@@ -982,20 +1014,56 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                         run.pipeline.malformed()
                     )?;
                 }
+                if run.pipeline.dropped_by_logger() > 0 {
+                    writeln!(
+                        out,
+                        "{} frame(s) dropped by the logger (its DROPCOUNT lines)",
+                        run.pipeline.dropped_by_logger()
+                    )?;
+                }
             }
             let faulty: Vec<&str> = run
                 .diagnoses
                 .iter()
-                .filter(|d| d.verdict == autoplug_diagnostics::Verdict::Faulty)
+                .filter(|d| judged && d.verdict == autoplug_diagnostics::Verdict::Faulty)
                 .map(|d| crate::names::ecu_name(d.ecu))
                 .collect();
-            if faulty.is_empty() {
-                Ok(())
-            } else {
-                Err(CliError::FaultyEcu(faulty.join(", ")))
+            let incomplete = incomplete(&log, &run);
+            // A fault found in part of a log stays a fault: 3 before 4.
+            match (faulty.is_empty(), incomplete) {
+                (false, None) => Err(CliError::FaultyEcu(faulty.join(", "))),
+                (false, Some(why)) => Err(CliError::FaultyEcu(format!(
+                    "{} (in an incomplete log: {why})",
+                    faulty.join(", ")
+                ))),
+                (true, Some(why)) => Err(CliError::Incomplete(why)),
+                (true, None) if !judged => Err(CliError::NotAutoPlug(format!(
+                    "{}: not an AutoPlug car, no ECU judged (--force judges it anyway)",
+                    log.display()
+                ))),
+                (true, None) => Ok(()),
             }
         }
     }
+}
+
+/// Why a log run's report covers only part of the log, if it does.
+fn incomplete(log: &Path, run: &crate::gateway::LogRun) -> Option<String> {
+    run.pipeline.incomplete().map(|e| {
+        format!(
+            "{}: {e} (the report covers the {} frames before it)",
+            log.display(),
+            run.pipeline.state().counters().frames
+        )
+    })
+}
+
+/// Why the ECUs of a log were not judged.
+fn not_judged(run: &crate::gateway::LogRun) -> String {
+    format!(
+        "the bus is {} (--force judges it anyway)",
+        run.recognition.summary()
+    )
 }
 
 /// Runs a job that only reads (identification, DTCs: it cannot fail as a whole) over the
@@ -1319,7 +1387,11 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         fleet.close(Duration::from_secs(5));
     }
     drop(fleet_runtime);
-    result.map_err(|e| CliError::Log(e.to_string()))
+    result.map_err(|e| CliError::Log(e.to_string()))?;
+    match pipeline.incomplete() {
+        Some(e) => Err(CliError::Incomplete(format!("{}: {e}", source.describe()))),
+        None => Ok(()),
+    }
 }
 
 /// The fleet link at the end of a run: where it reported, what waits, the campaigns.
@@ -1364,7 +1436,7 @@ fn export_log(
             file.display()
         )));
     }
-    let reader = autoplug_logs::open(log).map_err(|e| CliError::Log(e.to_string()))?;
+    let mut reader = autoplug_logs::open(log).map_err(|e| CliError::Log(e.to_string()))?;
     let mut partial = file.as_os_str().to_owned();
     partial.push(".partial");
     let partial = PathBuf::from(partial);
@@ -1373,13 +1445,14 @@ fn export_log(
     let writer = io::BufWriter::new(output);
     let mut decoded = None;
     let result = match format {
-        ExportFormat::Asc => autoplug_logs::export_asc(reader, writer),
-        ExportFormat::Candump => autoplug_logs::write::export_candump(reader, writer, false),
-        ExportFormat::Mcap => autoplug_logs::export_mcap(reader, writer).map(|s| {
+        ExportFormat::Asc => autoplug_logs::export_asc(&mut reader, writer),
+        ExportFormat::Candump => autoplug_logs::write::export_candump(&mut reader, writer, false),
+        ExportFormat::Mcap => autoplug_logs::export_mcap(&mut reader, writer).map(|s| {
             decoded = Some((s.decoded, s.undecodable));
             s.export
         }),
     };
+    let dropped = reader.dropped_frames();
     let fail = |message: String| {
         let _ = std::fs::remove_file(&partial);
         CliError::Log(message)
@@ -1411,7 +1484,22 @@ fn export_log(
             String::new()
         }
     )?;
-    Ok(())
+    if dropped > 0 {
+        writeln!(
+            out,
+            "{dropped} frame(s) dropped by the logger (its DROPCOUNT lines) are not in the log"
+        )?;
+    }
+    // The frames before a damaged tail are written: the file is kept, the status says
+    // it is not the whole log.
+    match summary.incomplete {
+        Some(e) => Err(CliError::Incomplete(format!(
+            "{}: {e} (the {} frames before it were written)",
+            log.display(),
+            summary.frames
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Runs a demonstration and reports what it showed.
@@ -1640,6 +1728,14 @@ pub fn main() -> ExitCode {
         Err(CliError::FaultyEcu(which)) => {
             complain(format!("judged faulty: {which}"));
             ExitCode::from(3)
+        }
+        Err(error @ CliError::Incomplete(_)) => {
+            complain(error.to_string());
+            ExitCode::from(4)
+        }
+        Err(error @ CliError::NotAutoPlug(_)) => {
+            complain(error.to_string());
+            ExitCode::from(5)
         }
         Err(error) => {
             complain(format!("error: {error}"));

@@ -7,7 +7,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use autoplug_diagnostics::{DtcMonitor, EcuDiagnosis, Verdict};
+use autoplug_diagnostics::{DtcMonitor, EcuDiagnosis, Recognition, Verdict};
 use autoplug_gateway::{CarState, FrameSource, LogSource, Paced, Pipeline, Strictness};
 use autoplug_store::{TripDetail, TripRow};
 use autoplug_trips::{TripEnd, TripStats};
@@ -20,6 +20,8 @@ use crate::watch::{TripLog, Watch};
 pub struct LogRun {
     /// The diagnosis of each ECU.
     pub diagnoses: Vec<EcuDiagnosis>,
+    /// Whether the bus is an AutoPlug car: the diagnoses mean something only if it is.
+    pub recognition: Recognition,
     /// The state at the end.
     pub pipeline: Pipeline,
     /// The trips found, in order.
@@ -31,7 +33,8 @@ pub struct LogRun {
 }
 
 /// Runs the gateway pipeline with the diagnostics and trips over a log file; trips go to
-/// `trip_log` if given.
+/// `trip_log` if given. A log that cannot be read to its end gives the run up to the
+/// damage ([`Pipeline::incomplete`] says why).
 pub fn run_log(
     path: &Path,
     strictness: Strictness,
@@ -51,6 +54,7 @@ pub fn run_log(
     watch.finish(pipeline.state());
     Ok(LogRun {
         diagnoses: watch.diagnostics.report(pipeline.state()),
+        recognition: watch.diagnostics.recognition(),
         pipeline,
         trips: watch.ended,
         trip_log: watch.trip_log,
@@ -283,14 +287,20 @@ struct JsonReport<'a> {
     log: String,
     frames: u64,
     malformed_lines_skipped: u64,
+    frames_dropped_by_logger: u64,
+    /// Why the log could not be read to its end; the report covers what came before.
+    incomplete: Option<String>,
+    vehicle: &'a Recognition,
+    /// Whether the ECUs were judged (an AutoPlug car, or `--force`).
+    judged: bool,
     any_faulty: bool,
     ecus: Vec<JsonEcu<'a>>,
 }
 
-/// The diagnosis as JSON.
-pub fn verdict_json(path: &Path, run: &LogRun) -> String {
-    let ecus = run
-        .diagnoses
+/// The diagnosis as JSON; `judged` false leaves the ECUs out (not an AutoPlug car).
+pub fn verdict_json(path: &Path, run: &LogRun, judged: bool) -> String {
+    let diagnoses: &[EcuDiagnosis] = if judged { &run.diagnoses } else { &[] };
+    let ecus = diagnoses
         .iter()
         .filter_map(|d| {
             let f = d.headline()?;
@@ -315,7 +325,11 @@ pub fn verdict_json(path: &Path, run: &LogRun) -> String {
         log: path.display().to_string(),
         frames: run.pipeline.state().counters().frames,
         malformed_lines_skipped: run.pipeline.malformed(),
-        any_faulty: any_faulty(&run.diagnoses),
+        frames_dropped_by_logger: run.pipeline.dropped_by_logger(),
+        incomplete: run.pipeline.incomplete().map(ToString::to_string),
+        vehicle: &run.recognition,
+        judged,
+        any_faulty: any_faulty(diagnoses),
         ecus,
     };
     serde_json::to_string_pretty(&report).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
@@ -326,12 +340,14 @@ pub fn any_faulty(diagnoses: &[EcuDiagnosis]) -> bool {
     diagnoses.iter().any(|d| d.verdict == Verdict::Faulty)
 }
 
-/// What the bus held: frames, messages with their measured periods, foreign traffic.
-pub fn bus_summary(state: &CarState, malformed: u64, out: &mut dyn Write) -> std::io::Result<()> {
+/// What the bus held: frames, messages with their measured periods, foreign traffic, and
+/// whether it is an AutoPlug car at all.
+pub fn bus_summary(run: &LogRun, out: &mut dyn Write) -> std::io::Result<()> {
+    let state = run.pipeline.state();
     let c = state.counters();
     writeln!(
         out,
-        "{} frames over {:.1} s: {} diagnostic, {} unknown identifier(s) in {} frame(s), {} extended, {} remote, {} error frames, {} out of time order, {} malformed line(s) skipped",
+        "{} frames over {:.1} s: {} diagnostic, {} unknown identifier(s) in {} frame(s), {} extended, {} remote, {} error frames, {} out of time order, {} malformed line(s) skipped, {} frame(s) dropped by the logger",
         c.frames,
         state.now_us() as f64 * 1e-6
             - state
@@ -347,8 +363,10 @@ pub fn bus_summary(state: &CarState, malformed: u64, out: &mut dyn Write) -> std
         c.remote_frames,
         c.error_frames,
         c.time_backwards,
-        malformed
+        run.pipeline.malformed(),
+        run.pipeline.dropped_by_logger()
     )?;
+    writeln!(out, "bus: {}", run.recognition.summary())?;
     writeln!(
         out,
         "{:<16} {:>5} {:>8} {:>10} {:>10} {:>8} {:>8}",

@@ -59,7 +59,8 @@ impl ReplayDesk {
     }
 }
 
-/// The log's first and last frame times, µs (reads it through once).
+/// The log's first and last frame times, µs (reads it through once). A log whose tail is
+/// damaged spans the frames before the damage: those are what the player can play.
 pub fn log_span(path: &Path) -> Result<(u64, u64), String> {
     let reader = autoplug_logs::open(path).map_err(|e| e.to_string())?;
     let mut span: Option<(u64, u64)> = None;
@@ -70,7 +71,8 @@ pub fn log_span(path: &Path) -> Result<(u64, u64), String> {
                 *first = (*first).min(frame.t_us);
                 *last = (*last).max(frame.t_us);
             }
-            Err(e) if e.is_fatal() => return Err(e.to_string()),
+            Err(e) if e.is_fatal() && span.is_none() => return Err(e.to_string()),
+            Err(e) if e.is_fatal() => break,
             // A malformed line is the pipeline's to report (strict: it stops there).
             Err(_) => {}
         }
@@ -130,8 +132,8 @@ impl ControlledReplay {
                     self.held = Some(frame);
                     break;
                 }
-                Poll::Frame(_) | Poll::Malformed(_) | Poll::Idle => {}
-                Poll::End => break,
+                Poll::Frame(_) | Poll::Malformed(_) | Poll::Dropped(_) | Poll::Idle => {}
+                Poll::End | Poll::Incomplete(_) => break,
             }
         }
         self.now_us = primed_from;
@@ -159,6 +161,7 @@ impl FrameSource for ControlledReplay {
                 None => match self.source.poll(max_wait)? {
                     Poll::Frame(frame) => Some(frame),
                     Poll::Malformed(e) => return Ok(Poll::Malformed(e)),
+                    Poll::Dropped(n) => return Ok(Poll::Dropped(n)),
                     _ => None,
                 },
             };
@@ -186,7 +189,8 @@ impl FrameSource for ControlledReplay {
             Some(frame) => frame,
             None => match self.source.poll(max_wait)? {
                 Poll::Frame(frame) => frame,
-                Poll::End => {
+                // A damaged tail ends the log where the damage starts.
+                Poll::End | Poll::Incomplete(_) => {
                     // Stay at the end, paused, so the page can seek back.
                     let mut desk = self.desk.borrow_mut();
                     desk.playing = false;

@@ -60,6 +60,8 @@ pub struct Pipeline {
     strictness: Strictness,
     malformed: u64,
     first_malformed: Option<LogError>,
+    incomplete: Option<LogError>,
+    dropped_by_logger: u64,
 }
 
 /// How long a live source is waited for before the observers get an idle call.
@@ -89,6 +91,17 @@ impl Pipeline {
         self.first_malformed.as_ref()
     }
 
+    /// Why the log could not be read to its end (a damaged tail, an I/O error), if so: the
+    /// state holds what came before it.
+    pub fn incomplete(&self) -> Option<&LogError> {
+        self.incomplete.as_ref()
+    }
+
+    /// Frames the logger reported dropped (candump's `DROPCOUNT` lines).
+    pub fn dropped_by_logger(&self) -> u64 {
+        self.dropped_by_logger
+    }
+
     /// Takes one frame through the state and the observers.
     pub fn feed(&mut self, frame: &LogFrame, observers: &mut [&mut dyn Observer]) -> Update {
         let update = self.state.update(frame);
@@ -99,7 +112,9 @@ impl Pipeline {
     }
 
     /// Runs a source to its end (or until `stop` says so, checked between frames and at
-    /// every idle moment of a live source).
+    /// every idle moment of a live source). A log that cannot be read to its end ends the
+    /// run as its end would, the frames before the damage taken: [`Pipeline::incomplete`]
+    /// says why.
     pub fn run(
         &mut self,
         source: &mut dyn FrameSource,
@@ -128,6 +143,15 @@ impl Pipeline {
                     for observer in observers.iter_mut() {
                         observer.on_idle(&self.state);
                     }
+                }
+                Poll::Dropped(n) => {
+                    self.dropped_by_logger = self.dropped_by_logger.saturating_add(n);
+                }
+                // Not an error of the run, strict or lenient: what was read stands, and the
+                // caller says the log was incomplete.
+                Poll::Incomplete(error) => {
+                    self.incomplete = Some(error);
+                    return Ok(());
                 }
                 Poll::End => return Ok(()),
             }

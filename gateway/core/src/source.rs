@@ -16,6 +16,12 @@ pub enum Poll {
     Frame(LogFrame),
     /// A log line that could not be read (the pipeline stops or skips, as asked).
     Malformed(LogError),
+    /// The log cannot be read past here (a damaged tail, an I/O error): the source ends,
+    /// and what came before it stands.
+    Incomplete(LogError),
+    /// The logger reported this many frames dropped here (candump's `DROPCOUNT`): frames
+    /// that were on the bus and are not in the log.
+    Dropped(u64),
     /// Nothing arrived within the wait (live sources).
     Idle,
     /// The source has ended (end of the log, connection closed by the other side).
@@ -90,7 +96,14 @@ const READ_BATCH: usize = 1024;
 /// the log, and however slowly the pipeline takes them.
 const READ_AHEAD_BATCHES: usize = 8;
 
-type Batch = Vec<Result<LogFrame, LogError>>;
+/// What the reading thread hands over: the reader's items, and the frames its logger
+/// reported dropped where it did.
+enum ReadAhead {
+    Item(Result<LogFrame, LogError>),
+    Dropped(u64),
+}
+
+type Batch = Vec<ReadAhead>;
 
 /// A recorded log, read as fast as the machine goes. Parsing runs on a thread of its own,
 /// a few batches ahead of the pipeline: on a machine with two cores the text is read while
@@ -100,7 +113,7 @@ type Batch = Vec<Result<LogFrame, LogError>>;
 pub struct LogSource {
     name: String,
     batches: Receiver<Batch>,
-    current: std::vec::IntoIter<Result<LogFrame, LogError>>,
+    current: std::vec::IntoIter<ReadAhead>,
 }
 
 impl LogSource {
@@ -129,21 +142,31 @@ impl LogSource {
 
 /// The reading thread: batches until the end of the log or a fatal error, or until the
 /// source is dropped (its receiver gone, the next send fails and the thread ends).
-fn read_ahead(reader: autoplug_logs::LogReader, sender: &SyncSender<Batch>) {
+fn read_ahead(mut reader: autoplug_logs::LogReader, sender: &SyncSender<Batch>) {
     let mut batch = Vec::with_capacity(READ_BATCH);
-    for item in reader {
+    let mut dropped = 0;
+    // Drops the logger reported since the last look, before the item that follows them.
+    let mut note_drops = |reader: &autoplug_logs::LogReader, batch: &mut Batch| {
+        if reader.dropped_frames() > dropped {
+            batch.push(ReadAhead::Dropped(reader.dropped_frames() - dropped));
+            dropped = reader.dropped_frames();
+        }
+    };
+    while let Some(item) = reader.next() {
+        note_drops(&reader, &mut batch);
         let fatal = matches!(&item, Err(e) if e.is_fatal());
-        batch.push(item);
+        batch.push(ReadAhead::Item(item));
         if fatal {
             break;
         }
-        if batch.len() == READ_BATCH {
+        if batch.len() >= READ_BATCH {
             let full = std::mem::replace(&mut batch, Vec::with_capacity(READ_BATCH));
             if sender.send(full).is_err() {
                 return;
             }
         }
     }
+    note_drops(&reader, &mut batch);
     if !batch.is_empty() {
         let _ = sender.send(batch);
     }
@@ -166,12 +189,11 @@ impl FrameSource for LogSource {
             },
         };
         match item {
-            Ok(frame) => Ok(Poll::Frame(frame)),
-            Err(error) if error.is_fatal() => Err(SourceError {
-                source: self.name.clone(),
-                message: error.to_string(),
-            }),
-            Err(error) => Ok(Poll::Malformed(error)),
+            ReadAhead::Item(Ok(frame)) => Ok(Poll::Frame(frame)),
+            // The frames before a damaged tail were handed over first: they stand.
+            ReadAhead::Item(Err(error)) if error.is_fatal() => Ok(Poll::Incomplete(error)),
+            ReadAhead::Item(Err(error)) => Ok(Poll::Malformed(error)),
+            ReadAhead::Dropped(n) => Ok(Poll::Dropped(n)),
         }
     }
 

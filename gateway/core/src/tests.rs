@@ -272,6 +272,89 @@ fn a_lenient_run_skips_and_counts_malformed_lines() {
     );
 }
 
+/// A BLF file of speed frames 10 ms apart, in one stored container, its last `cut`
+/// bytes missing (a logger that lost power).
+fn cut_blf(frames: u64, cut: usize) -> tempfile::TempPath {
+    let mut file = b"LOGG".to_vec();
+    file.extend_from_slice(&144u32.to_le_bytes());
+    file.resize(144, 0);
+    let mut objects = Vec::new();
+    for i in 0..frames {
+        objects.extend_from_slice(b"LOBJ");
+        objects.extend_from_slice(&32u16.to_le_bytes());
+        objects.extend_from_slice(&1u16.to_le_bytes());
+        objects.extend_from_slice(&48u32.to_le_bytes());
+        objects.extend_from_slice(&1u32.to_le_bytes());
+        objects.extend_from_slice(&2u32.to_le_bytes());
+        objects.extend_from_slice(&[0; 4]);
+        objects.extend_from_slice(&(i * 10_000_000).to_le_bytes());
+        objects.extend_from_slice(&[1, 0, 0, 1, 3, 0, 0, 0, 80, 0, 0, 0, 0, 0, 0, 0]);
+    }
+    let size = 32 + objects.len() as u32;
+    file.extend_from_slice(b"LOBJ");
+    file.extend_from_slice(&[16, 0, 1, 0]);
+    file.extend_from_slice(&size.to_le_bytes());
+    file.extend_from_slice(&10u32.to_le_bytes());
+    file.extend_from_slice(&[0; 8]);
+    file.extend_from_slice(&(objects.len() as u32).to_le_bytes());
+    file.extend_from_slice(&[0; 4]);
+    file.extend_from_slice(&objects);
+    file.truncate(file.len() - cut);
+    let mut out = tempfile::Builder::new().suffix(".blf").tempfile().unwrap();
+    std::io::Write::write_all(&mut out, &file).unwrap();
+    out.into_temp_path()
+}
+
+#[test]
+fn a_log_cut_short_ends_the_run_with_what_precedes_the_damage() {
+    for strictness in [Strictness::Strict, Strictness::Lenient] {
+        // 100 objects of 48 bytes, 100 bytes missing: 97 whole ones.
+        let path = cut_blf(100, 100);
+        let mut pipeline = Pipeline::new(strictness);
+        pipeline
+            .run(
+                &mut crate::LogSource::open(&path).unwrap(),
+                &mut [],
+                &mut || false,
+            )
+            .unwrap();
+        assert_eq!(pipeline.state().counters().frames, 97);
+        assert_eq!(pipeline.state().now_us(), 960_000);
+        let e = pipeline.incomplete().unwrap();
+        assert_eq!(e.line, 98);
+        assert!(e.message.contains("truncated file?"), "{e}");
+        assert_eq!(pipeline.malformed(), 0);
+    }
+    let mut whole = Pipeline::new(Strictness::Strict);
+    whole
+        .run(
+            &mut crate::LogSource::open(&cut_blf(100, 0)).unwrap(),
+            &mut [],
+            &mut || false,
+        )
+        .unwrap();
+    assert!(whole.incomplete().is_none());
+    assert_eq!(whole.state().counters().frames, 100);
+}
+
+#[test]
+fn frames_the_logger_reported_dropped_are_counted() {
+    let path = log_file(
+        "(0.000000) can0 003#50\nDROPCOUNT: dropped 7 CAN frames on 'can0' socket (total drops 7)\n(0.010000) can0 003#51\nDROPCOUNT: dropped 1 CAN frame on 'can0' socket (total drops 8)\n",
+    );
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    pipeline
+        .run(
+            &mut crate::LogSource::open(&path).unwrap(),
+            &mut [],
+            &mut || false,
+        )
+        .unwrap();
+    assert_eq!(pipeline.dropped_by_logger(), 8);
+    assert_eq!(pipeline.state().counters().frames, 2);
+    assert_eq!(pipeline.malformed(), 0);
+}
+
 #[test]
 fn a_missing_log_is_a_clear_error() {
     let error = crate::LogSource::open(std::path::Path::new("/nonexistent/drive.log"))

@@ -23,7 +23,9 @@
 //! | [`pedals`] | pedals | brake override of the accelerator; commands follow the cruise command |
 //!
 //! Besides the routines, [`dtcs`] reads the ECUs' trouble codes off the bus wherever a
-//! tester (the gateway itself, when it may transmit) asked for them, with their descriptions.
+//! tester (the gateway itself, when it may transmit) asked for them, with their descriptions,
+//! and [`recognition`] says whether the bus is an AutoPlug car at all: verdicts on another
+//! vehicle's bus judge its frames by a catalogue they do not follow.
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -37,12 +39,14 @@ pub mod engine;
 pub mod pedals;
 pub mod presence;
 pub mod ranges;
+pub mod recognition;
 mod span;
 pub mod steering;
 pub mod transmission;
 mod verdict;
 
 pub use dtcs::{describe as describe_dtc, DtcEntry, DtcMonitor, EcuDtcs};
+pub use recognition::Recognition;
 pub use verdict::{EcuDiagnosis, Finding, Verdict, Window};
 
 use autoplug_can::Node;
@@ -82,6 +86,7 @@ pub struct Restart {
 pub struct Diagnostics {
     routines: Vec<Box<dyn Routine + Send>>,
     restarts: Vec<Restart>,
+    tally: recognition::BusTally,
 }
 
 /// The routines that judge `node`: presence and ranges for every ECU, and its own.
@@ -130,7 +135,14 @@ impl Diagnostics {
         Self {
             routines: ecus().flat_map(routines_for).collect(),
             restarts: Vec::new(),
+            tally: recognition::BusTally::default(),
         }
+    }
+
+    /// Whether the bus seen so far is an AutoPlug car (see [`recognition`]): the verdicts
+    /// of [`Diagnostics::report`] mean something only if it is.
+    pub fn recognition(&self) -> Recognition {
+        self.tally.recognition()
     }
 
     /// The ECU restarts the bus showed, in order (each started its routines over).
@@ -185,6 +197,7 @@ impl Diagnostics {
 
 impl Observer for Diagnostics {
     fn on_frame(&mut self, frame: &LogFrame, update: Update, state: &CarState) {
+        self.tally.note(frame, update);
         if update == Update::Diagnostic {
             if let Some(node) = ecus().find(|n| is_reset_response(*n, frame)) {
                 self.routines.retain(|r| r.ecu() != node);

@@ -755,3 +755,152 @@ fn an_offset_beyond_one_step_or_an_oscillation_still_counts_for_the_cruise() {
     assert_eq!(f.verdict, Verdict::Faulty, "{f:?}");
     assert!(f.value.unwrap() > 1.1, "{f:?}");
 }
+
+/// The recognition after `frames` (in time order).
+fn recognise(frames: Vec<LogFrame>) -> crate::Recognition {
+    let mut pipeline = Pipeline::new(Strictness::Strict);
+    let mut diagnostics = Diagnostics::new();
+    pipeline
+        .run(
+            &mut VecSource::new("test", frames),
+            &mut [&mut diagnostics],
+            &mut || false,
+        )
+        .unwrap();
+    diagnostics.recognition()
+}
+
+fn data(t_ms: u64, id: u32, extended: bool, bytes: &[u8]) -> LogFrame {
+    LogFrame::new(
+        t_ms * 1000,
+        0,
+        id,
+        extended,
+        autoplug_logs::FrameKind::Data,
+        bytes,
+    )
+    .unwrap()
+}
+
+/// Every catalogue message at its length every 10 ms for `ms`.
+fn autoplug_bus(ms: u64) -> Vec<LogFrame> {
+    let mut frames = Vec::new();
+    for t in (0..ms).step_by(10) {
+        for m in autoplug_can::MESSAGES.iter() {
+            frames.push(data(
+                t,
+                u32::from(m.id),
+                false,
+                &[0; 8][..usize::from(m.dlc)],
+            ));
+        }
+    }
+    frames
+}
+
+#[test]
+fn the_catalogue_on_the_bus_is_an_autoplug_car() {
+    let r = recognise(autoplug_bus(2000));
+    assert!(r.autoplug, "{r:?}");
+    assert_eq!((r.messages_seen, r.catalogue_messages), (18, 18));
+    assert_eq!((r.catalogue_frames, r.foreign_frames), (3600, 0));
+    assert_eq!(
+        r.summary(),
+        "an AutoPlug car (18 of the catalogue's 18 messages, 0.0 % of 3600 data frames foreign)"
+    );
+}
+
+#[test]
+fn a_tester_and_a_few_strangers_beside_the_car_change_nothing() {
+    let mut frames = autoplug_bus(2000);
+    for t in (0..2000).step_by(2) {
+        // A scan tool on the OBD-II and UDS identifiers, busier than the car itself...
+        frames.push(data(t, 0x7DF, false, &[2, 1, 0x0D, 0, 0, 0, 0, 0]));
+        frames.push(data(
+            t,
+            0x7E0 + (t as u32 / 2) % 8,
+            false,
+            &[2, 0x3E, 0, 0, 0, 0, 0, 0],
+        ));
+        frames.push(data(
+            t,
+            0x7E8 + (t as u32 / 2) % 8,
+            false,
+            &[2, 0x7E, 0, 0, 0, 0, 0, 0],
+        ));
+    }
+    // ... and a device of its own: 10 % of the data frames.
+    for t in (0..2000).step_by(5) {
+        frames.push(data(t, 0x555, false, &[1]));
+    }
+    frames.sort_by_key(|f| f.t_us);
+    let r = recognise(frames);
+    assert!(r.autoplug, "{r:?}");
+    assert_eq!(r.foreign_frames, 400);
+    assert!((r.foreign_share - 0.1).abs() < 1e-9, "{r:?}");
+}
+
+#[test]
+fn another_cars_bus_is_not_an_autoplug_car() {
+    // Its own identifiers, and 0x00E at the catalogue's length: 1 message of 18 matches.
+    let mut frames = Vec::new();
+    for t in (0..3000).step_by(10) {
+        frames.push(data(t, 0x00E, false, &[200; 8]));
+        for id in [0x0B4, 0x025, 0x1C4, 0x2C1, 0x3B7] {
+            frames.push(data(t, id, false, &[0; 8]));
+        }
+        frames.push(data(t, 0x18FEF100, true, &[0; 8]));
+    }
+    let r = recognise(frames);
+    assert!(!r.autoplug, "{r:?}");
+    assert_eq!((r.catalogue_frames, r.foreign_frames), (300, 1800));
+    assert_eq!(r.messages_seen, 1);
+    assert_eq!(
+        r.reasons,
+        [
+            "85.7 % of its 2100 data frames have an identifier or a length the catalogue does not know (above 20 %)",
+            "only 1 of the catalogue's 18 messages in 3.0 s (fewer than 9)"
+        ]
+    );
+    assert!(
+        r.summary().starts_with("not an AutoPlug car: 85.7 %"),
+        "{}",
+        r.summary()
+    );
+}
+
+#[test]
+fn the_catalogues_identifiers_at_other_lengths_are_foreign() {
+    // A car whose traffic sits on the catalogue's identifiers, every one at 8 bytes.
+    let mut frames = Vec::new();
+    for t in (0..2000).step_by(10) {
+        for m in autoplug_can::MESSAGES.iter() {
+            frames.push(data(t, u32::from(m.id), false, &[0; 8]));
+        }
+    }
+    let r = recognise(frames);
+    assert!(!r.autoplug, "{r:?}");
+    // AbsMsg alone is 8 bytes long in the catalogue.
+    assert_eq!((r.messages_seen, r.catalogue_frames), (1, 200));
+    assert_eq!(r.reasons.len(), 2, "{r:?}");
+}
+
+#[test]
+fn missing_messages_count_only_once_there_was_time_for_them() {
+    // One message, no stranger: a filtered capture. Under 1 s: not judged on it.
+    let short: Vec<LogFrame> = (0..99).map(|i| data(i * 10, 0x003, false, &[50])).collect();
+    let r = recognise(short);
+    assert!(r.autoplug, "{r:?}");
+    // Over 1 s, half the catalogue must show.
+    let long: Vec<LogFrame> = (0..101)
+        .map(|i| data(i * 10, 0x003, false, &[50]))
+        .collect();
+    let r = recognise(long);
+    assert!(!r.autoplug, "{r:?}");
+    assert_eq!(
+        r.reasons,
+        ["only 1 of the catalogue's 18 messages in 1.0 s (fewer than 9)"]
+    );
+    // Nothing at all is nothing against it.
+    assert!(recognise(Vec::new()).autoplug);
+}

@@ -1,11 +1,12 @@
 //! The diagnostics on every shipped scenario, run on the virtual car and judged from its
 //! bus alone: the faulty software is flagged with its number, correct software never is,
-//! and a silenced ECU is "no data" for exactly that ECU.
+//! a silenced ECU is "no data" for exactly that ECU, and every one of these buses is
+//! recognised as an AutoPlug car.
 
 use std::path::{Path, PathBuf};
 
 use autoplug_can::Node;
-use autoplug_diagnostics::{Diagnostics, EcuDiagnosis, Verdict};
+use autoplug_diagnostics::{Diagnostics, EcuDiagnosis, Recognition, Verdict};
 use autoplug_gateway::{Pipeline, Strictness, VecSource};
 use autoplug_logs::LogFrame;
 use autoplug_virtual_car::report;
@@ -15,7 +16,7 @@ fn scenarios_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios")
 }
 
-fn diagnose(scenario: &Scenario) -> Vec<EcuDiagnosis> {
+fn diagnose_and_recognise(scenario: &Scenario) -> (Vec<EcuDiagnosis>, Recognition) {
     let record = report::run(scenario);
     let frames = record
         .log
@@ -31,7 +32,10 @@ fn diagnose(scenario: &Scenario) -> Vec<EcuDiagnosis> {
             &mut || false,
         )
         .unwrap();
-    diagnostics.report(pipeline.state())
+    (
+        diagnostics.report(pipeline.state()),
+        diagnostics.recognition(),
+    )
 }
 
 fn verdict(report: &[EcuDiagnosis], node: Node) -> &EcuDiagnosis {
@@ -51,7 +55,13 @@ fn every_shipped_scenario_gets_the_right_verdicts() {
     assert_eq!(autoplug_diagnostics::ecus().count(), 9);
     for path in paths {
         let scenario = Scenario::load(&path).unwrap();
-        let report = diagnose(&scenario);
+        let (report, recognition) = diagnose_and_recognise(&scenario);
+        assert!(
+            recognition.autoplug && recognition.foreign_frames == 0,
+            "{}: {recognition:?}",
+            scenario.name
+        );
+        assert_eq!(recognition.messages_seen, 18, "{}", scenario.name);
         let faulty: &[Node] = match scenario.name.as_str() {
             "cruise-faulty" => &[Node::Cruise],
             "abs-faulty-split-mu" => &[Node::ABS],
@@ -95,7 +105,12 @@ fn a_silenced_ecu_is_no_data_for_exactly_that_ecu() {
         );
         let with_fault = Scenario::parse(&text, "silenced").unwrap();
         scenario.at.insert(0, with_fault.at[0].clone());
-        let report = diagnose(&scenario);
+        let (report, recognition) = diagnose_and_recognise(&scenario);
+        assert!(
+            recognition.autoplug,
+            "{} silenced: {recognition:?}",
+            node.name()
+        );
         for d in &report {
             if d.ecu == node {
                 assert_eq!(d.verdict, Verdict::NoData, "{}: {:?}", node.name(), d);

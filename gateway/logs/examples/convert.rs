@@ -10,7 +10,8 @@
 //! object per frame (`{"t_us":..,"channel":..,"id":..,"extended":..,"kind":"data",
 //! "direction":"rx","len":..,"data":"0A14"}`) or error (`{"error":"..","line":..,
 //! "fatal":..}`), which tests/check_with_python.py compares with python-can and cantools.
-//! Malformed lines are skipped and counted; the exit status is 1 on a fatal error.
+//! Malformed lines are skipped and counted; the exit status is 1 on a fatal error (the
+//! frames before it are written all the same).
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
@@ -80,16 +81,19 @@ fn convert(input: &Path, output: &Path, direction: bool) -> Result<(), String> {
         LogFormat::Candump => export_candump(reader, out, direction),
         LogFormat::Blf => return Err("BLF is not written: convert to .asc".into()),
     }
-    .map_err(|e| match e {
-        ExportError::Read(e) => format!("{}: {e}", input.display()),
-        ExportError::Write(e) => format!("{}: {e}", output.display()),
-    })?;
+    .map_err(|ExportError::Write(e)| format!("{}: {e}", output.display()))?;
     eprint!("{} frames written to {}", summary.frames, output.display());
     match summary.first_skipped {
         Some(first) => eprintln!("; {} malformed skipped (first: {})", summary.skipped, first),
         None => eprintln!(),
     }
-    Ok(())
+    match summary.incomplete {
+        Some(e) => Err(format!(
+            "{}: {e} (the frames before it were written)",
+            input.display()
+        )),
+        None => Ok(()),
+    }
 }
 
 fn main() -> ExitCode {

@@ -45,7 +45,8 @@ fn json_string(text: &str) -> String {
 }
 
 /// Converts a log (any reader of [`crate::read`]) to MCAP. Malformed lines are skipped and
-/// counted; a fatal read error or a write error stops it.
+/// counted; a fatal read error ends the input there (see [`ExportSummary::incomplete`]); a
+/// write error stops it.
 pub fn export_mcap<I, W>(frames: I, out: W) -> Result<McapSummary, ExportError>
 where
     I: IntoIterator<Item = Result<LogFrame, LogError>>,
@@ -107,7 +108,11 @@ where
     for item in frames {
         let frame = match item {
             Ok(frame) => frame,
-            Err(e) if e.is_fatal() => return Err(ExportError::Read(e)),
+            // What came before the damage is kept: the file is finished with it.
+            Err(e) if e.is_fatal() => {
+                summary.export.incomplete = Some(e);
+                break;
+            }
             Err(e) => {
                 summary.export.skipped += 1;
                 summary.export.first_skipped.get_or_insert(e);

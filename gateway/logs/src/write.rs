@@ -226,13 +226,14 @@ pub struct ExportSummary {
     pub skipped: u64,
     /// The first of them, to show the user.
     pub first_skipped: Option<LogError>,
+    /// Why the input could not be read to its end (a damaged tail, an I/O error: a fatal
+    /// [`LogError`]), if so. Every frame before it was written, and the output finished.
+    pub incomplete: Option<LogError>,
 }
 
 /// Why a conversion stopped.
 #[derive(Debug)]
 pub enum ExportError {
-    /// The input could not be read on (a fatal [`LogError`]).
-    Read(LogError),
     /// The output could not be written.
     Write(io::Error),
 }
@@ -240,7 +241,6 @@ pub enum ExportError {
 impl fmt::Display for ExportError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            ExportError::Read(e) => write!(f, "reading: {e}"),
             ExportError::Write(e) => write!(f, "writing: {e}"),
         }
     }
@@ -262,7 +262,11 @@ where
                 write(&frame).map_err(ExportError::Write)?;
                 summary.frames += 1;
             }
-            Err(e) if e.is_fatal() => return Err(ExportError::Read(e)),
+            // What came before the damage is kept: the output is finished with it.
+            Err(e) if e.is_fatal() => {
+                summary.incomplete = Some(e);
+                break;
+            }
             Err(e) => {
                 summary.skipped += 1;
                 summary.first_skipped.get_or_insert(e);
@@ -273,7 +277,8 @@ where
 }
 
 /// Converts a log (any reader of [`crate::read`]) to ASC, times from its first frame.
-/// Malformed lines are skipped and counted; a fatal read error or a write error stops it.
+/// Malformed lines are skipped and counted; a fatal read error ends the input there (see
+/// [`ExportSummary::incomplete`]); a write error stops it.
 pub fn export_asc<I, W>(frames: I, out: W) -> Result<ExportSummary, ExportError>
 where
     I: IntoIterator<Item = Result<LogFrame, LogError>>,
@@ -453,7 +458,7 @@ mod tests {
     }
 
     #[test]
-    fn export_skips_malformed_lines_and_stops_at_fatal_ones() {
+    fn export_skips_malformed_lines_and_keeps_what_precedes_a_fatal_one() {
         let input = "(1.0) can0 001#00\n(2.0) can0 zz\n(3.0) can0 003#01\n";
         let mut out = Vec::new();
         let summary = export_asc(CandumpReader::new(input.as_bytes()), &mut out).unwrap();
@@ -464,7 +469,10 @@ mod tests {
             Ok(sample()[0]),
             Err(LogError::at_line(2, "gone").into_fatal()),
         ];
-        let e = export_candump(fatal, Vec::new(), false).unwrap_err();
-        assert_eq!(e.to_string(), "reading: line 2: gone");
+        let mut out = Vec::new();
+        let summary = export_candump(fatal, &mut out, false).unwrap();
+        assert_eq!(summary.frames, 1);
+        assert_eq!(summary.incomplete.unwrap().to_string(), "line 2: gone");
+        assert_eq!(CandumpReader::new(&out[..]).count(), 1);
     }
 }

@@ -17,7 +17,10 @@ It builds the `convert` example of autoplug-logs, then:
    microsecond, and every catalogue frame must decode with cantools to the same
    signals as the original;
 3. reads the python-can fixtures in tests/data (candump, ASC, BLF) with the Rust reader
-   and with python-can's readers, and converts the BLF to ASC for python-can's ASCReader.
+   and with python-can's readers, and converts the BLF to ASC for python-can's ASCReader;
+4. writes 6000 frames with python-can's BLFWriter and cuts the file's last 200 bytes, as a
+   logger that lost power leaves it: the Rust reader must give the frames python-can reads,
+   then one fatal error saying the file is truncated.
 
 Exits 1 on any disagreement, listing each.
 """
@@ -167,6 +170,31 @@ def make_input(db):
     return messages, expected
 
 
+def truncated_blf(convert, tmp):
+    """Step 4: a BLF cut short, read by python-can and by the Rust reader."""
+    rng = random.Random(6000)
+    path = tmp / "cut.blf"
+    writer = can.BLFWriter(path)
+    t = T0_US
+    for _ in range(6000):
+        writer.on_message_received(can.Message(
+            timestamp=t / 1e6, arbitration_id=rng.randrange(0x800), is_extended_id=False,
+            data=bytes(rng.randrange(256) for _ in range(rng.randrange(9))),
+            is_rx=rng.random() < 0.8, channel=0))
+        t += rng.randrange(100, 2000)
+    writer.stop()
+    path.write_bytes(path.read_bytes()[:-200])
+    python = [from_python(m, m.channel) for m in can.BLFReader(path)]
+    out = subprocess.run([str(convert), "--json", str(path)], capture_output=True, text=True)
+    items = [json.loads(line) for line in out.stdout.splitlines()]
+    last = items[-1] if items else {}
+    check("rust on a BLF cut short: one fatal error at the end",
+          last.get("fatal") is True and "truncated file?" in last.get("error", "")
+          and sum("error" in i for i in items) == 1, str(last))
+    check("python-can reads most of the BLF cut short", 5900 < len(python) < 6000, str(len(python)))
+    compare("rust and python-can read a BLF cut short", items[:-1], python)
+
+
 def main():
     db = cantools.database.load_file(str(DBC))
     convert = convert_binary()
@@ -253,6 +281,9 @@ def main():
         want = [dict(from_python(m, m.channel), t_us=us(m.timestamp) - t0) for m in blf]
         python = [from_python(m, m.channel) for m in can.ASCReader(blf_asc)]
         compare("python-can ASCReader reads rust's ASC of python-can.blf", python, want)
+
+        # 4. A BLF cut short.
+        truncated_blf(convert, tmp)
 
     if failures:
         print(f"\n{len(failures)} of {checks} checks FAILED")

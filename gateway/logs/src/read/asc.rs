@@ -20,8 +20,18 @@
 //! [`LogFrame`]. `base dec` makes identifiers, DLCs and data bytes decimal.
 //!
 //! Comments, header lines and events that are not frames (statistics, chip states, start
-//! of measurement, J1939 and the like) are skipped; CAN FD (`CANFD`) lines are errors a
-//! lenient caller can skip.
+//! of measurement, global markers, J1939 and the like) are skipped. A `CANFD` event whose
+//! flags have the FDF bit (0x1000) clear holds a classic frame (CANoe logs classic frames
+//! on a CAN FD channel so, and can-utils' `log2asc -f` writes every frame so) and is read
+//! as one, remote when the flags have 0x10; real CAN FD frames and `CANXL` events are
+//! errors a lenient caller can skip.
+//!
+//! ```text
+//!    0.100000 CANFD   1 Rx        123  EngineData  0 0 8  8 01 02 03 04 05 06 07 08   130000  130        0 0 0 0 0 0
+//! ```
+//!
+//! (channel, direction, identifier, an optional symbolic name, BRS, ESI, DLC in hex, data
+//! length in decimal, the data, frame duration, bit count, flags in hex, CRC, bit timings.)
 
 use std::io::BufRead;
 
@@ -29,6 +39,23 @@ use super::lines::{Line, Lines};
 use super::LogError;
 use crate::frame::{Direction, FrameKind, LogFrame};
 use crate::time::parse_seconds;
+
+/// The FDF (EDL) bit of a `CANFD` event's flags: the frame is CAN FD.
+const ASC_FDF: u32 = 0x1000;
+/// The remote-frame bit of a `CANFD` event's flags.
+const ASC_RTR: u32 = 0x10;
+
+/// A frame's channel, 1-based in the file, 0-based in [`LogFrame`].
+fn channel(text: &str) -> Result<u8, String> {
+    match text.parse::<u32>() {
+        Ok(n @ 1..=256) => Ok((n - 1) as u8),
+        Ok(0) => Err("channel \"0\": ASC channels count from 1".into()),
+        // A frame's channel is a u8 here: AutoPlug's limit, not the format's.
+        _ => Err(format!(
+            "channel \"{text}\": AutoPlug reads ASC channels 1 to 256 only"
+        )),
+    }
+}
 
 /// Reads an ASC log line by line; see the [module](self).
 pub struct AscReader<R> {
@@ -118,26 +145,24 @@ impl State {
             return Ok(None);
         };
         if channel_text.eq_ignore_ascii_case("CANFD") {
+            return self.canfd(tokens, t_us).map_err(err);
+        }
+        if channel_text.eq_ignore_ascii_case("CANXL") {
             return Err(err(
-                "CAN FD frame (CANFD event) is not supported: classic CAN only".into(),
+                "CAN XL frame (CANXL event) is not supported: classic CAN only".into(),
             ));
         }
         if !channel_text.bytes().all(|b| b.is_ascii_digit()) {
             // "Start of measurement", "SV:", "J1939TP", ...
             return Ok(None);
         }
-        let channel = match channel_text.parse::<u32>() {
-            Ok(n @ 1..=256) => (n - 1) as u8,
-            _ => {
-                return Err(err(format!(
-                    "channel \"{channel_text}\": ASC channels are 1 to 256"
-                )))
-            }
-        };
+        // What the line is decides whether its channel matters: a global marker's channel
+        // field is 0 ("2.2 0 16777215 0 1 GMGroup: ..."), and it is no frame.
         let Some(id_text) = tokens.next() else {
             return Ok(None);
         };
         if id_text.eq_ignore_ascii_case("ErrorFrame") {
+            let channel = channel(channel_text).map_err(err)?;
             let frame = LogFrame::new(t_us, channel, 0, false, FrameKind::Error, &[])
                 .map_err(|e| err(e.to_string()))?;
             return Ok(Some(frame));
@@ -145,16 +170,11 @@ impl State {
         let direction = match tokens.next() {
             Some(d) if d.eq_ignore_ascii_case("Rx") => Direction::Rx,
             Some(d) if d.eq_ignore_ascii_case("Tx") => Direction::Tx,
-            // "1 Statistic: ...", "1 Status: chip status error active", ...
+            // "1 Statistic: ...", "1 Status: chip status error active", markers, ...
             _ => return Ok(None),
         };
-        let (digits, extended) = match id_text.strip_suffix(['x', 'X']) {
-            Some(digits) => (digits, true),
-            None => (id_text, false),
-        };
-        let id = self
-            .number(digits)
-            .ok_or_else(|| err(format!("identifier \"{id_text}\" is not {}", self.base())))?;
+        let channel = channel(channel_text).map_err(err)?;
+        let (id, extended) = self.identifier(id_text).map_err(err)?;
         let kind_text = tokens.next().unwrap_or("");
         let frame = if kind_text.eq_ignore_ascii_case("d") {
             let dlc_text = tokens
@@ -195,6 +215,123 @@ impl State {
         }
         .map_err(|e| err(e.to_string()))?;
         Ok(Some(frame.with_direction(direction)))
+    }
+
+    /// The rest of a `CANFD` line (see the [module](self) for its layout): a classic frame
+    /// when its FDF flag is clear, else refused.
+    fn canfd<'a>(
+        &self,
+        mut tokens: impl Iterator<Item = &'a str> + Clone,
+        t_us: u64,
+    ) -> Result<Option<LogFrame>, String> {
+        let mut next = |what: &str| {
+            tokens
+                .next()
+                .ok_or_else(|| format!("CANFD line ends before its {what}"))
+        };
+        let channel_text = next("channel")?;
+        let direction = match next("direction")? {
+            d if d.eq_ignore_ascii_case("Rx") => Direction::Rx,
+            d if d.eq_ignore_ascii_case("Tx") => Direction::Tx,
+            d => {
+                return Err(format!(
+                    "expected Rx or Tx after the CANFD channel, found \"{d}\""
+                ))
+            }
+        };
+        let id_text = next("identifier")?;
+        if id_text.eq_ignore_ascii_case("ErrorFrame") {
+            let frame = LogFrame::new(
+                t_us,
+                channel(channel_text)?,
+                0,
+                false,
+                FrameKind::Error,
+                &[],
+            )
+            .map_err(|e| e.to_string())?;
+            return Ok(Some(frame.with_direction(direction)));
+        }
+        let (id, extended) = self.identifier(id_text)?;
+        // BRS is 0 or 1; anything else there is the frame's symbolic name, BRS after it.
+        let brs = next("BRS flag")?;
+        if brs != "0" && brs != "1" {
+            next("BRS flag")?;
+        }
+        next("ESI flag")?;
+        let dlc_text = next("DLC")?;
+        let dlc = self
+            .number(dlc_text)
+            .filter(|&d| d <= 15)
+            .ok_or_else(|| format!("DLC \"{dlc_text}\" is not a number 0 to 15"))?;
+        let length_text = next("data length")?;
+        let length = length_text
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| n <= 64)
+            .ok_or_else(|| format!("data length \"{length_text}\" is not a number 0 to 64"))?;
+        // The flags come after the data, the frame's duration and its bit count.
+        let data_tokens = tokens.clone();
+        for present in 0..length {
+            if tokens.next().is_none() {
+                return Err(format!("{length} data bytes announced, {present} present"));
+            }
+        }
+        let mut after_data = |what: &str| {
+            tokens
+                .next()
+                .ok_or_else(|| format!("CANFD line ends before its {what}"))
+        };
+        after_data("flags")?;
+        after_data("flags")?;
+        let flags_text = after_data("flags")?;
+        let flags = u32::from_str_radix(flags_text, 16)
+            .map_err(|_| format!("flags \"{flags_text}\" are not hexadecimal"))?;
+        if flags & ASC_FDF != 0 {
+            return Err(format!(
+                "CAN FD frame (CANFD event, identifier 0x{id:X}) is not supported: classic CAN only"
+            ));
+        }
+        if length > 8 {
+            return Err(format!(
+                "{length} data bytes in a classic frame (FDF flag clear): at most 8"
+            ));
+        }
+        let channel = channel(channel_text)?;
+        let frame = if flags & ASC_RTR != 0 {
+            // A classic DLC of 9 to 15 still means 8 bytes.
+            LogFrame::remote(t_us, channel, id, extended, dlc.min(8) as u8)
+        } else {
+            let mut data = [0u8; 8];
+            for (byte, text) in data.iter_mut().zip(data_tokens).take(length) {
+                *byte = self
+                    .number(text)
+                    .and_then(|v| u8::try_from(v).ok())
+                    .ok_or_else(|| format!("data byte \"{text}\" is not {}", self.base()))?;
+            }
+            LogFrame::new(
+                t_us,
+                channel,
+                id,
+                extended,
+                FrameKind::Data,
+                &data[..length],
+            )
+        }
+        .map_err(|e| e.to_string())?;
+        Ok(Some(frame.with_direction(direction)))
+    }
+
+    /// `123` or `1ABCDEF0x` (extended).
+    fn identifier(&self, text: &str) -> Result<(u32, bool), String> {
+        let (digits, extended) = match text.strip_suffix(['x', 'X']) {
+            Some(digits) => (digits, true),
+            None => (text, false),
+        };
+        let id = self
+            .number(digits)
+            .ok_or_else(|| format!("identifier \"{text}\" is not {}", self.base()))?;
+        Ok((id, extended))
     }
 
     fn base(&self) -> &'static str {
@@ -331,6 +468,119 @@ mod tests {
         assert_eq!(e.line, 9);
         assert!(e.message.contains("CAN FD frame") && e.message.contains("not supported"));
         assert_eq!(got[1].as_ref().unwrap().data(), &[0xAA]);
+    }
+
+    /// With its FDF bit (0x1000 in the flags) clear, a CANFD event holds a classic frame:
+    /// how CANoe logs classic frames on a CAN FD channel, and what can-utils' `log2asc -f`
+    /// writes. Layout: channel, direction, identifier, an optional symbolic name, BRS, ESI,
+    /// DLC (hex), data length (decimal), the data, then duration, bit count, flags (hex),
+    /// CRC and the bit timings.
+    #[test]
+    fn canfd_events_with_classic_frames_are_read() {
+        let text = format!(
+            "{HEADER}\
+             \x20  0.100000 CANFD   1 Rx        123                                   0 0 8  8 01 02 03 04 05 06 07 08   130000  130        0 0 0 0 0 0\n\
+             \x20  0.110000 CANFD   2 Tx   1ABCDEF0x  EngineData  0 0 3  3 0A 0B 0C  112000  112  0  1c2d 0 0 0 0\n\
+             \x20  0.120000 CANFD   1 Rx        7FF                                   0 0 4  0   130000  130       10 0 0 0 0 0\n\
+             \x20  0.130000 CANFD   1 Rx        100                                   1 0 9 12 00 01 02 03 04 05 06 07 08 09 0A 0B   130000  130     3000 0 0 0 0 0\n\
+             \x20  0.140000 CANFD   1 Rx        020                                   0 0 0  0   130000  130        0 0 0 0 0 0\n\
+             \x20  0.150000 CANFD   1 Rx        101  0 0 8  8 11 22 33 44 55 66 77 88 0 0 1000 0 0 0 0 0\n\
+             End TriggerBlock\n"
+        );
+        let got = read(&text);
+        assert_eq!(got.len(), 6, "{got:?}");
+        let f = got[0].as_ref().unwrap();
+        assert_eq!(
+            (f.t_us, f.channel, f.id, f.extended, f.kind, f.direction),
+            (100_000, 0, 0x123, false, FrameKind::Data, Direction::Rx)
+        );
+        assert_eq!(f.data(), &[1, 2, 3, 4, 5, 6, 7, 8]);
+        let f = got[1].as_ref().unwrap();
+        assert_eq!(
+            (f.channel, f.id, f.extended, f.direction, f.data()),
+            (1, 0x1ABC_DEF0, true, Direction::Tx, &[0x0A, 0x0B, 0x0C][..])
+        );
+        let f = got[2].as_ref().unwrap();
+        assert_eq!((f.kind, f.id, f.len()), (FrameKind::Remote, 0x7FF, 4));
+        let e = got[3].as_ref().unwrap_err();
+        assert_eq!(e.line, 10);
+        assert_eq!(
+            e.message,
+            "CAN FD frame (CANFD event, identifier 0x100) is not supported: classic CAN only"
+        );
+        let f = got[4].as_ref().unwrap();
+        assert_eq!((f.kind, f.id, f.len()), (FrameKind::Data, 0x020, 0));
+        let e = got[5].as_ref().unwrap_err();
+        assert_eq!((e.line, e.fatal), (12, false));
+        assert!(e.message.contains("identifier 0x101"), "{e}");
+    }
+
+    #[test]
+    fn canfd_lines_cut_short_are_named() {
+        let cases = [
+            (
+                "1.0 CANFD 1 Rx 123 0 0 2 2 01",
+                "2 data bytes announced, 1 present",
+            ),
+            (
+                "1.0 CANFD 1 Rx 123 0 0 2 2 01 02 130000 130",
+                "ends before its flags",
+            ),
+            (
+                "1.0 CANFD 1 Rx 123 0 0 2 2 01 02 130000 130 1G00",
+                "flags \"1G00\" are not hexadecimal",
+            ),
+            (
+                "1.0 CANFD 1 Rx 123 0 0 9 12 00 01 02 03 04 05 06 07 08 09 0A 0B 0 0 0 0",
+                "12 data bytes in a classic frame",
+            ),
+            ("1.0 CANFD 0 Rx 123 0 0 0 0 0 0 0 0", "channel \"0\""),
+        ];
+        for (line, expected) in cases {
+            let got = read(&format!("{line}\n   2.0 1 002 Rx d 0\n"));
+            assert_eq!(got.len(), 2, "{line}: {got:?}");
+            let e = got[0].as_ref().unwrap_err();
+            assert_eq!(e.line, 1);
+            assert!(e.message.contains(expected), "{line}: {e}");
+            assert_eq!(got[1].as_ref().unwrap().id, 2);
+        }
+    }
+
+    #[test]
+    fn canxl_events_are_refused_as_canfd_ones_are() {
+        let text = format!(
+            "{HEADER}   0.100000 CANXL 1 Rx XLFF 1 0 123 0 0 0 12 12 00 01 02 03 04 05 06 07 08 09 0A 0B\n   0.200000 1  123 Rx d 1 AA\n"
+        );
+        let got = read(&text);
+        assert_eq!(got.len(), 2, "{got:?}");
+        let e = got[0].as_ref().unwrap_err();
+        assert_eq!((e.line, e.fatal), (7, false));
+        assert_eq!(
+            e.message,
+            "CAN XL frame (CANXL event) is not supported: classic CAN only"
+        );
+        assert_eq!(got[1].as_ref().unwrap().data(), &[0xAA]);
+    }
+
+    /// A Global Marker: channel field 0, then its type, colours and texts; not a frame.
+    #[test]
+    fn global_markers_are_not_frames_and_not_errors() {
+        let text = format!(
+            "{HEADER}   2.200804 0 16777215 0 1 GMGroup: Marker Group GMMarker: Marker 1 GMDescription: Description\n   2.300000 1  123 Rx d 1 AA\n"
+        );
+        let got = read(&text);
+        assert_eq!(got.len(), 1, "{got:?}");
+        assert_eq!(got[0].as_ref().unwrap().id, 0x123);
+        // A frame on channel 0 is still refused, an error frame there too.
+        for line in ["2.0 0 123 Rx d 0", "2.0 0 ErrorFrame"] {
+            let e = read(line)[0].clone().unwrap_err();
+            assert!(e.message.contains("channel \"0\""), "{line}: {e}");
+        }
+        let e = read("2.0 300 123 Rx d 0")[0].clone().unwrap_err();
+        assert_eq!(
+            e.message,
+            "channel \"300\": AutoPlug reads ASC channels 1 to 256 only"
+        );
     }
 
     #[test]

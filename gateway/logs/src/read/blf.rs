@@ -14,9 +14,13 @@
 //! - a file header: `LOGG`, its size, application and version bytes, file sizes, the
 //!   object count, and the measurement start and end as Windows SYSTEMTIMEs;
 //! - then objects, each `LOBJ`, header size (u16), header version (u16), object size
-//!   (u32), object type (u32), followed by `object size % 4` padding bytes. Almost all
-//!   are LOG_CONTAINERs (type 10) holding a zlib-compressed (or stored) run of further
-//!   objects; an inner object may continue in the next container.
+//!   (u32), object type (u32), usually followed by `object size % 4` padding bytes. Some
+//!   types have none: CANoe writes Ethernet frames and errors (Ex and forwarded), FlexRay
+//!   VFR receive Ex, test structures and diagnostic request interpretations unpadded, so
+//!   the next `LOBJ` is taken straight after an object or after its padding, as python-can
+//!   and Vector's own reader do. Almost all outer objects are LOG_CONTAINERs (type 10)
+//!   holding a zlib-compressed (or stored) run of further objects; an inner object may
+//!   continue in the next container.
 //! - Inner objects have a v1 or v2 header carrying flags (timestamp unit: 10 µs or 1 ns)
 //!   and a 64-bit timestamp relative to the measurement start.
 //!
@@ -26,7 +30,9 @@
 //! skipped. Errors name the object by its 1-based number among the inner objects
 //! (containers are not counted). A damaged structure (bad signature, truncated file,
 //! corrupt zlib data) ends the read with one fatal error: nothing after it can be
-//! trusted.
+//! trusted. What precedes the damage is kept: the whole objects of a container cut short
+//! (a logger that lost power) or whose zlib data breaks off are read first, as far as its
+//! bytes go or inflate, and the fatal error comes after them.
 //!
 //! `t_us` is the measurement start from the file header (taken as UTC; python-can writes
 //! UTC, to the millisecond) plus the object's time, rounded to the microsecond. A file
@@ -75,8 +81,15 @@ pub struct BlfReader<R> {
     /// Inner objects not yet parsed: `buf[pos..]`.
     buf: Vec<u8>,
     pos: usize,
-    /// Padding still to skip after the last inner object.
-    skip: usize,
+    /// Padding the last inner object would have (`size % 4`): the next `LOBJ` is
+    /// straight after the object or after these bytes.
+    padding: usize,
+    /// Bytes read after an outer object that start the next one's header (an outer object
+    /// written without its padding).
+    carry: Vec<u8>,
+    /// Damage found in the last container read (cut short, corrupt zlib data): reported
+    /// as the fatal error once the objects before it are read.
+    damage: Option<String>,
     /// Inner objects read so far.
     objects: u64,
     /// Compressed bytes of the container being read (reused).
@@ -187,7 +200,9 @@ impl<R: Read> BlfReader<R> {
             offset: u64::from(header_size),
             buf: Vec::new(),
             pos: 0,
-            skip: 0,
+            padding: 0,
+            carry: Vec::new(),
+            damage: None,
             objects: 0,
             packed: Vec::new(),
             input_done: false,
@@ -223,10 +238,14 @@ impl<R: Read> BlfReader<R> {
             self.buf.drain(..self.pos);
             self.pos = 0;
         }
-        let at = self.offset;
+        let at = self.offset - self.carry.len() as u64;
         let mut base = [0u8; BASE_HEADER];
-        let n = read_full(&mut self.input, &mut base).map_err(|e| self.io_error(&e))?;
-        self.offset += n as u64;
+        let carried = self.carry.len();
+        base[..carried].copy_from_slice(&self.carry);
+        self.carry.clear();
+        let n = carried
+            + read_full(&mut self.input, &mut base[carried..]).map_err(|e| self.io_error(&e))?;
+        self.offset += (n - carried) as u64;
         if n < BASE_HEADER {
             self.input_done = true;
             if base[..n].iter().all(|&b| b == 0) {
@@ -265,13 +284,12 @@ impl<R: Read> BlfReader<R> {
                 .map_err(|e| self.io_error(&e))?;
             self.offset += n as u64;
             if n < size - BASE_HEADER {
-                return Err(truncated(self));
+                // Its bytes present go to the parser, which reports the object cut short.
+                self.buf.truncate(start + n);
+                self.input_done = true;
+                return Ok(true);
             }
-            let mut pad = [0u8; 3];
-            let n =
-                read_full(&mut self.input, &mut pad[..padding]).map_err(|e| self.io_error(&e))?;
-            self.offset += n as u64;
-            self.buf.extend_from_slice(&pad[..padding]);
+            self.read_padding(padding)?;
             return Ok(true);
         }
         if size < BASE_HEADER + CONTAINER_HEADER {
@@ -292,11 +310,17 @@ impl<R: Read> BlfReader<R> {
         let n = read_full(&mut self.input, &mut self.packed).map_err(|e| self.io_error(&e))?;
         self.offset += n as u64;
         if n < packed_len {
-            return Err(truncated(self));
+            // A logger that lost power: what the container's bytes present hold is read
+            // before the error.
+            self.packed.truncate(n);
+            self.input_done = true;
+            self.damage = Some(format!(
+                "the file ends inside the log container at byte {at} ({} of its {size} bytes present): truncated file?",
+                BASE_HEADER + CONTAINER_HEADER + n
+            ));
+        } else {
+            self.read_padding(padding)?;
         }
-        let mut pad = [0u8; 3];
-        let n = read_full(&mut self.input, &mut pad[..padding]).map_err(|e| self.io_error(&e))?;
-        self.offset += n as u64;
         match method {
             0 => self.buf.extend_from_slice(&self.packed),
             2 => {
@@ -305,20 +329,29 @@ impl<R: Read> BlfReader<R> {
                     .take(MAX_INFLATED + 1)
                     .read_to_end(&mut self.buf);
                 let inflated = self.buf.len() - before;
-                if let Err(e) = result {
-                    return Err(self.fatal(format!(
-                        "log container at byte {at}: zlib data is corrupt ({e})"
-                    )));
-                }
                 if inflated as u64 > MAX_INFLATED {
                     return Err(self.fatal(format!(
                         "log container at byte {at} inflates to more than {MAX_INFLATED} bytes: corrupt file"
                     )));
                 }
-                if inflated != inflated_size as usize {
-                    return Err(self.fatal(format!(
-                        "log container at byte {at}: zlib data gives {inflated} bytes, the container says {inflated_size}: corrupt file"
-                    )));
+                // A container cut short inflates exactly as far as its bytes go: that is
+                // kept. Corrupt data is another matter: deflate has no checksum before the
+                // end, so nothing it gave can be trusted, and the container is dropped.
+                if self.damage.is_none() {
+                    let corrupt = match result {
+                        Err(e) => Some(format!(
+                            "log container at byte {at}: zlib data is corrupt ({e})"
+                        )),
+                        Ok(_) if inflated != inflated_size as usize => Some(format!(
+                            "log container at byte {at}: zlib data gives {inflated} bytes, the container says {inflated_size}: corrupt file"
+                        )),
+                        Ok(_) => None,
+                    };
+                    if let Some(why) = corrupt {
+                        self.buf.truncate(before);
+                        self.input_done = true;
+                        self.damage = Some(why);
+                    }
                 }
             }
             m => {
@@ -328,6 +361,18 @@ impl<R: Read> BlfReader<R> {
             }
         }
         Ok(true)
+    }
+
+    /// Reads the `padding` bytes after an outer object. If they start a `LOBJ` instead
+    /// (an object written without padding), they are kept for the next object's header.
+    fn read_padding(&mut self, padding: usize) -> Result<(), LogError> {
+        let mut pad = [0u8; 3];
+        let n = read_full(&mut self.input, &mut pad[..padding]).map_err(|e| self.io_error(&e))?;
+        self.offset += n as u64;
+        if n > 0 && b"LOBJ".starts_with(&pad[..n]) {
+            self.carry.extend_from_slice(&pad[..n]);
+        }
+        Ok(())
     }
 
     /// Makes `n` bytes available at `pos`; `false` if the file ends first.
@@ -342,17 +387,14 @@ impl<R: Read> BlfReader<R> {
 
     /// The next inner object; `None` at a clean end of the file.
     fn next_object(&mut self) -> Result<Option<Parsed>, LogError> {
-        while self.skip > 0 {
-            if self.pos == self.buf.len() && !self.fill()? {
-                break;
-            }
-            let k = self.skip.min(self.buf.len() - self.pos);
-            self.pos += k;
-            self.skip -= k;
-        }
+        let padding = std::mem::take(&mut self.padding);
         if !self.ensure(BASE_HEADER)? {
             let rest = &self.buf[self.pos..];
-            if rest.iter().all(|&b| b == 0) {
+            if let Some(damage) = self.damage.take() {
+                return Err(self.fatal(damage));
+            }
+            // The last object's padding, or zeros a writer left at the end.
+            if rest.len() <= padding || rest.iter().all(|&b| b == 0) {
                 return Ok(None);
             }
             return Err(self.fatal(format!(
@@ -362,23 +404,31 @@ impl<R: Read> BlfReader<R> {
             )));
         }
         if &self.buf[self.pos..self.pos + 4] != b"LOBJ" {
-            // Tolerate a writer that pads differently: a few zero bytes before `LOBJ`.
+            // The object before had its padding (or a writer padded with a few more zero
+            // bytes): `LOBJ` follows a little further on.
             let window = &self.buf[self.pos..self.pos + BASE_HEADER];
             match window.windows(4).position(|w| w == b"LOBJ") {
-                Some(k) if k < 8 && window[..k].iter().all(|&b| b == 0) => {
+                Some(k) if k <= padding || (k < 8 && window[..k].iter().all(|&b| b == 0)) => {
                     self.pos += k;
                     if !self.ensure(BASE_HEADER)? {
-                        return Err(self.fatal(format!(
-                            "the file ends inside object {}: truncated file?",
-                            self.objects + 1
-                        )));
+                        let why = self.damage.take().unwrap_or_else(|| {
+                            format!(
+                                "the file ends inside object {}: truncated file?",
+                                self.objects + 1
+                            )
+                        });
+                        return Err(self.fatal(why));
                     }
                 }
                 _ => {
-                    return Err(self.fatal(format!(
-                        "expected an object (\"LOBJ\") inside a log container, found [{}]: corrupt file",
-                        show(&window[..4])
-                    )))
+                    // A damaged container found on the way says better what went wrong.
+                    let why = self.damage.take().unwrap_or_else(|| {
+                        format!(
+                            "expected an object (\"LOBJ\") inside a log container, found [{}]: corrupt file",
+                            show(&window[..4])
+                        )
+                    });
+                    return Err(self.fatal(why));
                 }
             }
         }
@@ -391,21 +441,25 @@ impl<R: Read> BlfReader<R> {
             || size < u32::from(header_size)
             || size > MAX_OBJECT
         {
-            return Err(self.fatal(format!(
-                "object size {size} with a {header_size}-byte header is not possible: corrupt file"
-            )));
+            let why = self.damage.take().unwrap_or_else(|| {
+                format!("object size {size} with a {header_size}-byte header is not possible: corrupt file")
+            });
+            return Err(self.fatal(why));
         }
         let size = size as usize;
         if !self.ensure(size)? {
-            return Err(self.fatal(format!(
-                "the file ends inside this object (type {kind}, {size} bytes): truncated file?"
-            )));
+            let why = self.damage.take().unwrap_or_else(|| {
+                format!(
+                    "the file ends inside this object (type {kind}, {size} bytes): truncated file?"
+                )
+            });
+            return Err(self.fatal(why));
         }
         self.objects += 1;
         let object = &self.buf[self.pos..self.pos + size];
         let parsed = decode(object, header_size.into(), version, kind, self.start_us);
         self.pos += size;
-        self.skip = size % 4;
+        self.padding = size % 4;
         Ok(Some(parsed))
     }
 }
@@ -458,8 +512,12 @@ fn decode(
     let channel = |raw: u32| -> Result<u8, Parsed> {
         match raw {
             1..=256 => Ok((raw - 1) as u8),
+            0 => Err(Parsed::Bad(format!(
+                "{name} on channel 0: BLF channels count from 1"
+            ))),
+            // A frame's channel is a u8 here: AutoPlug's limit, not the format's.
             c => Err(Parsed::Bad(format!(
-                "{name} on channel {c}: BLF channels are 1 to 256"
+                "{name} on channel {c}: AutoPlug reads BLF channels 1 to 256 only (the format allows up to 65535)"
             ))),
         }
     };
@@ -688,6 +746,14 @@ pub(crate) mod build {
         o
     }
 
+    /// An inner object as Vector writes some types (Ethernet, test structures...):
+    /// nothing after it, whatever its size.
+    pub fn object_unpadded(kind: u32, t_ns: u64, body: &[u8]) -> Vec<u8> {
+        let mut o = object(kind, t_ns, body);
+        o.truncate(32 + body.len());
+        o
+    }
+
     /// A CAN_MESSAGE body.
     pub fn can_message(channel: u16, flags: u8, dlc: u8, id: u32, data: &[u8]) -> Vec<u8> {
         let mut b = Vec::new();
@@ -868,6 +934,137 @@ mod tests {
             .message
             .contains("body of 2 bytes"));
         assert_eq!(got[6].as_ref().unwrap().id, 7, "reading went on");
+    }
+
+    /// CANoe writes Ethernet frames (and their errors), FlexRay VFR receive Ex objects,
+    /// test structures and diagnostic request interpretations with no padding after them.
+    #[test]
+    fn objects_written_without_padding_are_read() {
+        let can = |id: u32| {
+            object(
+                1,
+                u64::from(id) * 1_000,
+                &can_message(1, 0, 1, id, &[id as u8]),
+            )
+        };
+        let mut inner = Vec::new();
+        inner.extend(can(0x100));
+        // ETHERNET_FRAME_EX, 32 + 41 bytes: 1 byte short of a multiple of 4, no padding.
+        inner.extend(object_unpadded(120, 5_000, &[0xEE; 41]));
+        inner.extend(can(0x101));
+        // TEST_STRUCTURE, 32 + 39 bytes, no padding.
+        inner.extend(object_unpadded(118, 6_000, &[0x54; 39]));
+        inner.extend(can(0x102));
+        // APP_TEXT, 32 + 21 bytes, with its padding as every other type has it.
+        inner.extend(object(65, 7_000, &[0x41; 21]));
+        inner.extend(can(0x103));
+        // DIAG_REQUEST_INTERPRETATION last, unpadded, right at the end of the data.
+        inner.extend(object_unpadded(119, 8_000, &[0x19; 17]));
+        let ids = |got: Vec<Result<LogFrame, LogError>>| -> Vec<u32> {
+            got.into_iter()
+                .map(|f| f.unwrap_or_else(|e| panic!("{e}")).id)
+                .collect()
+        };
+        let mut file = header(START, 8);
+        file.extend(container(&inner, true));
+        assert_eq!(ids(read(&file)), [0x100, 0x101, 0x102, 0x103]);
+        // The same run split across two containers at every point.
+        for cut in 1..inner.len() {
+            let mut file = header(START, 8);
+            file.extend(container(&inner[..cut], true));
+            file.extend(container(&inner[cut..], false));
+            assert_eq!(
+                ids(read(&file)),
+                [0x100, 0x101, 0x102, 0x103],
+                "cut at {cut}"
+            );
+        }
+        // And outside any container.
+        let mut file = header(START, 8);
+        file.extend(&inner);
+        assert_eq!(ids(read(&file)), [0x100, 0x101, 0x102, 0x103]);
+    }
+
+    /// 600 CAN_MESSAGEs of 48 bytes in one container, as a logger that lost power leaves
+    /// them: the container's last 200 bytes never reached the disk.
+    fn cut_file(zlib: bool) -> (Vec<u8>, Vec<u8>) {
+        let mut inner = Vec::new();
+        for i in 0..600u32 {
+            let id = i % 0x7FF;
+            inner.extend(object(
+                1,
+                u64::from(i) * 1_000_000,
+                &can_message(1, 0, 2, id, &[i as u8, (i >> 8) as u8]),
+            ));
+        }
+        let mut file = header(START, 600);
+        file.extend(container(&inner, zlib));
+        file.truncate(file.len() - 200);
+        (file, inner)
+    }
+
+    fn check_cut(got: &[Result<LogFrame, LogError>], expected_frames: usize) {
+        assert_eq!(got.len(), expected_frames + 1, "frames then one error");
+        for (i, f) in got[..expected_frames].iter().enumerate() {
+            let f = f.as_ref().unwrap_or_else(|e| panic!("item {i}: {e}"));
+            assert_eq!(
+                (f.id, f.data(), f.t_us),
+                (
+                    i as u32 % 0x7FF,
+                    &[i as u8, (i >> 8) as u8][..],
+                    START_US + i as u64 * 1_000
+                )
+            );
+        }
+        let e = got[expected_frames].as_ref().unwrap_err();
+        assert!(e.is_fatal(), "{e}");
+        assert_eq!(e.line, expected_frames as u64 + 1, "{e}");
+        assert!(
+            e.message.contains("truncated") && e.message.contains("byte 144"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_stored_container_cut_short_gives_its_whole_objects() {
+        let (file, _) = cut_file(false);
+        // 28,800 bytes of objects, 200 missing: 28,600 present, 595 whole objects.
+        check_cut(&read(&file), 595);
+    }
+
+    #[test]
+    fn a_zlib_container_cut_short_gives_what_inflates() {
+        let (file, inner) = cut_file(true);
+        // What the compressed bytes present inflate to, by zlib itself.
+        let mut inflater = flate2::Decompress::new(true);
+        let mut out = vec![0u8; inner.len()];
+        let _ = inflater.decompress(&file[144 + 32..], &mut out, flate2::FlushDecompress::Sync);
+        let inflated = inflater.total_out() as usize;
+        assert_eq!(&out[..inflated], &inner[..inflated]);
+        let whole = inflated / 48;
+        assert!((500..600).contains(&whole), "{whole} objects inflate");
+        check_cut(&read(&file), whole);
+    }
+
+    #[test]
+    fn channels_above_256_are_autoplugs_limit_not_the_formats() {
+        let mut inner = Vec::new();
+        inner.extend(object(1, 1_000, &can_message(300, 0, 0, 1, &[])));
+        inner.extend(object(1, 2_000, &can_message(0, 0, 0, 2, &[])));
+        inner.extend(object(1, 3_000, &can_message(256, 0, 0, 3, &[])));
+        let mut file = header(START, 3);
+        file.extend(container(&inner, true));
+        let got = read(&file);
+        assert_eq!(got.len(), 3, "{got:?}");
+        assert_eq!(
+            got[0].as_ref().unwrap_err().to_string(),
+            "object 1: CAN_MESSAGE on channel 300: AutoPlug reads BLF channels 1 to 256 only (the format allows up to 65535)"
+        );
+        assert_eq!(
+            got[1].as_ref().unwrap_err().to_string(),
+            "object 2: CAN_MESSAGE on channel 0: BLF channels count from 1"
+        );
+        assert_eq!(got[2].as_ref().unwrap().channel, 255);
     }
 
     #[test]

@@ -10,6 +10,9 @@
 //!   nothing and the frame counts as received.
 //! - Data may hold `.` separators (`11.22.33`), and an 8-byte frame may carry candump's
 //!   `_X` raw DLC suffix, which is ignored.
+//! - `DROPCOUNT: dropped 3 CAN frames on 'can0' socket (total drops 7)`: candump's note
+//!   that the kernel dropped frames before it could log them. Not a frame and not an
+//!   error: the reader counts the frames lost ([`CandumpReader::dropped_frames`]).
 
 use std::io::BufRead;
 
@@ -37,6 +40,14 @@ pub struct CandumpLine<'a> {
 /// [`CandumpReader`] skips them.
 pub fn parse_line(text: &str, line: u64) -> Result<CandumpLine<'_>, LogError> {
     let err = |message: String| LogError::at_line(line, message);
+    if let Some(dropped) = dropcount(text) {
+        return Err(err(match dropped {
+            Ok(n) => {
+                format!("DROPCOUNT line: {n} frame(s) the logger reported dropped, not a frame")
+            }
+            Err(why) => why,
+        }));
+    }
     let mut parts = text.split_ascii_whitespace();
     let (Some(stamp), Some(interface), Some(body)) = (parts.next(), parts.next(), parts.next())
     else {
@@ -196,6 +207,22 @@ fn parse_common(line: &[u8]) -> Option<(LogFrame, &[u8])> {
     Some((frame.with_direction(direction), interface))
 }
 
+/// candump's `DROPCOUNT: dropped N CAN frame(s) on 'IFACE' socket (total drops M)`: the
+/// N frames dropped, or what is wrong with the line; `None` for any other line.
+fn dropcount(text: &str) -> Option<Result<u64, String>> {
+    let rest = text.trim_start().strip_prefix("DROPCOUNT:")?;
+    let mut words = rest.split_ascii_whitespace();
+    Some(
+        match (words.next(), words.next().and_then(|n| n.parse().ok())) {
+            (Some("dropped"), Some(n)) => Ok(n),
+            _ => Err(format!(
+                "DROPCOUNT line (frames the logger reported dropped) does not say how many: \"{}\"",
+                text.trim()
+            )),
+        },
+    )
+}
+
 struct Data {
     bytes: [u8; 8],
     len: usize,
@@ -254,6 +281,7 @@ fn hex_value(b: u8) -> Option<u8> {
 pub struct CandumpReader<R> {
     lines: Lines<R>,
     interfaces: Vec<String>,
+    dropped: u64,
     done: bool,
 }
 
@@ -263,6 +291,7 @@ impl<R: BufRead> CandumpReader<R> {
         Self {
             lines: Lines::new(input),
             interfaces: Vec::new(),
+            dropped: 0,
             done: false,
         }
     }
@@ -270,6 +299,12 @@ impl<R: BufRead> CandumpReader<R> {
     /// The interface names seen so far; channel `n` is `interfaces()[n]`.
     pub fn interfaces(&self) -> &[String] {
         &self.interfaces
+    }
+
+    /// Frames the logger reported dropped so far (its `DROPCOUNT` lines): frames that were
+    /// on the bus and are not in the log.
+    pub fn dropped_frames(&self) -> u64 {
+        self.dropped
     }
 }
 
@@ -311,6 +346,14 @@ impl<R: BufRead> Iterator for CandumpReader<R> {
                 Line::Text(text) if text.trim().is_empty() => continue,
                 Line::Text(text) => text,
             };
+            match dropcount(text) {
+                Some(Ok(n)) => {
+                    self.dropped = self.dropped.saturating_add(n);
+                    continue;
+                }
+                Some(Err(why)) => return Some(Err(LogError::at_line(number, why))),
+                None => {}
+            }
             let parsed = match parse_line(text, number) {
                 Ok(parsed) => parsed,
                 Err(e) => return Some(Err(e)),
@@ -560,6 +603,40 @@ mod tests {
         let e = got[2].as_ref().unwrap_err();
         assert_eq!(e.line, 4, "blank lines count");
         assert_eq!(got[3].as_ref().unwrap().id, 4);
+    }
+
+    /// candump -l writes a line when the kernel reports frames its socket dropped.
+    #[test]
+    fn dropcount_lines_are_counted_and_reading_goes_on() {
+        let text = "(1.0) can0 001#00\n\
+                    DROPCOUNT: dropped 3 CAN frames on 'can0' socket (total drops 3)\n\
+                    (2.0) can0 002#01\n\
+                    DROPCOUNT: dropped 1 CAN frame on 'can0' socket (total drops 4)\n\
+                    (3.0) can0 003#02\n";
+        let mut r = CandumpReader::new(text.as_bytes());
+        let got: Vec<u32> = r
+            .by_ref()
+            .map(|f| f.unwrap_or_else(|e| panic!("{e}")).id)
+            .collect();
+        assert_eq!(got, [1, 2, 3]);
+        assert_eq!(r.dropped_frames(), 4);
+
+        let got = read("(1.0) can0 001#00\nDROPCOUNT: lost some\n(2.0) can0 002#01\n");
+        assert_eq!(got.len(), 3);
+        let e = got[1].as_ref().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "line 2: DROPCOUNT line (frames the logger reported dropped) does not say how many: \"DROPCOUNT: lost some\""
+        );
+        let e = parse_line(
+            "DROPCOUNT: dropped 2 CAN frames on 'can0' socket (total drops 2)",
+            9,
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "line 9: DROPCOUNT line: 2 frame(s) the logger reported dropped, not a frame"
+        );
     }
 
     #[test]

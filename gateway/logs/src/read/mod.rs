@@ -5,7 +5,8 @@
 //! with the file (a line, or one BLF container, at a time). A malformed line gives an
 //! error naming it and reading goes on with the next one, so the caller chooses: stop at
 //! the first error (strict) or skip and count (lenient). Errors the reader cannot go past
-//! (I/O, a damaged BLF structure) are [fatal](LogError::is_fatal) and end the iteration.
+//! (I/O, a damaged BLF structure) are [fatal](LogError::is_fatal) and end the iteration;
+//! every frame before the damage comes first, so a caller keeps them.
 //! Frames come in file order; time going backwards is not judged here.
 
 use std::fmt;
@@ -188,6 +189,15 @@ impl LogReader {
     /// The format being read.
     pub fn format(&self) -> LogFormat {
         self.format
+    }
+
+    /// Frames the logger reported dropped so far (candump's `DROPCOUNT` lines; 0 for the
+    /// other formats).
+    pub fn dropped_frames(&self) -> u64 {
+        match &self.inner {
+            Inner::Candump(r) => r.dropped_frames(),
+            Inner::Asc(_) | Inner::Blf(_) => 0,
+        }
     }
 }
 
