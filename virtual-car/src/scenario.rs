@@ -330,8 +330,9 @@ pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
 /// Longest error message, characters: whatever the input, an error stays a line or two.
 pub const MAX_MESSAGE_CHARS: usize = 300;
 
-/// Characters of the offending line shown around the place of a syntax error.
-const SNIPPET_CHARS: usize = 40;
+/// Characters of the offending line shown: a line this short is shown whole, a longer one
+/// around the place of the error.
+const SNIPPET_CHARS: usize = 60;
 
 /// `text` cut to at most `max` characters, with an ellipsis where it was cut.
 fn cut(text: &str, max: usize) -> String {
@@ -341,9 +342,10 @@ fn cut(text: &str, max: usize) -> String {
     }
 }
 
-/// A TOML syntax error in a line or two: its place, the parser's message (its own excerpt
-/// of the file, which can be as long as the file's longest line, left out), and a short
-/// snippet of the line around the place.
+/// A TOML syntax or type error in a line or two: its place, the key it concerns (a type
+/// error's place is the value, so the key is named apart), the parser's message (its own
+/// excerpt of the file, which can be as long as the file's longest line, left out), and the
+/// line: whole when it is short, else a snippet around the place.
 fn syntax_error(text: &str, error: &toml::de::Error) -> String {
     let message = cut(error.message().trim(), 120);
     let Some(span) = error.span() else {
@@ -358,14 +360,66 @@ fn syntax_error(text: &str, error: &toml::de::Error) -> String {
     let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
     let line = text[..start].matches('\n').count() + 1;
     let column = text[line_start..start].chars().count() + 1;
-    // The snippet: up to SNIPPET_CHARS characters of the line from a little before the place.
-    let from = text[line_start..start]
-        .char_indices()
+    let whole = text[line_start..line_end].trim();
+    let shown = if whole.chars().count() <= SNIPPET_CHARS {
+        whole.to_string()
+    } else {
+        // Up to SNIPPET_CHARS characters of the line from a little before the place.
+        let from = text[line_start..start]
+            .char_indices()
+            .rev()
+            .nth(SNIPPET_CHARS / 4)
+            .map_or(line_start, |(i, _)| line_start + i);
+        cut(&text[from..line_end], SNIPPET_CHARS)
+    };
+    let key = key_before(&text[line_start..start])
+        .map(|key| match table_of(&text[..line_start]) {
+            Some(table) => format!(", key {}", cut(&format!("{table}.{key}"), 60)),
+            None => format!(", key {}", cut(&key, 60)),
+        })
+        .unwrap_or_default();
+    format!("line {line}, column {column}{key}: {message} (the line: {shown})")
+}
+
+/// The table the text after `before` is in: the last `[table]` or `[[array]]` header.
+fn table_of(before: &str) -> Option<&str> {
+    let header = before
+        .lines()
         .rev()
-        .nth(SNIPPET_CHARS / 4)
-        .map_or(line_start, |(i, _)| line_start + i);
-    let snippet = cut(&text[from..line_end], SNIPPET_CHARS);
-    format!("line {line}, column {column}: {message} (at \"{snippet}\")")
+        .map(str::trim)
+        .find(|line| line.starts_with('['))?;
+    let name = header.trim_start_matches('[');
+    let name = name[..name.find(']')?].trim();
+    (!name.is_empty()).then_some(name)
+}
+
+/// The key whose value starts at the end of `before` (the line up to the place), as in
+/// `duration_s = ` or `{ t_s = 1, kmh = `; `None` where no `key =` leads to the place.
+/// Inside an inline table the key is named with the table's own key (`fault.silence`).
+fn key_before(before: &str) -> Option<String> {
+    let head = before.trim_end().strip_suffix('=')?.trim_end();
+    let start = head
+        .rfind(|c: char| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '"')))
+        .map_or(0, |i| i + 1);
+    let key = head[start..].trim_matches('"');
+    if key.is_empty() {
+        return None;
+    }
+    // The inline table the key is in, if any: the last `{` not closed before it.
+    let mut depth = 0usize;
+    let open = head[..start].char_indices().rev().find(|&(_, c)| {
+        match c {
+            '}' => depth += 1,
+            '{' if depth == 0 => return true,
+            '{' => depth -= 1,
+            _ => {}
+        }
+        false
+    });
+    Some(match open.and_then(|(at, _)| key_before(&head[..at])) {
+        Some(table) => format!("{table}.{key}"),
+        None => key.to_string(),
+    })
 }
 
 /// Node names a fault may name.

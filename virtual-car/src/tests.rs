@@ -138,6 +138,36 @@ fn scenario_errors_name_the_field() {
 }
 
 #[test]
+fn a_value_of_the_wrong_type_names_its_key_and_shows_its_line() {
+    let shown = Scenario::parse("name = \"x\"\nduration_s = \"long\"\n", "x.toml")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        shown,
+        "x.toml: line 2, column 14, key duration_s: invalid type: string \"long\", expected f64 (the line: duration_s = \"long\")"
+    );
+    // In a table, and in an inline table of the timeline.
+    let text = EXAMPLE.replace("speed_kmh = 90.0", "speed_kmh = true");
+    let shown = Scenario::parse(&text, "x.toml").unwrap_err().to_string();
+    assert!(
+        shown.contains("key initial.speed_kmh: invalid type: boolean"),
+        "{shown}"
+    );
+    assert!(shown.contains("(the line: speed_kmh = true)"), "{shown}");
+    let text = EXAMPLE.replace(r#"{ silence = "Steering" }"#, "{ silence = 3 }");
+    let shown = Scenario::parse(&text, "x.toml").unwrap_err().to_string();
+    assert!(
+        shown.contains("key at.fault.silence: invalid type: integer"),
+        "{shown}"
+    );
+    // A long line: a snippet around the place, never the whole line.
+    let long = format!("name = \"x\"\nduration_s = \"{}\"\n", "l".repeat(500));
+    let shown = Scenario::parse(&long, "x.toml").unwrap_err().to_string();
+    assert!(shown.contains("key duration_s"), "{shown}");
+    assert!(shown.len() < 400, "{shown}");
+}
+
+#[test]
 fn the_timeline_ramps_latches_and_presses() {
     let s = Scenario::parse(EXAMPLE, "example").unwrap();
     let mut timeline = Timeline::new(&s);
