@@ -305,19 +305,24 @@ fn cut_blf(frames: u64, cut: usize) -> tempfile::TempPath {
     out.into_temp_path()
 }
 
+/// The pipeline after running the log at `path` through it, with no observers.
+fn run_log(path: &std::path::Path, strictness: Strictness) -> Pipeline {
+    let mut pipeline = Pipeline::new(strictness);
+    pipeline
+        .run(
+            &mut crate::LogSource::open(path).unwrap(),
+            &mut [],
+            &mut || false,
+        )
+        .unwrap();
+    pipeline
+}
+
 #[test]
 fn a_log_cut_short_ends_the_run_with_what_precedes_the_damage() {
     for strictness in [Strictness::Strict, Strictness::Lenient] {
         // 100 objects of 48 bytes, 100 bytes missing: 97 whole ones.
-        let path = cut_blf(100, 100);
-        let mut pipeline = Pipeline::new(strictness);
-        pipeline
-            .run(
-                &mut crate::LogSource::open(&path).unwrap(),
-                &mut [],
-                &mut || false,
-            )
-            .unwrap();
+        let pipeline = run_log(&cut_blf(100, 100), strictness);
         assert_eq!(pipeline.state().counters().frames, 97);
         assert_eq!(pipeline.state().now_us(), 960_000);
         let e = pipeline.incomplete().unwrap();
@@ -325,14 +330,7 @@ fn a_log_cut_short_ends_the_run_with_what_precedes_the_damage() {
         assert!(e.message.contains("truncated file?"), "{e}");
         assert_eq!(pipeline.malformed(), 0);
     }
-    let mut whole = Pipeline::new(Strictness::Strict);
-    whole
-        .run(
-            &mut crate::LogSource::open(&cut_blf(100, 0)).unwrap(),
-            &mut [],
-            &mut || false,
-        )
-        .unwrap();
+    let whole = run_log(&cut_blf(100, 0), Strictness::Strict);
     assert!(whole.incomplete().is_none());
     assert_eq!(whole.state().counters().frames, 100);
 }
@@ -342,14 +340,7 @@ fn frames_the_logger_reported_dropped_are_counted() {
     let path = log_file(
         "(0.000000) can0 003#50\nDROPCOUNT: dropped 7 CAN frames on 'can0' socket (total drops 7)\n(0.010000) can0 003#51\nDROPCOUNT: dropped 1 CAN frame on 'can0' socket (total drops 8)\n",
     );
-    let mut pipeline = Pipeline::new(Strictness::Strict);
-    pipeline
-        .run(
-            &mut crate::LogSource::open(&path).unwrap(),
-            &mut [],
-            &mut || false,
-        )
-        .unwrap();
+    let pipeline = run_log(&path, Strictness::Strict);
     assert_eq!(pipeline.dropped_by_logger(), 8);
     assert_eq!(pipeline.state().counters().frames, 2);
     assert_eq!(pipeline.malformed(), 0);

@@ -17,9 +17,8 @@ fn every(period_ms: u64, until_ms: u64, make: impl Fn(u64) -> Frame) -> Vec<LogF
         .collect()
 }
 
-/// The diagnosis of every ECU after `frames` (sorted into time order first).
-fn report(mut frames: Vec<LogFrame>) -> Vec<crate::EcuDiagnosis> {
-    frames.sort_by_key(|f| f.t_us);
+/// The pipeline and the diagnostics after `frames` (in time order).
+fn diagnosed(frames: Vec<LogFrame>) -> (Pipeline, Diagnostics) {
     let mut pipeline = Pipeline::new(Strictness::Strict);
     let mut diagnostics = Diagnostics::new();
     pipeline
@@ -29,6 +28,13 @@ fn report(mut frames: Vec<LogFrame>) -> Vec<crate::EcuDiagnosis> {
             &mut || false,
         )
         .unwrap();
+    (pipeline, diagnostics)
+}
+
+/// The diagnosis of every ECU after `frames` (sorted into time order first).
+fn report(mut frames: Vec<LogFrame>) -> Vec<crate::EcuDiagnosis> {
+    frames.sort_by_key(|f| f.t_us);
+    let (pipeline, diagnostics) = diagnosed(frames);
     diagnostics.report(pipeline.state())
 }
 
@@ -758,16 +764,7 @@ fn an_offset_beyond_one_step_or_an_oscillation_still_counts_for_the_cruise() {
 
 /// The recognition after `frames` (in time order).
 fn recognise(frames: Vec<LogFrame>) -> crate::Recognition {
-    let mut pipeline = Pipeline::new(Strictness::Strict);
-    let mut diagnostics = Diagnostics::new();
-    pipeline
-        .run(
-            &mut VecSource::new("test", frames),
-            &mut [&mut diagnostics],
-            &mut || false,
-        )
-        .unwrap();
-    diagnostics.recognition()
+    diagnosed(frames).1.recognition()
 }
 
 fn data(t_ms: u64, id: u32, extended: bool, bytes: &[u8]) -> LogFrame {
