@@ -179,6 +179,11 @@ pub enum Command {
         /// (http://host:port); repeatable.
         #[arg(long = "web-origin", value_name = "ORIGIN", requires = "web")]
         web_origins: Vec<String>,
+        /// A host name besides the listening address the web server answers for (NAME or
+        /// NAME:PORT, as in the browser's address bar); repeatable. Other names are
+        /// refused (421), so a web page cannot point its own name at this server.
+        #[arg(long = "allowed-host", value_name = "NAME", requires = "web")]
+        allowed_hosts: Vec<String>,
         /// The fleet this vehicle reports to (needs --transmit).
         #[command(flatten)]
         fleet: crate::fleet_cli::VehicleFleetArgs,
@@ -216,6 +221,11 @@ pub enum Command {
         /// (http://host:port); repeatable.
         #[arg(long = "web-origin", value_name = "ORIGIN")]
         web_origins: Vec<String>,
+        /// A host name besides the listening address the dashboard answers for (NAME or
+        /// NAME:PORT, as in the browser's address bar); repeatable. Other names are
+        /// refused (421), so a web page cannot point its own name at the dashboard.
+        #[arg(long = "allowed-host", value_name = "NAME")]
+        allowed_hosts: Vec<String>,
         /// On a real bus, let the gateway transmit (identification, trouble codes,
         /// flashing). The virtual car's gateway always may.
         #[arg(long)]
@@ -850,6 +860,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             dtc_interval,
             web,
             web_origins,
+            allowed_hosts,
             fleet,
         } => {
             let options = GatewayOptions {
@@ -868,6 +879,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 web: web.map(|addr| autoplug_web::WebConfig {
                     addr,
                     allowed_origins: web_origins,
+                    allowed_hosts,
                     ..autoplug_web::WebConfig::loopback(0)
                 }),
                 recordings_dir: None,
@@ -884,6 +896,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             token,
             read_only,
             web_origins,
+            allowed_hosts,
             transmit,
             vehicle,
             duration,
@@ -936,11 +949,17 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 duration,
                 quiet: !status,
                 replay_pages: (!matches!(bus, BusUrl::Replay(_))).then(|| {
-                    crate::dashboard::ReplayPages::new(listen.ip(), data.clone(), token.clone())
+                    crate::dashboard::ReplayPages::new(
+                        listen.ip(),
+                        data.clone(),
+                        token.clone(),
+                        &allowed_hosts,
+                    )
                 }),
                 web: Some(autoplug_web::WebConfig {
                     addr: listen,
                     allowed_origins: web_origins,
+                    allowed_hosts,
                     token,
                     trips_db: Some(folder.trips_db()),
                     recordings_dir: Some(folder.recordings()),

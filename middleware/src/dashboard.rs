@@ -124,6 +124,8 @@ pub struct ReplayPages {
     listen: std::net::IpAddr,
     data: PathBuf,
     token: Option<String>,
+    /// The host names this dashboard answers for besides its address.
+    allowed_hosts: Vec<String>,
     child: Option<ReplayChild>,
 }
 
@@ -150,12 +152,29 @@ pub struct RunningReplay<'a> {
 }
 
 impl ReplayPages {
-    /// Replay dashboards on `listen`'s address, with the data folder and token of this one.
-    pub fn new(listen: std::net::IpAddr, data: PathBuf, token: Option<String>) -> Self {
+    /// Replay dashboards on `listen`'s address, with the data folder, token and allowed
+    /// host names of this one (a name given with this one's port is allowed on the
+    /// replay's port).
+    pub fn new(
+        listen: std::net::IpAddr,
+        data: PathBuf,
+        token: Option<String>,
+        allowed_hosts: &[String],
+    ) -> Self {
+        let allowed_hosts = allowed_hosts
+            .iter()
+            .map(|host| match host.rsplit_once(':') {
+                Some((name, port)) if port.parse::<u16>().is_ok() && !name.ends_with(':') => {
+                    name.to_string()
+                }
+                _ => host.clone(),
+            })
+            .collect();
         Self {
             listen,
             data,
             token,
+            allowed_hosts,
             child: None,
         }
     }
@@ -179,6 +198,11 @@ impl ReplayPages {
             .arg("--data")
             .arg(&self.data)
             .arg("--exit-with-input")
+            .args(
+                self.allowed_hosts
+                    .iter()
+                    .flat_map(|h| ["--allowed-host", h]),
+            )
             .stdin(Stdio::piped())
             .stdout(Stdio::null())
             .stderr(Stdio::null());

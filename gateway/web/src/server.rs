@@ -2,7 +2,10 @@
 //! runtime: the gateway's pipeline only publishes into the [`LiveTable`] and never waits
 //! for the network.
 //!
-//! Built for hostile clients: at most [`WebConfig::max_clients`] streams at once (more get
+//! Built for hostile clients: a request whose `Host` names neither the address the server
+//! listens on nor a name the user allowed gets 421 before anything is read or sent (DNS
+//! rebinding: a page the user visits points its own name at 127.0.0.1, and the browser
+//! sends that name), at most [`WebConfig::max_clients`] streams at once (more get
 //! 503), an `Origin` header that is not the server's own (or configured) gets 403, incoming
 //! WebSocket messages are limited to [`MAX_INCOMING_BYTES`], a client that does not take an
 //! update within [`SEND_TIMEOUT`] is dropped, and a slow one gets coalesced updates (see
@@ -44,6 +47,10 @@ pub struct WebConfig {
     /// Origins besides the server's own that may open the stream from a browser
     /// (`http://host:port`).
     pub allowed_origins: Vec<String>,
+    /// Host names besides the listening address the server answers for (`name` or
+    /// `name:port`; without a port, the server's): a name in a request's `Host` that is
+    /// neither is refused.
+    pub allowed_hosts: Vec<String>,
     /// Streams at once.
     pub max_clients: usize,
     /// The token write actions need (`Authorization: Bearer TOKEN`, or the stream's
@@ -69,6 +76,7 @@ impl WebConfig {
         Self {
             addr: SocketAddr::from(([127, 0, 0, 1], port)),
             allowed_origins: Vec::new(),
+            allowed_hosts: Vec::new(),
             max_clients: DEFAULT_MAX_CLIENTS,
             token: None,
             trips_db: None,
@@ -83,6 +91,8 @@ impl WebConfig {
 pub(crate) struct Shared {
     pub(crate) table: Arc<LiveTable>,
     pub(crate) config: WebConfig,
+    /// The address the server listens on (its port, when the configuration said 0).
+    local: SocketAddr,
     clients: AtomicUsize,
     pub(crate) control: Option<Control>,
     /// One fleet query at a time.
@@ -117,6 +127,7 @@ impl WebServer {
         let shared = Arc::new(Shared {
             table,
             config,
+            local: addr,
             clients: AtomicUsize::new(0),
             control,
             fleet_queries: Arc::new(tokio::sync::Semaphore::new(1)),
@@ -169,7 +180,79 @@ fn router(shared: Arc<Shared>) -> Router {
         .route("/api/stream", get(stream))
         .merge(crate::api::routes())
         .fallback(crate::assets::serve)
+        .layer(axum::middleware::from_fn_with_state(
+            shared.clone(),
+            refuse_foreign_hosts,
+        ))
         .with_state(shared)
+}
+
+/// Answers 421 to a request whose `Host` is not this server's (see [`host_allowed`]),
+/// before any handler runs: the stream's upgrade included.
+async fn refuse_foreign_hosts(
+    State(shared): State<Arc<Shared>>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    // A request without `Host` is no browser's (HTTP/1.1 browsers always send it).
+    if let Some(host) = request.headers().get(header::HOST) {
+        let host = host.to_str().unwrap_or("");
+        if !host_allowed(host, &shared.config, shared.local) {
+            let shown = cut(host, 100);
+            return error(
+                StatusCode::MISDIRECTED_REQUEST,
+                format!("this server does not answer for the host '{shown}' (start it with --allowed-host NAME to allow a name)"),
+            );
+        }
+    }
+    next.run(request).await
+}
+
+/// Whether a `Host` header names this server: an IP address it listens on (any of the
+/// machine's when it listens on all of them: an address cannot be rebound), `localhost`
+/// when it listens on loopback, or a name the user allowed; with the port it listens on
+/// (none: 80).
+pub fn host_allowed(host: &str, config: &WebConfig, local: SocketAddr) -> bool {
+    let (name, port) = match host.strip_prefix('[') {
+        Some(rest) => match rest.split_once(']') {
+            Some((name, tail)) => (name, tail.strip_prefix(':')),
+            None => return false,
+        },
+        None => match host.rsplit_once(':') {
+            Some((name, port)) => (name, Some(port)),
+            None => (host, None),
+        },
+    };
+    let port = match port {
+        Some(port) => match port.parse::<u16>() {
+            Ok(port) => port,
+            Err(_) => return false,
+        },
+        None => 80,
+    };
+    let name = name.to_ascii_lowercase();
+    let allowed_name = config.allowed_hosts.iter().any(|allowed| {
+        let allowed = allowed.to_ascii_lowercase();
+        match allowed.rsplit_once(':') {
+            Some((n, p)) if p.parse::<u16>().is_ok() => n == name && p.parse() == Ok(port),
+            _ => allowed == name && port == local.port(),
+        }
+    });
+    if allowed_name {
+        return true;
+    }
+    if port != local.port() {
+        return false;
+    }
+    let listening = local.ip();
+    match name.parse::<std::net::IpAddr>() {
+        Ok(ip) => {
+            ip == listening
+                || listening.is_unspecified()
+                || (listening.is_loopback() && ip.is_loopback())
+        }
+        Err(_) => name == "localhost" && (listening.is_loopback() || listening.is_unspecified()),
+    }
 }
 
 /// An error answer: the status and a JSON body naming what was wrong.

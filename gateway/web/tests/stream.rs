@@ -229,12 +229,16 @@ fn foreign_origins_and_extra_clients_are_refused_with_a_reason() {
 
 /// A plain HTTP/1.1 GET, the whole response (status line, headers, body).
 fn http_get(server: &WebServer, path: &str) -> String {
+    http_get_with(server, path, &format!("Host: {}\r\n", server.addr()))
+}
+
+/// The same with the given header lines (each ending in CRLF) instead of the `Host`.
+fn http_get_with(server: &WebServer, path: &str, headers: &str) -> String {
     use std::io::{Read, Write};
     let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
     write!(
         stream,
-        "GET {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
-        server.addr()
+        "GET {path} HTTP/1.1\r\n{headers}Connection: close\r\n\r\n"
     )
     .expect("request");
     let mut response = String::new();
@@ -412,4 +416,78 @@ fn driving_over_the_stream_needs_the_token_and_reaches_the_session() {
     assert_eq!(got[1], "Press(CruiseOn)");
     // The page that drove left: the session releases the pedals.
     assert_eq!(got[2], "DriverLeft");
+}
+
+#[test]
+fn a_page_that_rebinds_its_name_to_the_dashboard_is_refused() {
+    let (table, server) = server(8);
+    let mut state = CarState::new();
+    state.update(&speed(0, 12.0));
+    table.publish(&state);
+    let port = server.addr().port();
+    // The browser of a page at http://rebind.example:PORT whose name now points at 127.0.0.1
+    // sends its own name, on plain requests and on the stream's upgrade alike.
+    let foreign =
+        format!("Host: rebind.example:{port}\r\nOrigin: http://rebind.example:{port}\r\n");
+    for path in ["/api/state", "/api/recordings", "/api/trips", "/"] {
+        let answer = http_get_with(&server, path, &foreign);
+        assert!(answer.starts_with("HTTP/1.1 421"), "{path}: {answer}");
+        assert!(
+            answer.contains("does not answer for the host 'rebind.example:"),
+            "{answer}"
+        );
+        assert!(!answer.contains("Vehicle.Speed"), "{answer}");
+    }
+    let upgrade = format!(
+        "{foreign}Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+    );
+    let answer = http_get_with(&server, "/api/stream", &upgrade);
+    assert!(answer.starts_with("HTTP/1.1 421"), "{answer}");
+    // The server's own names: its address, localhost, with its port; no Host at all (a tool).
+    for host in [
+        format!("127.0.0.1:{port}"),
+        format!("localhost:{port}"),
+        format!("LOCALHOST:{port}"),
+    ] {
+        let answer = http_get_with(&server, "/api/state", &format!("Host: {host}\r\n"));
+        assert!(answer.starts_with("HTTP/1.1 200"), "{host}: {answer}");
+    }
+    // Another port, a name without one (port 80), garbage.
+    for host in [
+        format!("127.0.0.1:{}", port.wrapping_add(1)),
+        "localhost".to_string(),
+        "[::1".to_string(),
+        format!("localhost:{port}x"),
+    ] {
+        let answer = http_get_with(&server, "/api/state", &format!("Host: {host}\r\n"));
+        assert!(answer.starts_with("HTTP/1.1 421"), "{host}: {answer}");
+    }
+}
+
+#[test]
+fn names_the_user_allows_are_answered() {
+    use autoplug_web::server::host_allowed;
+    let mut config = WebConfig::loopback(0);
+    config.allowed_hosts = vec!["car.lan".into(), "bench.lan:9000".into()];
+    let local: std::net::SocketAddr = "127.0.0.1:8080".parse().unwrap();
+    assert!(host_allowed("car.lan:8080", &config, local));
+    assert!(host_allowed("CAR.LAN:8080", &config, local));
+    assert!(!host_allowed("car.lan:8081", &config, local));
+    assert!(host_allowed("bench.lan:9000", &config, local));
+    assert!(!host_allowed("bench.lan:8080", &config, local));
+    assert!(!host_allowed("evil.lan:8080", &config, local));
+    assert!(
+        host_allowed("[::1]:8080", &config, local),
+        "loopback is loopback"
+    );
+    // Listening on every address: any address literal, but still no foreign name.
+    let all: std::net::SocketAddr = "0.0.0.0:8080".parse().unwrap();
+    assert!(host_allowed("192.0.2.7:8080", &config, all));
+    assert!(host_allowed("[2001:db8::1]:8080", &config, all));
+    assert!(!host_allowed("evil.lan:8080", &config, all));
+    // Listening on one address: that one only.
+    let one: std::net::SocketAddr = "192.0.2.7:8080".parse().unwrap();
+    assert!(host_allowed("192.0.2.7:8080", &config, one));
+    assert!(!host_allowed("192.0.2.8:8080", &config, one));
+    assert!(!host_allowed("localhost:8080", &config, one));
 }
