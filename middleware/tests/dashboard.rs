@@ -25,7 +25,12 @@ fn start(data: &std::path::Path) -> Dashboard {
 }
 
 fn start_with(data: &std::path::Path, extra: &[&str]) -> Dashboard {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_autoplug"))
+    launch(dashboard_command(data, extra))
+}
+
+fn dashboard_command(data: &std::path::Path, extra: &[&str]) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_autoplug"));
+    command
         .args(["dashboard", "--listen", "127.0.0.1:0", "--duration", "120"])
         .args(extra)
         .arg("--data")
@@ -33,9 +38,12 @@ fn start_with(data: &std::path::Path, extra: &[&str]) -> Dashboard {
         .arg("--token")
         .arg(TOKEN)
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("autoplug runs");
+        .stderr(Stdio::null());
+    command
+}
+
+fn launch(mut command: Command) -> Dashboard {
+    let mut child = command.spawn().expect("autoplug runs");
     let stdout = child.stdout.take().expect("stdout");
     let mut lines = BufReader::new(stdout).lines();
     let addr = lines
@@ -373,4 +381,84 @@ fn a_recorded_log_plays_pauses_changes_speed_and_seeks_from_the_page() {
     assert_eq!(status, 409);
     assert!(answer.contains("only listens"), "{answer}");
     assert_eq!(session()["source"]["kind"], "replay");
+}
+
+/// The descriptors `pid` has open.
+#[cfg(target_os = "linux")]
+fn descriptors(pid: u32) -> usize {
+    std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |dir| dir.count())
+}
+
+/// A GET on a new connection, answered within a second: the status.
+fn get_within_a_second(addr: &str, path: &str) -> u16 {
+    let mut stream = std::net::TcpStream::connect(addr).expect("connect");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(1)))
+        .unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut response = Vec::new();
+    stream
+        .read_to_end(&mut response)
+        .unwrap_or_else(|e| panic!("GET {path} not answered within a second: {e}"));
+    String::from_utf8_lossy(&response)[9..12]
+        .parse()
+        .expect("a status")
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn idle_connections_lock_no_one_out_and_their_descriptors_come_back() {
+    use std::os::unix::process::CommandExt;
+    // This process holds the idle connections: it needs the descriptors for them.
+    rlimit::increase_nofile_limit(u64::MAX).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut command = dashboard_command(dir.path(), &[]);
+    // The dashboard with the usual limit of 1024 descriptors, which it cannot raise.
+    unsafe {
+        command.pre_exec(|| rlimit::setrlimit(rlimit::Resource::NOFILE, 1024, 1024));
+    }
+    let dash = launch(command);
+    let addr = dash.addr.as_str();
+    let pid = dash.child.id();
+    assert_eq!(get_within_a_second(addr, "/api/state"), 200);
+    let before = descriptors(pid);
+
+    // 2,000 connections that say nothing, then a slow one that sends half a request.
+    let idle: Vec<std::net::TcpStream> = (0..2000)
+        .map(|_| std::net::TcpStream::connect(addr).expect("the server accepts"))
+        .collect();
+    let mut slow = std::net::TcpStream::connect(addr).unwrap();
+    slow.write_all(b"GET /api/state HTTP/1.1\r\nHost: ")
+        .unwrap();
+    // Whoever comes now gets the page and the state, within a second.
+    for path in ["/", "/api/state", "/api/catalog"] {
+        assert_eq!(get_within_a_second(addr, path), 200, "{path}");
+    }
+    let held = descriptors(pid);
+    assert!(
+        held < 1024,
+        "{held} descriptors with 2,000 idle connections"
+    );
+
+    // The server lets go of connections that send no request in time (5 s), the half
+    // request too, without the clients closing them.
+    let give_up = std::time::Instant::now() + Duration::from_secs(10);
+    while descriptors(pid) > before + 8 && std::time::Instant::now() < give_up {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let after = descriptors(pid);
+    assert!(
+        after <= before + 8,
+        "{before} descriptors before, {after} after the deadline"
+    );
+    slow.set_read_timeout(Some(Duration::from_secs(1))).unwrap();
+    let mut rest = Vec::new();
+    let closed = slow.read_to_end(&mut rest).is_ok();
+    assert!(closed, "the half request's connection was closed");
+    drop(idle);
+    assert_eq!(get_within_a_second(addr, "/api/state"), 200);
 }

@@ -30,6 +30,7 @@
 
 pub mod api;
 pub mod assets;
+pub mod connections;
 pub mod control;
 pub mod fleet;
 pub mod live;

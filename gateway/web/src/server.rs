@@ -53,6 +53,9 @@ pub struct WebConfig {
     pub allowed_hosts: Vec<String>,
     /// Streams at once.
     pub max_clients: usize,
+    /// Connections at once (see [`crate::connections`]): by default half the process's
+    /// file descriptor limit.
+    pub max_connections: usize,
     /// The token write actions need (`Authorization: Bearer TOKEN`, or the stream's
     /// `auth` message); `None`: the dashboard only shows, and every write is refused.
     pub token: Option<String>,
@@ -78,6 +81,7 @@ impl WebConfig {
             allowed_origins: Vec::new(),
             allowed_hosts: Vec::new(),
             max_clients: DEFAULT_MAX_CLIENTS,
+            max_connections: crate::connections::connection_limit(),
             token: None,
             trips_db: None,
             recordings_dir: None,
@@ -124,6 +128,7 @@ impl WebServer {
             .enable_time()
             .build()?;
         let (stop, stopped) = oneshot::channel::<()>();
+        let max_connections = config.max_connections;
         let shared = Arc::new(Shared {
             table,
             config,
@@ -144,7 +149,7 @@ impl WebServer {
                     // when their client leaves. Leaving `block_on` drops the runtime, which
                     // cancels every connection's task and closes its socket.
                     tokio::select! {
-                        _ = axum::serve(listener, app) => {}
+                        _ = crate::connections::serve(listener, app, max_connections) => {}
                         _ = stopped => {}
                     }
                 });

@@ -9,5 +9,10 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    // The usual soft limit of 1024 descriptors is low for a server (the dashboard's
+    // connections, the fleet's cars): take what the hard limit allows. Where it cannot be
+    // raised the servers size their limits to what there is.
+    #[cfg(unix)]
+    let _ = rlimit::increase_nofile_limit(u64::MAX);
     autoplug_middleware::cli::main()
 }
