@@ -38,6 +38,12 @@ pub const SEND_TIMEOUT: Duration = Duration::from_secs(2);
 pub const MAX_INCOMING_BYTES: usize = 4096;
 /// Streams at once by default.
 pub const DEFAULT_MAX_CLIENTS: usize = 64;
+/// A stream passes the driver's controls to the session at most this often; what comes
+/// meanwhile replaces what waits (the latest state wins), so one stream cannot fill the
+/// queue the others' commands share.
+pub const DRIVE_INTERVAL: Duration = Duration::from_millis(10);
+/// Button presses a stream may make per second (each one is passed on, none coalesced).
+pub const PRESSES_PER_SECOND: u32 = 20;
 
 /// Where and for whom the server listens.
 #[derive(Clone, Debug)]
@@ -373,6 +379,12 @@ enum ClientMessage {
 struct Driver {
     authenticated: bool,
     drove: bool,
+    /// Controls received and not passed on yet (the latest).
+    pending: Option<DriveInput>,
+    /// When controls were last passed on.
+    last_drive: Option<tokio::time::Instant>,
+    /// Presses in the current second, and when it began.
+    presses: (u32, Option<tokio::time::Instant>),
 }
 
 impl Driver {
@@ -399,8 +411,29 @@ impl Driver {
                     "error": "driving needs the token: send {\"type\":\"auth\",\"token\":\"...\"} first",
                 }))
             }
-            ClientMessage::Drive(input) => Command::Drive(input),
-            ClientMessage::Press { button } => Command::Press(button),
+            ClientMessage::Drive(input) => {
+                if shared.control.is_some() {
+                    self.pending = Some(input);
+                    return self.pass_drive(shared, tokio::time::Instant::now());
+                }
+                Command::Drive(input)
+            }
+            ClientMessage::Press { button } => {
+                let now = tokio::time::Instant::now();
+                let (count, since) = &mut self.presses;
+                if since.is_none_or(|s| now.duration_since(s) >= Duration::from_secs(1)) {
+                    *count = 0;
+                    *since = Some(now);
+                }
+                *count += 1;
+                if *count > PRESSES_PER_SECOND {
+                    return Some(serde_json::json!({
+                        "type": "error",
+                        "error": format!("too many button presses: at most {PRESSES_PER_SECOND} a second"),
+                    }));
+                }
+                Command::Press(button)
+            }
         };
         let Some(control) = shared.control.as_ref() else {
             return Some(serde_json::json!({
@@ -419,6 +452,48 @@ impl Driver {
             Err(SendError::Gone) => Some(serde_json::json!({
                 "type": "error", "error": "the session has ended",
             })),
+        }
+    }
+}
+
+impl Driver {
+    /// When the controls waiting may be passed on, if any wait.
+    fn drive_due(&self) -> Option<tokio::time::Instant> {
+        self.pending?;
+        Some(
+            self.last_drive
+                .map_or_else(tokio::time::Instant::now, |last| last + DRIVE_INTERVAL),
+        )
+    }
+
+    /// Passes the waiting controls on if their interval has passed (or keeps them, the
+    /// queue full, for the next try).
+    fn pass_drive(
+        &mut self,
+        shared: &Shared,
+        now: tokio::time::Instant,
+    ) -> Option<serde_json::Value> {
+        let input = self.pending?;
+        if self
+            .last_drive
+            .is_some_and(|last| now < last + DRIVE_INTERVAL)
+        {
+            return None;
+        }
+        let control = shared.control.as_ref()?;
+        self.last_drive = Some(now);
+        match control.send(Command::Drive(input)) {
+            Ok(()) => {
+                self.pending = None;
+                self.drove = true;
+                None
+            }
+            // Tried again at the next interval, with whatever is latest by then.
+            Err(SendError::Busy) => None,
+            Err(SendError::Gone) => {
+                self.pending = None;
+                Some(serde_json::json!({ "type": "error", "error": "the session has ended" }))
+            }
         }
     }
 }
@@ -466,20 +541,34 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
     let driver = &mut driver.driver;
     let mut ticker = tokio::time::interval(UPDATE_PERIOD);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    // A change not sent yet: it goes at the next tick, at most one update per period.
+    // Messages are read as they come meanwhile (waiting for the tick inside the loop held
+    // them up to a period each, and a driver's inputs queued up behind it).
+    let mut changed_since = false;
     loop {
+        let drive_due = driver.drive_due();
         tokio::select! {
-            changed = changes.changed() => {
+            changed = changes.changed(), if !changed_since => {
                 if changed.is_err() {
                     return; // the table is gone: the gateway stopped
                 }
-                // At most one update per period: what changes meanwhile is coalesced.
-                ticker.tick().await;
+                changed_since = true;
+            }
+            _ = ticker.tick(), if changed_since => {
+                changed_since = false;
                 let (update, now) = table.update_since(version);
                 if now > version {
                     if !send(&mut socket, update).await {
                         return;
                     }
                     version = now;
+                }
+            }
+            _ = tokio::time::sleep_until(drive_due.unwrap_or_else(tokio::time::Instant::now)), if drive_due.is_some() => {
+                if let Some(reply) = driver.pass_drive(&slot.0, tokio::time::Instant::now()) {
+                    if !send(&mut socket, reply.to_string()).await {
+                        return;
+                    }
                 }
             }
             incoming = socket.recv() => {

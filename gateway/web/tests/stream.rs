@@ -491,3 +491,84 @@ fn names_the_user_allows_are_answered() {
     assert!(!host_allowed("192.0.2.8:8080", &config, one));
     assert!(!host_allowed("localhost:8080", &config, one));
 }
+
+#[test]
+fn a_drivers_burst_is_read_at_once_coalesced_and_a_ping_after_it_answered_at_once() {
+    let table = Arc::new(LiveTable::new());
+    let mut config = WebConfig::loopback(0);
+    config.token = Some("stream-token-0123456789".into());
+    let (control, commands) = autoplug_web::control::channel();
+    let server = WebServer::start(config, table.clone(), Some(control)).expect("server");
+    // The car keeps changing, as a running one does: an update is due every period.
+    let running = Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let publisher = {
+        let (table, running) = (table.clone(), running.clone());
+        std::thread::spawn(move || {
+            let mut state = CarState::new();
+            let mut t_ms = 0;
+            while running.load(std::sync::atomic::Ordering::Acquire) {
+                t_ms += 5;
+                state.update(&speed(t_ms, (t_ms % 200) as f32));
+                table.publish(&state);
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        })
+    };
+    let drive = |brake: u32| {
+        format!(
+            r#"{{"type":"drive","accelerator":0,"brake":{brake},"steering_deg":0,"headlights":false,"economy_mode":false,"manual_mode":false,"set_temp_f":70}}"#
+        )
+    };
+    let pong_after = runtime().block_on(async {
+        let mut client = connect(&server).await;
+        assert_eq!(next_json(&mut client).await["type"], "catalog");
+        client
+            .send(Message::Text(
+                r#"{"type":"auth","token":"stream-token-0123456789"}"#.into(),
+            ))
+            .await
+            .unwrap();
+        while next_json(&mut client).await["type"] != "auth" {}
+        // 100 inputs at once (5 s of driving at 20 a second), a press among them.
+        for brake in 0..100 {
+            client
+                .send(Message::Text(drive(brake).into()))
+                .await
+                .unwrap();
+            if brake == 50 {
+                client
+                    .send(Message::Text(
+                        r#"{"type":"press","button":"shift_up"}"#.into(),
+                    ))
+                    .await
+                    .unwrap();
+            }
+        }
+        let sent = std::time::Instant::now();
+        client
+            .send(Message::Text(r#"{"type":"ping"}"#.into()))
+            .await
+            .unwrap();
+        while next_json(&mut client).await["type"] != "pong" {}
+        let pong_after = sent.elapsed();
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        pong_after
+    });
+    running.store(false, std::sync::atomic::Ordering::Release);
+    publisher.join().unwrap();
+    // Every message is read as it comes: the ping waits behind no tick.
+    assert!(pong_after < Duration::from_millis(500), "{pong_after:?}");
+    let mut drives = Vec::new();
+    let mut presses = 0;
+    while let Some(command) = commands.next() {
+        match command {
+            autoplug_web::Command::Drive(input) => drives.push(input.brake),
+            autoplug_web::Command::Press(_) => presses += 1,
+            _ => {}
+        }
+    }
+    assert_eq!(presses, 1, "the press is never coalesced away");
+    // Coalesced: far fewer than 100 reached the session, the latest last.
+    assert!(!drives.is_empty() && drives.len() < 50, "{drives:?}");
+    assert_eq!(drives.last(), Some(&99.0), "{drives:?}");
+}
