@@ -1,13 +1,16 @@
 //! The broker's configuration for a fleet, shipped with the project (`fleet/broker/`):
 //! Mosquitto with logins, the ACL that keeps each vehicle to its own topics, persistent
-//! sessions. [`init`] writes a ready directory; [`add_login`] adds a vehicle (or a fleet
-//! service) to its password file with Mosquitto's own `mosquitto_passwd`, so the password
-//! is hashed exactly as the broker expects.
+//! sessions, and two listeners: the vehicles' (a car's client id is its login) and the
+//! fleet services' (each process its own client id under the fleet's login). [`init`]
+//! writes a ready directory; [`add_login`] adds a vehicle (or the fleet services' login)
+//! to its listener's password file with Mosquitto's own `mosquitto_passwd`, so the
+//! password is hashed exactly as the broker expects.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The broker configuration, with `{dir}`, `{bind}`, `{port}` and `{user}` to fill in.
+/// The broker configuration, with `{dir}`, `{bind}`, `{port}`, `{fleet_bind}`,
+/// `{fleet_port}` and `{user}` to fill in.
 pub const CONFIG_TEMPLATE: &str = include_str!("../broker/mosquitto.conf");
 
 /// The ACL (see the file's comments).
@@ -23,8 +26,10 @@ pub struct BrokerDir {
     pub dir: PathBuf,
     /// `mosquitto.conf`.
     pub config: PathBuf,
-    /// `passwd`.
+    /// `passwd`: the vehicles' logins.
     pub passwords: PathBuf,
+    /// `passwd-fleet`: the fleet services' login.
+    pub fleet_passwords: PathBuf,
 }
 
 impl BrokerDir {
@@ -34,16 +39,40 @@ impl BrokerDir {
             dir: dir.to_path_buf(),
             config: dir.join("mosquitto.conf"),
             passwords: dir.join("passwd"),
+            fleet_passwords: dir.join("passwd-fleet"),
+        }
+    }
+
+    /// The password file that holds `user`'s login: the fleet's own, or the vehicles'.
+    pub fn passwords_of(&self, user: &str) -> &Path {
+        if user == FLEET_USER {
+            &self.fleet_passwords
+        } else {
+            &self.passwords
         }
     }
 }
 
-/// Writes a broker directory: `mosquitto.conf` listening on `bind:port`, the ACL, an empty
-/// password file (mode 0600) and the persistence directory. Refuses to overwrite a
-/// configuration that is there (its password file holds logins).
-pub fn init(dir: &Path, bind: &str, port: u16) -> Result<BrokerDir, String> {
-    if bind.is_empty() || bind.contains(char::is_whitespace) {
-        return Err(format!("'{bind}' is not an address to listen on"));
+/// Writes a broker directory: `mosquitto.conf` listening for vehicles on `bind:port` and
+/// for the fleet services on `fleet_bind:fleet_port`, the ACL, two empty password files
+/// (mode 0600) and the persistence directory. Refuses to overwrite a configuration that is
+/// there (its password files hold logins).
+pub fn init(
+    dir: &Path,
+    bind: &str,
+    port: u16,
+    fleet_bind: &str,
+    fleet_port: u16,
+) -> Result<BrokerDir, String> {
+    for address in [bind, fleet_bind] {
+        if address.is_empty() || address.contains(char::is_whitespace) {
+            return Err(format!("'{address}' is not an address to listen on"));
+        }
+    }
+    if port == fleet_port {
+        return Err(format!(
+            "the vehicles and the fleet services need a port each (both are {port})"
+        ));
     }
     let files = BrokerDir::at(dir);
     if files.config.exists() {
@@ -71,6 +100,8 @@ pub fn init(dir: &Path, bind: &str, port: u16) -> Result<BrokerDir, String> {
     let config = CONFIG_TEMPLATE
         .replace("{user}", &owner_name(&abs))
         .replace("{dir}", text)
+        .replace("{fleet_bind}", fleet_bind)
+        .replace("{fleet_port}", &fleet_port.to_string())
         .replace("{bind}", bind)
         .replace("{port}", &port.to_string());
     let write = |path: &Path, body: &str, mode: u32| -> Result<(), String> {
@@ -80,6 +111,7 @@ pub fn init(dir: &Path, bind: &str, port: u16) -> Result<BrokerDir, String> {
     };
     write(&dir.join("acl"), ACL, 0o644)?;
     write(&files.passwords, "", 0o600)?;
+    write(&files.fleet_passwords, "", 0o600)?;
     write(&files.config, &config, 0o644)?;
     Ok(files)
 }
@@ -139,8 +171,9 @@ fn mosquitto_passwd() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("mosquitto_passwd"))
 }
 
-/// Adds (or changes) a login in the directory's password file. A running broker reads it
-/// again on SIGHUP.
+/// Adds (or changes) a login in the directory's password file for it (the fleet services'
+/// for [`FLEET_USER`], the vehicles' for any other). A running broker reads it again on
+/// SIGHUP.
 pub fn add_login(dir: &BrokerDir, user: &str, password: &str) -> Result<(), String> {
     // The password file's format separates user and hash with ':'; the ACL's patterns
     // take the name into topics.
@@ -150,16 +183,17 @@ pub fn add_login(dir: &BrokerDir, user: &str, password: &str) -> Result<(), Stri
             "'{user}' cannot be a broker login (no ':', '/', '+', '#')"
         ));
     }
-    if !dir.passwords.exists() {
+    let passwords = dir.passwords_of(user);
+    if !passwords.exists() {
         return Err(format!(
             "{} does not exist: write the directory first (autoplug fleet broker init)",
-            dir.passwords.display()
+            passwords.display()
         ));
     }
     let tool = mosquitto_passwd();
     let output = Command::new(&tool)
         .arg("-b")
-        .arg(&dir.passwords)
+        .arg(passwords)
         .arg(user)
         .arg(password)
         .output()
@@ -187,16 +221,20 @@ mod tests {
     fn a_broker_directory_is_written_once_with_every_placeholder_filled() {
         let tmp = tempfile::tempdir().unwrap();
         let dir = tmp.path().join("broker");
-        let files = init(&dir, "127.0.0.1", 18830).unwrap();
+        let files = init(&dir, "127.0.0.1", 18830, "127.0.0.1", 18831).unwrap();
         let config = std::fs::read_to_string(&files.config).unwrap();
         assert!(!config.contains('{'), "{config}");
         assert!(config.contains("listener 18830 127.0.0.1"));
+        assert!(config.contains("listener 18831 127.0.0.1"));
+        assert!(files.fleet_passwords.exists());
+        assert_eq!(files.passwords_of(FLEET_USER), files.fleet_passwords);
         assert!(config.contains("allow_anonymous false"));
         assert!(config.contains(&format!("acl_file {}/acl", dir.display())));
         assert_eq!(std::fs::read_to_string(dir.join("acl")).unwrap(), ACL);
-        let again = init(&dir, "127.0.0.1", 18830).unwrap_err();
+        let again = init(&dir, "127.0.0.1", 18830, "127.0.0.1", 18831).unwrap_err();
         assert!(again.contains("exists already"), "{again}");
-        assert!(init(&tmp.path().join("b2"), "", 1).is_err());
+        assert!(init(&tmp.path().join("b2"), "", 1, "127.0.0.1", 2).is_err());
+        assert!(init(&tmp.path().join("b3"), "127.0.0.1", 1, "127.0.0.1", 1).is_err());
         assert!(add_login(&files, "a:b", "x")
             .unwrap_err()
             .contains("cannot be a broker login"));

@@ -399,9 +399,13 @@ pub enum BrokerCommand {
         /// The directory (created).
         #[arg(long, value_name = "DIR")]
         dir: PathBuf,
-        /// Where the broker listens.
+        /// Where the broker listens for vehicles.
         #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:1883")]
         listen: std::net::SocketAddr,
+        /// Where it listens for the fleet services (their own logins; each process keeps
+        /// its own client id there).
+        #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:1884")]
+        fleet_listen: std::net::SocketAddr,
     },
     /// Add a login: a vehicle (its VIN) or a fleet service (autoplug-fleet). Prints the
     /// password once unless --password-file names one to use.
@@ -712,13 +716,24 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             Ok(())
         }
         FleetCommand::Campaign(command) => campaign(command, out),
-        FleetCommand::Broker(BrokerCommand::Init { dir, listen }) => {
-            let files = broker::init(&dir, &listen.ip().to_string(), listen.port())?;
+        FleetCommand::Broker(BrokerCommand::Init {
+            dir,
+            listen,
+            fleet_listen,
+        }) => {
+            let files = broker::init(
+                &dir,
+                &listen.ip().to_string(),
+                listen.port(),
+                &fleet_listen.ip().to_string(),
+                fleet_listen.port(),
+            )?;
             writeln!(
                 out,
-                "wrote {} (with the ACL and an empty password file)\nadd logins with: autoplug fleet broker add --dir {} --user VIN\nrun it with: mosquitto -c {}",
+                "wrote {} (with the ACL and empty password files): vehicles on {listen}, fleet services on {fleet_listen}\nadd logins with: autoplug fleet broker add --dir {} --user VIN (or --user {})\nrun it with: mosquitto -c {}",
                 files.config.display(),
                 dir.display(),
+                broker::FLEET_USER,
                 files.config.display()
             )
             .map_err(io)?;

@@ -52,24 +52,36 @@ pub struct PrivateBroker {
     pub dir: tempfile::TempDir,
     pub files: autoplug_fleet::broker::BrokerDir,
     pub port: u16,
+    /// The fleet services' listener.
+    pub fleet_port: u16,
     child: std::process::Child,
 }
 
 impl PrivateBroker {
     pub fn start() -> Self {
         let dir = tempfile::tempdir().unwrap();
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
-        let files =
-            autoplug_fleet::broker::init(&dir.path().join("broker"), "127.0.0.1", port).unwrap();
+        let free = || {
+            std::net::TcpListener::bind("127.0.0.1:0")
+                .unwrap()
+                .local_addr()
+                .unwrap()
+                .port()
+        };
+        let (port, fleet_port) = (free(), free());
+        let files = autoplug_fleet::broker::init(
+            &dir.path().join("broker"),
+            "127.0.0.1",
+            port,
+            "127.0.0.1",
+            fleet_port,
+        )
+        .unwrap();
         let child = Self::spawn(&files);
         let broker = Self {
             dir,
             files,
             port,
+            fleet_port,
             child,
         };
         broker.wait_listening();
@@ -97,13 +109,14 @@ impl PrivateBroker {
 
     fn wait_listening(&self) {
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
-            assert!(
-                std::time::Instant::now() < deadline,
-                "mosquitto did not listen on {}",
-                self.port
-            );
-            std::thread::sleep(std::time::Duration::from_millis(20));
+        for port in [self.port, self.fleet_port] {
+            while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+                assert!(
+                    std::time::Instant::now() < deadline,
+                    "mosquitto did not listen on {port}"
+                );
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
         }
     }
 
@@ -119,9 +132,20 @@ impl PrivateBroker {
         std::thread::sleep(std::time::Duration::from_millis(200));
     }
 
-    /// The address for `user` with `password`.
+    /// The address for `user` with `password`: the fleet services' listener for the
+    /// fleet's login, the vehicles' for any other.
     pub fn url(&self, user: &str, password: &str) -> autoplug_fleet::mqtt::Broker {
-        format!("mqtt://{user}:{password}@127.0.0.1:{}", self.port)
+        let port = if user == autoplug_fleet::broker::FLEET_USER {
+            self.fleet_port
+        } else {
+            self.port
+        };
+        self.url_at(port, user, password)
+    }
+
+    /// The address of the listener on `port` for `user` with `password`.
+    pub fn url_at(&self, port: u16, user: &str, password: &str) -> autoplug_fleet::mqtt::Broker {
+        format!("mqtt://{user}:{password}@127.0.0.1:{port}")
             .parse()
             .unwrap()
     }

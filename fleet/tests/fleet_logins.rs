@@ -1,0 +1,297 @@
+//! More than one fleet process logged in at once, as the README's scaling out and
+//! `fleet campaign create` have it: on a private Mosquitto run from the shipped
+//! configuration (logins, ACL, persistence) and the PostgreSQL server.
+
+mod common;
+
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use autoplug_fleet::broker::FLEET_USER;
+use autoplug_fleet::ingest::{Ingest, IngestStats};
+use autoplug_fleet::mqtt::{LinkOptions, LinkStatus, MqttLink};
+use autoplug_fleet::topics::{self, ReportKind};
+use autoplug_fleet::{FleetStore, TripReport};
+use autoplug_trips::{TripEnd, TripStats};
+use autoplug_vin::Vin;
+use common::{runtime, PgSchema, PrivateBroker};
+
+/// A car as the gateway is one: its own login and persistent session, QoS 1, publishes
+/// kept and sent again by the client while the broker is away. One report in flight at a
+/// time, so the n-th PUBACK acknowledges the n-th report: `acked` says exactly which
+/// reports the broker took responsibility for.
+struct Car {
+    vin: Vin,
+    client: rumqttc::AsyncClient,
+    acked: Arc<AtomicUsize>,
+    published: usize,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Car {
+    fn start(rt: &tokio::runtime::Runtime, broker: &PrivateBroker, vin: Vin) -> Self {
+        let mut options = rumqttc::MqttOptions::new(vin.to_string(), "127.0.0.1", broker.port);
+        options
+            .set_credentials(vin.to_string(), format!("pw-{vin}"))
+            .set_clean_session(false)
+            .set_keep_alive(Duration::from_secs(5))
+            .set_inflight(1);
+        let (client, mut eventloop) = rumqttc::AsyncClient::new(options, 1024);
+        let acked = Arc::new(AtomicUsize::new(0));
+        let count = acked.clone();
+        let task = rt.spawn(async move {
+            loop {
+                match eventloop.poll().await {
+                    Ok(rumqttc::Event::Incoming(rumqttc::Packet::PubAck(_))) => {
+                        count.fetch_add(1, Ordering::SeqCst);
+                    }
+                    Ok(_) => {}
+                    // The broker is away: the client reconnects on the next poll; this is
+                    // its retry pace, not a synchronisation.
+                    Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+                }
+            }
+        });
+        Self {
+            vin,
+            client,
+            acked,
+            published: 0,
+            task,
+        }
+    }
+
+    /// Publishes its next `n` trips (numbered from 1 up).
+    fn publish(&mut self, n: usize) {
+        for _ in 0..n {
+            self.published += 1;
+            let trip = trip(&self.vin, self.published as i64);
+            self.client
+                .try_publish(
+                    topics::report(&self.vin, ReportKind::Trip),
+                    rumqttc::QoS::AtLeastOnce,
+                    false,
+                    serde_json::to_vec(&trip).unwrap(),
+                )
+                .unwrap();
+        }
+    }
+
+    fn acked(&self) -> usize {
+        self.acked.load(Ordering::SeqCst)
+    }
+}
+
+impl Drop for Car {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+fn trip(vin: &Vin, n: i64) -> TripReport {
+    TripReport {
+        vin: vin.to_string(),
+        trip: n,
+        started_at_ms: n * 1000,
+        ended_at_ms: n * 1000 + 500,
+        stats: TripStats::default(),
+        end: TripEnd::Parked,
+        verdicts: Vec::new(),
+        dtcs: Vec::new(),
+    }
+}
+
+fn vins(n: u32) -> Vec<Vin> {
+    (0..n)
+        .map(|i| Vin::with_check_digit(&format!("JA3AP47H0YF{:06}", 100 + i)).unwrap())
+        .collect()
+}
+
+/// Waits for `done`, at most `timeout`; panics with `what` and the state otherwise.
+fn wait_for(what: &str, timeout: Duration, mut done: impl FnMut() -> Result<(), String>) {
+    let deadline = Instant::now() + timeout;
+    loop {
+        match done() {
+            Ok(()) => return,
+            Err(state) if Instant::now() >= deadline => {
+                panic!("{what} not within {timeout:?}: {state}")
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+}
+
+/// A fleet service's intake as `autoplug fleet serve` runs it (persistent session, the
+/// shared subscription, manual acks), on its own thread until `stop`.
+fn service(
+    rt: &tokio::runtime::Runtime,
+    broker: &PrivateBroker,
+    schema: &PgSchema,
+    client_id: &str,
+    stop: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<(IngestStats, LinkStatus)> {
+    let mut options = LinkOptions::new(client_id);
+    options.persistent_session = true;
+    options.manual_acks = true;
+    options.subscriptions = vec![topics::REPORTS_SHARED.to_string()];
+    let link = MqttLink::connect(rt.handle(), &broker.url(FLEET_USER, "pw-fleet"), options);
+    link.wait_connected(Duration::from_secs(10)).unwrap();
+    wait_for("the service's SUBACK", Duration::from_secs(10), || {
+        let s = link.status();
+        (s.granted.len() == 1).then_some(()).ok_or(format!("{s:?}"))
+    });
+    let store = FleetStore::open(&schema.url).unwrap();
+    std::thread::spawn(move || {
+        let mut ingest = Ingest::new(store, link);
+        ingest.run(&stop, Duration::from_millis(50), |_| {});
+        (ingest.stats, ingest.link.status())
+    })
+}
+
+fn stored_trips(store: &mut FleetStore) -> i64 {
+    store.summary().unwrap().trips
+}
+
+/// Trips stored per VIN, and the most any one (VIN, trip) is stored.
+fn stored_per_vin(schema: &PgSchema) -> (Vec<(String, i64)>, i64) {
+    let mut db = postgres::Client::connect(&schema.url, postgres::NoTls).unwrap();
+    let per_vin = db
+        .query(
+            "SELECT vin, count(*) FROM trips GROUP BY vin ORDER BY vin",
+            &[],
+        )
+        .unwrap()
+        .iter()
+        .map(|r| (r.get::<_, String>(0), r.get::<_, i64>(1)))
+        .collect();
+    let most = db
+        .query_one(
+            "SELECT coalesce(max(c), 0) FROM (SELECT count(*) AS c FROM trips GROUP BY vin, trip) t",
+            &[],
+        )
+        .unwrap()
+        .get::<_, i64>(0);
+    (per_vin, most)
+}
+
+fn broker_with_logins(cars: &[Vin]) -> PrivateBroker {
+    let broker = PrivateBroker::start();
+    broker.add_login(FLEET_USER, "pw-fleet");
+    for v in cars {
+        broker.add_login(v.as_str(), &format!("pw-{v}"));
+    }
+    broker
+}
+
+#[test]
+fn two_services_and_a_campaign_publisher_log_in_side_by_side_and_store_every_report_once() {
+    const PER_CAR: usize = 100;
+    let vins = vins(3);
+    let broker = broker_with_logins(&vins);
+    let schema = PgSchema::new();
+    let rt = runtime();
+    let stop = Arc::new(AtomicBool::new(false));
+    // Two services of one group, as the README scales out: distinct client ids, one login.
+    let a = service(&rt, &broker, &schema, "fleet-a", stop.clone());
+    let b = service(&rt, &broker, &schema, "fleet-b", stop.clone());
+    let mut check = FleetStore::open(&schema.url).unwrap();
+
+    let mut cars: Vec<Car> = vins.iter().map(|v| Car::start(&rt, &broker, *v)).collect();
+    for car in &mut cars {
+        car.publish(PER_CAR / 2);
+    }
+    // `fleet campaign create` meanwhile: the image published retained by a third fleet
+    // process (the publisher's own client id, clean session, as the CLI's), which then
+    // leaves.
+    let mut options = LinkOptions::new(format!("autoplug-fleet-publisher-{}", std::process::id()));
+    options.max_backoff = Duration::from_millis(200);
+    let publisher = MqttLink::connect(rt.handle(), &broker.url(FLEET_USER, "pw-fleet"), options);
+    publisher.wait_connected(Duration::from_secs(10)).unwrap();
+    publisher
+        .publish(
+            &topics::image(&"ab".repeat(32)),
+            vec![0x5a; 64 * 1024],
+            true,
+        )
+        .unwrap();
+    publisher.close(Duration::from_secs(10));
+    for car in &mut cars {
+        car.publish(PER_CAR / 2);
+    }
+    wait_for("every report's PUBACK", Duration::from_secs(60), || {
+        let acked: Vec<usize> = cars.iter().map(Car::acked).collect();
+        acked
+            .iter()
+            .all(|&a| a == PER_CAR)
+            .then_some(())
+            .ok_or(format!("{acked:?}"))
+    });
+    let acked: usize = cars.iter().map(Car::acked).sum();
+    // What the broker acknowledged must reach the store; give it the time to.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while stored_trips(&mut check) < acked as i64 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let stored = stored_trips(&mut check);
+    stop.store(true, Ordering::Relaxed);
+    let (stats_a, link_a) = a.join().unwrap();
+    let (stats_b, link_b) = b.join().unwrap();
+    let (per_vin, most) = stored_per_vin(&schema);
+    eprintln!(
+        "two services: {} published, {acked} acknowledged, {stored} stored ({} by fleet-a, {} by fleet-b, {} redelivered); connections: fleet-a {}, fleet-b {}",
+        cars.iter().map(|c| c.published).sum::<usize>(),
+        stats_a.trips,
+        stats_b.trips,
+        stats_a.duplicates + stats_b.duplicates,
+        link_a.connects,
+        link_b.connects,
+    );
+    // Neither service was thrown off by the other or by the publisher.
+    assert_eq!(
+        (link_a.connects, link_b.connects),
+        (1, 1),
+        "a fleet login evicted a service: {link_a:?} {link_b:?}"
+    );
+    assert_eq!(
+        stored, acked as i64,
+        "every acknowledged report is stored: {per_vin:?}"
+    );
+    assert_eq!(most, 1, "a report stored twice");
+    assert!(
+        stats_a.trips > 0 && stats_b.trips > 0,
+        "both services take reports: {} and {}",
+        stats_a.trips,
+        stats_b.trips
+    );
+    assert_eq!(stats_a.trips + stats_b.trips, acked as u64);
+}
+
+#[test]
+fn a_vehicle_cannot_log_in_where_the_fleet_picks_its_own_client_ids() {
+    let vins = vins(1);
+    let broker = broker_with_logins(&vins);
+    let rt = runtime();
+    let vin = vins[0].to_string();
+    // On the fleet's listener a client names its own client id: a car there could take
+    // over another car's session, so its login is not valid there.
+    let mut options = LinkOptions::new("JA3AP47H2YF000043");
+    options.max_backoff = Duration::from_millis(200);
+    let car = MqttLink::connect(
+        rt.handle(),
+        &broker.url_at(broker.fleet_port, &vin, &format!("pw-{vin}")),
+        options,
+    );
+    let refused = car.wait_connected(Duration::from_secs(5)).unwrap_err();
+    assert!(refused.0.contains("refused the login"), "{refused}");
+    // Nor is the fleet's login valid on the vehicles' listener.
+    let mut options = LinkOptions::new("fleet-x");
+    options.max_backoff = Duration::from_millis(200);
+    let fleet = MqttLink::connect(
+        rt.handle(),
+        &broker.url_at(broker.port, FLEET_USER, "pw-fleet"),
+        options,
+    );
+    let refused = fleet.wait_connected(Duration::from_secs(5)).unwrap_err();
+    assert!(refused.0.contains("refused the login"), "{refused}");
+}
