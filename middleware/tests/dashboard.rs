@@ -2,23 +2,15 @@
 //! page, the write token, and what the API answers to good and bad requests. (The page
 //! itself is driven in a real browser by scripts/dashboard-test.)
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::process::{Child, Command, Stdio};
+mod common;
+
+use std::io::{Read, Write};
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const TOKEN: &str = "dashboard-test-token-0001";
 
-struct Dashboard {
-    child: Child,
-    addr: String,
-}
-
-impl Drop for Dashboard {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+type Dashboard = common::RunningDashboard;
 
 fn start(data: &std::path::Path) -> Dashboard {
     start_with(data, &[])
@@ -42,22 +34,8 @@ fn dashboard_command(data: &std::path::Path, extra: &[&str]) -> Command {
     command
 }
 
-fn launch(mut command: Command) -> Dashboard {
-    let mut child = command.spawn().expect("autoplug runs");
-    let stdout = child.stdout.take().expect("stdout");
-    let mut lines = BufReader::new(stdout).lines();
-    let addr = lines
-        .by_ref()
-        .map_while(Result::ok)
-        .find_map(|line| {
-            line.strip_prefix("dashboard on http://")
-                .and_then(|rest| rest.strip_suffix(&format!("/#token={TOKEN}")))
-                .map(str::to_string)
-        })
-        .expect("the page's address, with the token, is printed");
-    // Keep reading: a closed pipe would end the program at its next line of output.
-    std::thread::spawn(move || lines.for_each(drop));
-    Dashboard { child, addr }
+fn launch(command: Command) -> Dashboard {
+    common::launch_dashboard(command, TOKEN)
 }
 
 /// One HTTP request: the status and the body.

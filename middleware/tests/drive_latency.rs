@@ -10,9 +10,11 @@
 //! second); `scripts/drive-latency-bench` runs the longer measurement and prints p50, p99
 //! and the worst.
 
-use std::io::{BufRead, BufReader, Read, Write};
+mod common;
+
+use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -23,42 +25,24 @@ const TOKEN: &str = "drive-latency-token-0001";
 /// The brake pressed, pedal units (PedalBrake's byte 0 carries it).
 const PRESSED: u8 = 40;
 
+/// The dashboard, and its data folder (the recordings).
 struct Dashboard {
-    child: Child,
-    addr: String,
+    running: common::RunningDashboard,
     data: tempfile::TempDir,
-}
-
-impl Drop for Dashboard {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 fn start() -> Dashboard {
     let data = tempfile::tempdir().unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_autoplug"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_autoplug"));
+    command
         .args(["dashboard", "--listen", "127.0.0.1:0", "--duration", "600"])
         .arg("--data")
         .arg(data.path())
         .args(["--token", TOKEN])
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("autoplug runs");
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let addr = lines
-        .by_ref()
-        .map_while(Result::ok)
-        .find_map(|line| {
-            line.strip_prefix("dashboard on http://")
-                .and_then(|rest| rest.strip_suffix(&format!("/#token={TOKEN}")))
-                .map(str::to_string)
-        })
-        .expect("the page's address");
-    std::thread::spawn(move || lines.for_each(drop));
-    Dashboard { child, addr, data }
+        .stderr(Stdio::null());
+    let running = common::launch_dashboard(command, TOKEN);
+    Dashboard { running, data }
 }
 
 fn post(addr: &str, path: &str, body: &str) -> u16 {
@@ -83,14 +67,16 @@ fn stream(addr: &str) -> WebSocket<TcpStream> {
 /// The bus time an update carries, s.
 fn update_time(text: &str) -> Option<f64> {
     let value: serde_json::Value = serde_json::from_str(text).ok()?;
-    (value["type"] == "update").then(|| value["t"].as_f64()).flatten()
+    (value["type"] == "update")
+        .then(|| value["t"].as_f64())
+        .flatten()
 }
 
 /// Drives for `seconds` at `rate` inputs a second beside `watchers` other streams; the
 /// latency of each press and release, s.
 fn drive(rate: u32, watchers: usize, seconds: f64) -> Vec<f64> {
     let dash = start();
-    let addr = dash.addr.clone();
+    let addr = dash.running.addr.clone();
     let stop = Arc::new(AtomicBool::new(false));
     let others: Vec<_> = (0..watchers)
         .map(|_| {
@@ -108,7 +94,9 @@ fn drive(rate: u32, watchers: usize, seconds: f64) -> Vec<f64> {
     assert_eq!(post(&addr, "/api/recording", r#"{"on":true}"#), 200);
     let mut socket = stream(&addr);
     socket
-        .send(Message::text(format!(r#"{{"type":"auth","token":"{TOKEN}"}}"#)))
+        .send(Message::text(format!(
+            r#"{{"type":"auth","token":"{TOKEN}"}}"#
+        )))
         .unwrap();
     socket
         .get_mut()
@@ -192,7 +180,9 @@ fn drive(rate: u32, watchers: usize, seconds: f64) -> Vec<f64> {
             let reached = frames
                 .iter()
                 .find(|&&(t, v)| t >= bus && v == value)
-                .unwrap_or_else(|| panic!("the brake at {value} sent at {bus:.3} s never reached the bus"));
+                .unwrap_or_else(|| {
+                    panic!("the brake at {value} sent at {bus:.3} s never reached the bus")
+                });
             reached.0 - bus
         })
         .collect()
@@ -225,7 +215,11 @@ fn a_brake_pressed_on_the_page_reaches_the_bus_without_a_backlog() {
         let mut latencies = drive(rate, 10, 4.0);
         assert!(latencies.len() >= 5, "{latencies:?}");
         let (_, _, worst) = report(rate, 10, &mut latencies);
-        assert!(worst < 0.3, "a press {:.0} ms late at {rate}/s", worst * 1e3);
+        assert!(
+            worst < 0.3,
+            "a press {:.0} ms late at {rate}/s",
+            worst * 1e3
+        );
     }
 }
 

@@ -629,3 +629,37 @@ pub fn serve_ecus(server: &SocketcandServer, nodes: &[Node], stop: &AtomicBool) 
     }
     ecus.into_iter().map(|(backend, ..)| backend).collect()
 }
+
+/// A running `autoplug dashboard` and the address it printed; killed when dropped.
+pub struct RunningDashboard {
+    pub child: std::process::Child,
+    pub addr: String,
+}
+
+impl Drop for RunningDashboard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Starts `command` (`autoplug dashboard ... --token TOKEN`, its output piped) and waits
+/// for the page's address it prints.
+pub fn launch_dashboard(mut command: std::process::Command, token: &str) -> RunningDashboard {
+    use std::io::BufRead;
+    let mut child = command.spawn().expect("autoplug runs");
+    let stdout = child.stdout.take().expect("stdout");
+    let mut lines = std::io::BufReader::new(stdout).lines();
+    let addr = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|line| {
+            line.strip_prefix("dashboard on http://")
+                .and_then(|rest| rest.strip_suffix(&format!("/#token={token}")))
+                .map(str::to_string)
+        })
+        .expect("the page's address, with the token, is printed");
+    // Keep reading: a closed pipe would end the program at its next line of output.
+    thread::spawn(move || lines.for_each(drop));
+    RunningDashboard { child, addr }
+}
