@@ -139,7 +139,15 @@ pub struct Ingest {
     pub link: MqttLink,
     /// What it did.
     pub stats: IngestStats,
+    /// What an operator should see now (the database failing and back), oldest first;
+    /// taken by [`Ingest::take_notices`].
+    notices: VecDeque<String>,
+    /// Database errors in a row, since the last report stored.
+    db_failures: u64,
 }
+
+/// Notices kept until taken (older ones are dropped: the last say most).
+const MAX_NOTICES: usize = 64;
 
 /// Longest wait between two tries of a database that fails.
 const MAX_DB_BACKOFF: Duration = Duration::from_secs(10);
@@ -151,7 +159,21 @@ impl Ingest {
             store,
             link,
             stats: IngestStats::default(),
+            notices: VecDeque::new(),
+            db_failures: 0,
         }
+    }
+
+    /// The notices for the operator since the last call, oldest first.
+    pub fn take_notices(&mut self) -> Vec<String> {
+        self.notices.drain(..).collect()
+    }
+
+    fn notice(&mut self, text: String) {
+        if self.notices.len() >= MAX_NOTICES {
+            self.notices.pop_front();
+        }
+        self.notices.push_back(text);
     }
 
     /// Handles one message: stored and acknowledged, or refused and acknowledged; a
@@ -162,6 +184,12 @@ impl Ingest {
         loop {
             match handle(&mut self.store, &message.topic, &message.payload) {
                 Ok(handled) => {
+                    if self.db_failures > 0 {
+                        let tries = std::mem::take(&mut self.db_failures);
+                        self.notice(format!(
+                            "the database answers again, after {tries} failed tries: storing"
+                        ));
+                    }
                     match &handled {
                         Handled::Inventory(_) => self.stats.inventories += 1,
                         Handled::Trip(Stored::New) => self.stats.trips += 1,
@@ -180,7 +208,14 @@ impl Ingest {
                     let _ = self.link.ack(message);
                     return None;
                 }
-                Err(Refused::Db(_)) => {
+                Err(Refused::Db(error)) => {
+                    if self.db_failures == 0 {
+                        self.notice(format!(
+                            "the database failed ({error}): reports stay unacknowledged and are tried again, at most every {} s",
+                            MAX_DB_BACKOFF.as_secs()
+                        ));
+                    }
+                    self.db_failures += 1;
                     self.stats.db_retries += 1;
                     if stop.load(Ordering::Relaxed) {
                         return None;

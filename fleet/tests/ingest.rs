@@ -9,11 +9,12 @@ use std::time::Duration;
 use autoplug_fleet::ingest::{Handled, Ingest};
 use autoplug_fleet::mqtt::{Broker, LinkOptions, MqttLink};
 use autoplug_fleet::topics::{self, ReportKind};
+use autoplug_fleet::FleetStore;
 use autoplug_fleet::{InventoryReport, Stored, TripReport};
 use autoplug_store::EcuIdentity;
 use autoplug_trips::{TripEnd, TripStats};
 use autoplug_vin::Vin;
-use common::{broker_url, engines, runtime};
+use common::{broker_url, engines, postgres_url, runtime, PgSchema};
 
 fn inventory(vin: &Vin) -> InventoryReport {
     InventoryReport {
@@ -147,6 +148,106 @@ fn reports_through_the_broker_are_stored_once_and_bad_ones_refused() {
             engine.label()
         );
     }
+}
+
+/// The service's database connection ended by the server (a restart, a failover, an
+/// administrator) in the middle of an intake: the next try makes it again, says so, and
+/// every report is stored; none is acknowledged before it is.
+#[test]
+fn a_database_connection_ended_mid_intake_is_made_again_and_nothing_is_lost() {
+    let rt = runtime();
+    let broker: Broker = broker_url().parse().unwrap();
+    let schema = PgSchema::new();
+    let serial = std::process::id() % 100_000 * 10 + 7;
+    let vin = Vin::with_check_digit(&format!("JA3AP47H0YH{serial:06}")).unwrap();
+    let mut options = LinkOptions::new(format!("ingest-db-test-{serial}"));
+    options.manual_acks = true;
+    options.subscriptions = vec![format!("autoplug/v1/vehicles/{vin}/report/#")];
+    let link = MqttLink::connect(rt.handle(), &broker, options);
+    link.wait_connected(Duration::from_secs(5))
+        .unwrap_or_else(|e| panic!("{e} (scripts/setup-tests installs and starts Mosquitto)"));
+    while link.status().granted.is_empty() {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let car = MqttLink::connect(
+        rt.handle(),
+        &broker,
+        LinkOptions::new(format!("db-car-{serial}")),
+    );
+    car.wait_connected(Duration::from_secs(5)).unwrap();
+    let publish = |trips: std::ops::Range<i64>| {
+        for n in trips {
+            let report = TripReport {
+                trip: n,
+                ..trip(&vin)
+            };
+            let payload = serde_json::to_vec(&report).unwrap();
+            car.publish(&topics::report(&vin, ReportKind::Trip), payload, false)
+                .unwrap();
+        }
+    };
+    let store = FleetStore::open(&schema.url).unwrap();
+    let mut ingest = Ingest::new(store, link);
+    // A database that never comes back keeps `take` retrying until `stop`: after 30 s the
+    // test stops it, and fails on what was stored.
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_secs(30));
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        });
+    }
+    let backend = |store: &mut FleetStore| match store
+        .db()
+        .query("SELECT pg_backend_pid()::BIGINT", &[])
+        .unwrap()[0][0]
+    {
+        autoplug_fleet::db::Value::Int(pid) => pid,
+        ref other => panic!("{other:?}"),
+    };
+    let take_until = |ingest: &mut Ingest, trips: u64| {
+        let give_up = std::time::Instant::now() + Duration::from_secs(25);
+        while ingest.stats.trips < trips {
+            assert!(
+                std::time::Instant::now() < give_up,
+                "{} of {trips} trips stored in 25 s: {:?}",
+                ingest.stats.trips,
+                ingest.stats
+            );
+            if let Some(message) = ingest.link.recv_timeout(Duration::from_millis(200)) {
+                ingest.take(&message, &stop);
+            }
+        }
+    };
+    publish(1..21);
+    take_until(&mut ingest, 20);
+    let before = backend(&mut ingest.store);
+    // An administrator ends the service's connection.
+    let mut admin = postgres::Client::connect(&postgres_url(), postgres::NoTls).unwrap();
+    let ended: bool = admin
+        .query_one("SELECT pg_terminate_backend($1::INT)", &[&(before as i32)])
+        .unwrap()
+        .get(0);
+    assert!(ended);
+    publish(21..41);
+    take_until(&mut ingest, 40);
+    assert_ne!(backend(&mut ingest.store), before, "a new connection");
+    assert_eq!(ingest.stats.duplicates, 0);
+    assert_eq!(ingest.store.summary().unwrap().trips, 40);
+    let notices = ingest.take_notices();
+    assert!(
+        notices
+            .iter()
+            .any(|n| n.starts_with("the database failed (")),
+        "{notices:?}"
+    );
+    assert!(
+        notices
+            .iter()
+            .any(|n| n.starts_with("the database answers again, after ")),
+        "{notices:?}"
+    );
 }
 
 /// Serialising the two report types through one closure.

@@ -1026,6 +1026,10 @@ fn serve(
         && duration.is_none_or(|d| started.elapsed().as_secs_f64() < d)
     {
         service.step(&stop, Duration::from_millis(50));
+        // As they happen, so an operator sees a database that fails, and its return.
+        for notice in service.ingest.take_notices() {
+            eprintln!("fleet: {notice}");
+        }
     }
     let sends = service.sends_campaigns();
     let (sent, failure) = (service.sent, service.failure.take());

@@ -20,11 +20,18 @@ const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 /// built from a recall's filters is one of a few shapes).
 const STATEMENT_CACHE: usize = 256;
 
-/// A connection to a PostgreSQL database.
+/// A connection to a PostgreSQL database. A connection that dies (the server restarted
+/// or failed over, an administrator or an idle timeout ended it) is made again at the next
+/// statement outside a transaction; inside one the statement fails, and with it the
+/// transaction, which its caller runs again from the start.
 pub struct PostgresDb {
     client: Client,
+    config: Config,
     name: String,
     statements: HashMap<String, Statement>,
+    /// A transaction is open on this connection (no reconnecting under it: its work would
+    /// be lost, and a COMMIT on a new connection succeeds with nothing to commit).
+    in_transaction: bool,
 }
 
 impl PostgresDb {
@@ -50,9 +57,28 @@ impl PostgresDb {
             .map_err(|e| fail(&name, format!("cannot connect: {}", full_error(&e))))?;
         Ok(Self {
             client,
+            config,
             name,
             statements: HashMap::new(),
+            in_transaction: false,
         })
+    }
+
+    /// Makes the connection again if it was lost and no transaction is open on it.
+    fn live(&mut self) -> Result<(), DbError> {
+        if !self.client.is_closed() || self.in_transaction {
+            return Ok(());
+        }
+        self.client = self.config.connect(NoTls).map_err(|e| DbError {
+            database: self.name.clone(),
+            message: format!(
+                "the connection was lost and cannot be made again: {}",
+                full_error(&e)
+            ),
+        })?;
+        // Prepared statements belonged to the old connection.
+        self.statements.clear();
+        Ok(())
     }
 
     fn fail(&self, sql: &str, e: &postgres::Error) -> DbError {
@@ -195,6 +221,7 @@ impl Db for PostgresDb {
     }
 
     fn execute(&mut self, sql: &str, params: &[Value]) -> Result<u64, DbError> {
+        self.live()?;
         let statement = self.statement(sql)?;
         self.client
             .execute(&statement, &Self::params(params))
@@ -202,6 +229,7 @@ impl Db for PostgresDb {
     }
 
     fn query(&mut self, sql: &str, params: &[Value]) -> Result<Vec<Row>, DbError> {
+        self.live()?;
         let statement = self.statement(sql)?;
         let rows = self
             .client
@@ -214,21 +242,29 @@ impl Db for PostgresDb {
     }
 
     fn batch(&mut self, sql: &str) -> Result<(), DbError> {
+        self.live()?;
         self.client
             .batch_execute(sql)
             .map_err(|e| self.fail(sql, &e))
     }
 
     fn begin(&mut self) -> Result<(), DbError> {
-        self.batch("BEGIN")
+        self.batch("BEGIN")?;
+        self.in_transaction = true;
+        Ok(())
     }
 
     fn commit(&mut self) -> Result<(), DbError> {
-        self.batch("COMMIT")
+        // Over whatever the outcome: a failed COMMIT ends the transaction too.
+        let result = self.batch("COMMIT");
+        self.in_transaction = false;
+        result
     }
 
     fn rollback(&mut self) -> Result<(), DbError> {
-        self.batch("ROLLBACK")
+        let result = self.batch("ROLLBACK");
+        self.in_transaction = false;
+        result
     }
 }
 
