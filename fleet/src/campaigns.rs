@@ -409,7 +409,9 @@ impl FleetStore {
         }
         transaction(self.db(), |db| -> Result<(), StoreError> {
             let rows = db.query(
-                "SELECT state, attempts FROM campaign_vehicles WHERE campaign = $1 AND vin = $2",
+                "SELECT v.state, v.attempts, c.state FROM campaign_vehicles v
+                 JOIN campaigns c ON c.id = v.campaign
+                 WHERE v.campaign = $1 AND v.vin = $2",
                 &[
                     Value::Int(report.campaign),
                     Value::from(report.vin.as_str()),
@@ -421,10 +423,47 @@ impl FleetStore {
                     report.vin, report.campaign
                 )));
             };
+            // A campaign is finished once every vehicle has a final state (or cancelled): a
+            // report after that is a replay (a captured instruction offered again) or a stray, and
+            // would rewrite what the campaign ended with.
+            let campaign_state = CampaignState::parse(&text(row, 2).unwrap_or_default());
+            if matches!(
+                campaign_state,
+                CampaignState::Finished | CampaignState::Cancelled
+            ) {
+                return Err(invalid(format!(
+                    "{}: a '{}' report for campaign {}, which is {}",
+                    report.vin,
+                    report.state.name(),
+                    report.campaign,
+                    campaign_state.name()
+                )));
+            }
             let state = text(row, 0)
                 .and_then(|s| VehicleState::parse(&s))
                 .unwrap_or(VehicleState::Waiting);
             let attempts = int(row, 1);
+            // The vehicle sends a report again until its receipt comes: the same report
+            // twice is one event, and an older one after a newer is kept in the audit
+            // trail only. Compared with the vehicle's own reports only: the fleet's events
+            // ('sent'...) are on the fleet's clock.
+            let seen = db.query(
+                "SELECT at_ms, state FROM campaign_events
+                 WHERE campaign = $1 AND vin = $2 AND attempt = $3 AND at_ms >= $4
+                   AND state NOT IN ('waiting', 'sent', 'no_answer')",
+                &[
+                    Value::Int(report.campaign),
+                    Value::from(report.vin.as_str()),
+                    Value::Int(report.attempt.into()),
+                    Value::Int(report.at_ms),
+                ],
+            )?;
+            if seen.iter().any(|r| {
+                int(r, 0) == report.at_ms && text(r, 1).as_deref() == Some(report.state.name())
+            }) {
+                return Ok(());
+            }
+            let stale = seen.iter().any(|r| int(r, 0) > report.at_ms);
             db.execute(
                 "INSERT INTO campaign_events (campaign, vin, at_ms, attempt, state, reason)
                  VALUES ($1, $2, $3, $4, $5, $6)",
@@ -437,7 +476,7 @@ impl FleetStore {
                     Value::from(report.reason.clone()),
                 ],
             )?;
-            if i64::from(report.attempt) < attempts || state == VehicleState::Installed {
+            if i64::from(report.attempt) < attempts || state == VehicleState::Installed || stale {
                 return Ok(());
             }
             db.execute(

@@ -7,18 +7,29 @@
 //! only once it is stored (manual acks): a service that dies mid-way leaves it with the
 //! broker for the next one. A bad report is acknowledged too, counted and kept among the
 //! last rejections, so it cannot come back for ever.
+//!
+//! After the commit (or the refusal) the vehicle gets a [`Receipt`] on its receipt topic:
+//! it keeps the report until then and publishes it again meanwhile ([`crate::outbox`]), so
+//! a report the broker acknowledged and then lost still arrives. Each refusal is also a
+//! notice for the operator as it happens, [`REFUSALS_SHOWN`] per [`REFUSAL_WINDOW`] at most
+//! and the rest counted, so a car whose reports are refused is seen at once.
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use crate::mqtt::{Message, MqttLink};
-use crate::report::{InventoryReport, TripReport, MAX_REPORT_BYTES};
+use crate::report::{InventoryReport, Receipt, TripReport, MAX_REPORT_BYTES};
 use crate::store::{FleetStore, StoreError, Stored};
 use crate::topics::{self, ReportKind};
 
 /// Rejections kept for the report.
 pub const KEPT_REJECTIONS: usize = 20;
+
+/// Refusals shown as notices per [`REFUSAL_WINDOW`]; the rest are counted in one notice.
+pub const REFUSALS_SHOWN: u32 = 5;
+/// See [`REFUSALS_SHOWN`].
+pub const REFUSAL_WINDOW: Duration = Duration::from_secs(10);
 
 /// What the intake did so far.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -144,6 +155,10 @@ pub struct Ingest {
     notices: VecDeque<String>,
     /// Database errors in a row, since the last report stored.
     db_failures: u64,
+    /// The refusal notices' window: its start, shown in it, counted and not shown.
+    refusal_window: (Instant, u32, u64),
+    /// Receipts the connection did not take (the vehicle sends the report again).
+    pub receipts_not_sent: u64,
 }
 
 /// Notices kept until taken (older ones are dropped: the last say most).
@@ -161,12 +176,63 @@ impl Ingest {
             stats: IngestStats::default(),
             notices: VecDeque::new(),
             db_failures: 0,
+            refusal_window: (Instant::now(), 0, 0),
+            receipts_not_sent: 0,
         }
     }
 
     /// The notices for the operator since the last call, oldest first.
     pub fn take_notices(&mut self) -> Vec<String> {
+        self.roll_refusal_window();
         self.notices.drain(..).collect()
+    }
+
+    /// A window over: the refusals it did not show, in one notice.
+    fn roll_refusal_window(&mut self) {
+        let (start, _, hidden) = self.refusal_window;
+        if start.elapsed() < REFUSAL_WINDOW {
+            return;
+        }
+        self.refusal_window = (Instant::now(), 0, 0);
+        if hidden > 0 {
+            self.notice(format!(
+                "refused {hidden} more reports in the last {} s ({} refused since start)",
+                REFUSAL_WINDOW.as_secs(),
+                self.stats.rejected
+            ));
+        }
+    }
+
+    fn refusal_notice(&mut self, topic: &str, reason: &str) {
+        self.roll_refusal_window();
+        let (_, shown, hidden) = &mut self.refusal_window;
+        if *shown < REFUSALS_SHOWN {
+            *shown += 1;
+            let total = self.stats.rejected;
+            let what = match topics::parse_report(topic) {
+                Ok((vin, kind)) => format!("a {} report of {vin}", kind.name()),
+                Err(_) => "a message that is not a report".to_string(),
+            };
+            self.notice(format!("refused {what} ({total} since start): {reason}"));
+        } else {
+            *hidden += 1;
+        }
+    }
+
+    /// Tells the vehicle of `message` that its report is done with (stored, or refused
+    /// for `refused`); a topic that names no vehicle gets none.
+    fn receipt(&mut self, message: &Message, refused: Option<String>) {
+        let Ok((vin, _)) = topics::parse_report(&message.topic) else {
+            return;
+        };
+        let receipt = Receipt::of(&message.payload, refused);
+        if self
+            .link
+            .publish(&topics::receipt(&vin), receipt.to_json(), false)
+            .is_err()
+        {
+            self.receipts_not_sent += 1;
+        }
     }
 
     fn notice(&mut self, text: String) {
@@ -196,6 +262,7 @@ impl Ingest {
                         Handled::Trip(Stored::Duplicate) => self.stats.duplicates += 1,
                         Handled::Campaign => self.stats.campaign_reports += 1,
                     }
+                    self.receipt(message, None);
                     let _ = self.link.ack(message);
                     return Some(handled);
                 }
@@ -204,7 +271,9 @@ impl Ingest {
                     if self.stats.last_rejections.len() >= KEPT_REJECTIONS {
                         self.stats.last_rejections.pop_front();
                     }
-                    self.stats.last_rejections.push_back(reason);
+                    self.stats.last_rejections.push_back(reason.clone());
+                    self.refusal_notice(&message.topic, &reason);
+                    self.receipt(message, Some(reason));
                     let _ = self.link.ack(message);
                     return None;
                 }

@@ -14,6 +14,7 @@ pub mod db;
 pub mod ingest;
 pub mod migrations;
 pub mod mqtt;
+pub mod outbox;
 pub mod report;
 pub mod service;
 pub mod store;
@@ -21,7 +22,7 @@ pub mod testing;
 pub mod topics;
 pub mod vehicle;
 
-pub use report::{InventoryReport, ReportError, TripReport};
+pub use report::{InventoryReport, Receipt, ReportError, TripReport};
 pub use store::{
     Evidence, EvidenceHit, EvidenceQuery, Finding, FleetStore, FleetSummary, InventoryHit,
     InventoryQuery, StoreError, Stored,

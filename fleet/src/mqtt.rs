@@ -140,7 +140,7 @@ pub struct LinkOptions {
     /// Keep the session while disconnected: subscriptions stay, QoS 1 messages for the
     /// client are queued by the broker until it comes back.
     pub persistent_session: bool,
-    /// Topics to subscribe to (QoS 1), again after each connect without a kept session.
+    /// Topics to subscribe to (QoS 1), again after every connect.
     pub subscriptions: Vec<String>,
     /// Acknowledge what arrives only when the caller says so ([`MqttLink::ack`]): a
     /// message is then taken from the broker only once it is handled (stored).
@@ -196,6 +196,8 @@ pub struct LinkStatus {
     pub denied: Vec<String>,
     /// Subscriptions the broker granted since the last connect.
     pub granted: Vec<String>,
+    /// Publishes the broker acknowledged (PUBACK): it took them, which is not yet stored.
+    pub acknowledged: u64,
 }
 
 /// Why a request could not be made.
@@ -374,8 +376,8 @@ fn set(status: &Mutex<LinkStatus>, change: impl FnOnce(&mut LinkStatus)) {
     }
 }
 
-/// The connection's event loop: reconnects with a backoff, subscribes after each connect
-/// without a kept session, hands publishes to the caller.
+/// The connection's event loop: reconnects with a backoff, subscribes after every connect,
+/// hands publishes to the caller.
 async fn run(
     mut eventloop: rumqttc::EventLoop,
     client: AsyncClient,
@@ -387,7 +389,7 @@ async fn run(
     let mut backoff = options.backoff;
     loop {
         match eventloop.poll().await {
-            Ok(Event::Incoming(Packet::ConnAck(ack))) => {
+            Ok(Event::Incoming(Packet::ConnAck(_))) => {
                 backoff = options.backoff;
                 set(&status, |s| {
                     s.connected = true;
@@ -399,7 +401,12 @@ async fn run(
                 if let Ok(mut pending) = subscribing.lock() {
                     pending.clear();
                 }
-                if !ack.session_present && !options.subscriptions.is_empty() {
+                // Subscribe on every connection, kept session or not: Mosquitto 2.0 keeps a
+                // persistent session across its restart but not the session's shared
+                // (`$share/…`) subscriptions, so a service that trusted `session_present`
+                // stayed connected and subscribed to nothing. Subscribing again to what a
+                // session holds changes nothing else.
+                if !options.subscriptions.is_empty() {
                     if let Ok(mut pending) = subscribing.lock() {
                         pending.push_back(options.subscriptions.clone());
                     }
@@ -410,8 +417,6 @@ async fn run(
                     if let Err(e) = client.try_subscribe_many(filters) {
                         set(&status, |s| s.last_error = Some(format!("subscribe: {e}")));
                     }
-                } else if ack.session_present {
-                    set(&status, |s| s.granted = options.subscriptions.clone());
                 }
             }
             Ok(Event::Incoming(Packet::SubAck(ack))) => {
@@ -441,6 +446,7 @@ async fn run(
                     return; // The link was dropped.
                 }
             }
+            Ok(Event::Incoming(Packet::PubAck(_))) => set(&status, |s| s.acknowledged += 1),
             Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
                 set(&status, |s| s.connected = false);
                 // Let the DISCONNECT go out, then stop.

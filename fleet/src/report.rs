@@ -44,6 +44,55 @@ pub struct TripReport {
     pub dtcs: Vec<DtcRecord>,
 }
 
+/// The fleet's word on one report, sent to the vehicle after the report's transaction
+/// committed (or after it was refused for good): the vehicle keeps every report until its
+/// receipt comes, and publishes it again meanwhile ([`crate::outbox`]). A broker
+/// acknowledges a publish when it has queued it, which is not the same as stored: a
+/// broker restarted before the services have subscribed again drops what it took.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Receipt {
+    /// The report: SHA-256 of its payload, lower-case hex.
+    pub report: String,
+    /// Why it was refused (it will never be stored); none: stored.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refused: Option<String>,
+}
+
+/// Largest receipt a vehicle reads, bytes.
+pub const MAX_RECEIPT_BYTES: usize = 4 * 1024;
+
+impl Receipt {
+    /// The receipt of `payload`: stored, or refused for `refused`.
+    pub fn of(payload: &[u8], refused: Option<String>) -> Self {
+        Self {
+            report: crate::campaign::sha256_hex(payload),
+            // A reason is for a person; the receipt stays small whatever the report held.
+            refused: refused.map(|r| r.chars().take(300).collect()),
+        }
+    }
+
+    /// Its payload.
+    pub fn to_json(&self) -> Vec<u8> {
+        serde_json::to_vec(self).unwrap_or_default()
+    }
+
+    /// Reads a receipt; an error naming what is wrong.
+    pub fn parse(payload: &[u8]) -> Result<Self, String> {
+        if payload.len() > MAX_RECEIPT_BYTES {
+            return Err(format!(
+                "a receipt of {} bytes (at most {MAX_RECEIPT_BYTES})",
+                payload.len()
+            ));
+        }
+        let receipt: Receipt =
+            serde_json::from_slice(payload).map_err(|e| format!("not a receipt: {e}"))?;
+        if receipt.report.len() != 64 || !receipt.report.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return Err("a receipt whose report is not a SHA-256 in hex".into());
+        }
+        Ok(receipt)
+    }
+}
+
 /// Why a report was not taken.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ReportError(pub String);

@@ -314,6 +314,15 @@ impl FleetStore {
         let received = now_ms();
         transaction(self.db.as_mut(), |db| -> Result<_, StoreError> {
             Self::touch_vehicle(db, vin, received)?;
+            // A vehicle sends a report again until its receipt comes: an older inventory
+            // arriving after a newer one (its receipt was lost) must not undo it.
+            let newer = db.query(
+                "SELECT 1 FROM vehicles WHERE vin = $1 AND inventory_at_ms > $2",
+                &[Value::from(vin), Value::Int(report.read_at_ms)],
+            )?;
+            if !newer.is_empty() {
+                return Ok(Vec::new());
+            }
             db.execute(
                 "UPDATE vehicles SET inventory_at_ms = $2 WHERE vin = $1",
                 &[Value::from(vin), Value::Int(report.read_at_ms)],

@@ -7,6 +7,7 @@
 //! autoplug/v1/vehicles/{VIN}/report/trip        vehicle → fleet, QoS 1
 //! autoplug/v1/vehicles/{VIN}/report/campaign    vehicle → fleet, QoS 1
 //! autoplug/v1/vehicles/{VIN}/command/campaign   fleet → vehicle, QoS 1 (persistent session)
+//! autoplug/v1/vehicles/{VIN}/command/receipt    fleet → vehicle, QoS 1: a report stored (or refused)
 //! autoplug/v1/images/{sha256}                   fleet → vehicles, QoS 1, retained
 //! ```
 
@@ -66,6 +67,12 @@ pub fn report(vin: &Vin, kind: ReportKind) -> String {
 /// Where the fleet sends `vin` its campaign instructions.
 pub fn command(vin: &Vin) -> String {
     format!("{PREFIX}/vehicles/{vin}/command/campaign")
+}
+
+/// Where the fleet tells `vin` that one of its reports is stored (or refused for good):
+/// the vehicle keeps each report until then ([`crate::outbox`]).
+pub fn receipt(vin: &Vin) -> String {
+    format!("{PREFIX}/vehicles/{vin}/command/receipt")
 }
 
 /// Where an image is retained, by its SHA-256 (lower-case hex).

@@ -1422,7 +1422,7 @@ fn fleet_summary(fleet: &crate::fleet_link::FleetLink, out: &mut dyn Write) -> i
             "fleet: reported as {vin} to {}; {} report(s) waiting, {} dropped",
             fleet.broker(),
             fleet.waiting_reports(),
-            fleet.dropped_reports
+            fleet.dropped_reports()
         )?,
         (None, None) => {}
     }

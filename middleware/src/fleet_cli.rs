@@ -84,6 +84,7 @@ impl VehicleFleetArgs {
             fleet_key: crate::image_tool::read_public_key(fleet_key).map_err(|e| e.to_string())?,
             image_key: crate::image_tool::read_public_key(image_key).map_err(|e| e.to_string())?,
             security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
+            resend_after_ms: autoplug_fleet::outbox::RESEND_AFTER_MS,
         }))
     }
 }
@@ -464,6 +465,7 @@ fn simulate(
         fleet_key: crate::image_tool::read_public_key(fleet_key).map_err(|e| e.to_string())?,
         image_key: crate::image_tool::read_public_key(image_key).map_err(|e| e.to_string())?,
         security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
+        resend_after_ms: autoplug_fleet::outbox::RESEND_AFTER_MS,
     };
     let threads = threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))

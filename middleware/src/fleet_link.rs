@@ -6,7 +6,9 @@
 //! with the shipped broker configuration, its login), with a persistent session, so the
 //! campaign instructions sent while the car was off wait at the broker. The inventory goes
 //! out when it changes, every trip when it ends (with the verdicts and trouble codes it
-//! ended with). Reports wait in a bounded queue while the broker is away.
+//! ended with). Every report stays in a bounded outbox until the fleet's receipt says it is
+//! stored, and is published again while none comes ([`autoplug_fleet::outbox`]): a broker
+//! that acknowledged a report and lost it (a restart) costs a delay, not the report.
 //!
 //! Whether the car stands is judged from the bus: the vehicle speed at 0 km/h for
 //! [`STANDING_AFTER_US`]. A flash the driver agreed to waits for it.
@@ -17,6 +19,7 @@ use std::time::Duration;
 use autoplug_can::{Node, VehicleSpeedMsg};
 use autoplug_fleet::campaign::now_ms;
 use autoplug_fleet::mqtt::{Broker, LinkOptions, LinkStatus, MqttLink};
+use autoplug_fleet::outbox::{Confirmed, Outbox};
 use autoplug_fleet::vehicle::{Action, AgentConfig, FlashResult, Offer, VehicleAgent};
 use autoplug_fleet::TripReport;
 use autoplug_gateway::CarState;
@@ -30,7 +33,7 @@ use crate::tester::{FlashConfig, FlashJob, UdsError};
 /// The vehicle speed must read 0 km/h this long before the car counts as standing, µs of
 /// bus time (a stop, not a car rolling through 0 km/h).
 pub const STANDING_AFTER_US: u64 = 2_000_000;
-/// Reports kept while the broker is away; the oldest go first beyond it.
+/// Reports kept until the fleet confirms them; the oldest go first beyond it.
 pub const MAX_WAITING_REPORTS: usize = 256;
 /// Events kept for the dashboard.
 const MAX_EVENTS: usize = 20;
@@ -48,6 +51,9 @@ pub struct FleetConfig {
     pub image_key: [u8; PUBLIC_KEY_LEN],
     /// The SecurityAccess secret for flashing.
     pub security_secret: Vec<u8>,
+    /// How long a report waits for its receipt before it is published again, ms (doubling
+    /// each time): [`autoplug_fleet::outbox::RESEND_AFTER_MS`] unless a test is in a hurry.
+    pub resend_after_ms: i64,
 }
 
 /// The link (see the module docs).
@@ -56,17 +62,17 @@ pub struct FleetLink {
     runtime: tokio::runtime::Handle,
     agent: Option<VehicleAgent>,
     link: Option<MqttLink>,
-    /// Reports not yet taken by the link, in order.
-    waiting: VecDeque<(String, Vec<u8>)>,
+    /// Reports not yet confirmed by the fleet, in order.
+    outbox: Outbox,
     /// Trips that ended before the VIN was known (their `vin` is filled in then).
     held_trips: Vec<TripReport>,
     pending_flash: Option<(Node, Vec<u8>)>,
+    /// Trips that ended before the VIN was known, beyond what is held.
+    dropped_held: u64,
     offer: Option<Offer>,
     events: VecDeque<String>,
     zero_since_us: Option<u64>,
     standing: bool,
-    /// Reports dropped because the queue was full.
-    pub dropped_reports: u64,
     /// Why the link is not open, when it is not.
     pub not_connected: Option<String>,
 }
@@ -74,19 +80,20 @@ pub struct FleetLink {
 impl FleetLink {
     /// A link that opens once the VIN is read, its connection on `runtime`.
     pub fn new(config: FleetConfig, runtime: tokio::runtime::Handle) -> Self {
+        let outbox = Outbox::new(MAX_WAITING_REPORTS, config.resend_after_ms);
         Self {
             config,
             runtime,
             agent: None,
             link: None,
-            waiting: VecDeque::new(),
+            outbox,
             held_trips: Vec::new(),
             pending_flash: None,
+            dropped_held: 0,
             offer: None,
             events: VecDeque::new(),
             zero_since_us: None,
             standing: false,
-            dropped_reports: 0,
             not_connected: Some("waiting for the ECUs to answer the VIN".into()),
         }
     }
@@ -159,9 +166,25 @@ impl FleetLink {
         }
     }
 
-    /// Reports not yet handed to the connection.
+    /// Reports the fleet has not yet confirmed (sent or not).
     pub fn waiting_reports(&self) -> usize {
-        self.waiting.len()
+        self.outbox.len()
+    }
+
+    /// Reports dropped unconfirmed because the outbox was full (and trips that ended
+    /// before the VIN was known, beyond what is held).
+    pub fn dropped_reports(&self) -> u64 {
+        self.outbox.dropped + self.dropped_held
+    }
+
+    /// Reports the fleet confirmed stored, and refused.
+    pub fn confirmed_reports(&self) -> (u64, u64) {
+        (self.outbox.stored, self.outbox.refused)
+    }
+
+    /// Publishes of a report that had been published before (no receipt came in time).
+    pub fn resent_reports(&self) -> u64 {
+        self.outbox.resent
     }
 
     /// The driver's answer to the offer of `campaign`.
@@ -220,7 +243,10 @@ impl FleetLink {
     fn connect(&mut self, vin: autoplug_vin::Vin) {
         let mut options = LinkOptions::new(vin.to_string());
         options.persistent_session = true;
-        options.subscriptions = vec![autoplug_fleet::topics::command(&vin)];
+        options.subscriptions = vec![
+            autoplug_fleet::topics::command(&vin),
+            autoplug_fleet::topics::receipt(&vin),
+        ];
         options.max_backoff = Duration::from_secs(10);
         self.link = Some(MqttLink::connect(
             &self.runtime,
@@ -260,7 +286,7 @@ impl FleetLink {
                 self.run_actions(None);
             }
             None if self.held_trips.len() < MAX_WAITING_REPORTS => self.held_trips.push(report),
-            None => self.dropped_reports += 1,
+            None => self.dropped_held += 1,
         }
     }
 
@@ -272,14 +298,34 @@ impl FleetLink {
             return;
         };
         agent.set_standing(self.standing);
+        let receipts = autoplug_fleet::topics::receipt(agent.vin());
+        let mut confirmed = Vec::new();
         if let Some(link) = self.link.as_mut() {
             for _ in 0..MESSAGES_PER_POLL {
                 let Some(message) = link.try_recv() else {
                     break;
                 };
-                agent.on_message(&message.topic, &message.payload, now_ms());
+                if message.topic == receipts {
+                    confirmed.push(self.outbox.on_receipt(&message.payload));
+                } else {
+                    agent.on_message(&message.topic, &message.payload, now_ms());
+                }
             }
         }
+        for outcome in confirmed {
+            match outcome {
+                Ok(Some(Confirmed::Refused { topic, reason })) => {
+                    self.event(format!(
+                        "fleet: the fleet refused the report on {topic}: {reason}"
+                    ));
+                }
+                Ok(_) => {}
+                Err(e) => self.event(format!("fleet: {e}")),
+            }
+        }
+        let Some(agent) = self.agent.as_mut() else {
+            return;
+        };
         let mut tester = tester;
         if let Some(tester) = tester.as_deref_mut() {
             while let Some((_, result)) = tester.take_fleet_outcome() {
@@ -319,13 +365,7 @@ impl FleetLink {
     fn run_actions(&mut self, tester: Option<&mut BusTester>) {
         while let Some(action) = self.agent.as_mut().and_then(|a| a.next_action()) {
             match action {
-                Action::Publish { topic, payload } => {
-                    if self.waiting.len() >= MAX_WAITING_REPORTS {
-                        self.waiting.pop_front();
-                        self.dropped_reports += 1;
-                    }
-                    self.waiting.push_back((topic, payload));
-                }
+                Action::Publish { topic, payload } => self.outbox.push(topic, payload),
                 Action::Subscribe(topic) => self.request(|l| l.subscribe(&topic)),
                 Action::Unsubscribe(topic) => self.request(|l| l.unsubscribe(&topic)),
                 Action::Ask(offer) => {
@@ -383,17 +423,14 @@ impl FleetLink {
         }
     }
 
-    /// Hands the waiting reports to the connection, in order, while it takes them.
+    /// Hands the reports that are due to the connection, in order, while it takes them.
     fn flush(&mut self) {
         let Some(link) = &self.link else {
             return;
         };
-        while let Some((topic, payload)) = self.waiting.pop_front() {
-            if link.publish(&topic, payload.clone(), false).is_err() {
-                self.waiting.push_front((topic, payload));
-                break;
-            }
-        }
+        self.outbox.send_due(now_ms(), |topic, payload| {
+            link.publish(topic, payload.to_vec(), false).is_ok()
+        });
     }
 
     fn event(&mut self, text: String) {

@@ -674,7 +674,7 @@ fn fleet_state(fleet: &crate::fleet_link::FleetLink) -> Value {
         "reports": fleet.campaign_reports(),
         "events": fleet.events().collect::<Vec<_>>(),
         "waiting_reports": fleet.waiting_reports(),
-        "dropped_reports": fleet.dropped_reports,
+        "dropped_reports": fleet.dropped_reports(),
     })
 }
 

@@ -93,6 +93,7 @@ fn fleet_config() -> FleetConfig {
         fleet_key: fleet_key().public_key(),
         image_key: ecu_key().public_key(),
         security_secret: autoplug_middleware::DEV_SECURITY_SECRET.to_vec(),
+        resend_after_ms: autoplug_fleet::outbox::RESEND_AFTER_MS,
     }
 }
 
