@@ -386,6 +386,8 @@ impl FleetStore {
     /// last sent is kept in the audit trail only; an installed vehicle stays installed.
     pub fn record_campaign_report(&mut self, report: &CampaignReport) -> Result<(), StoreError> {
         autoplug_vin::Vin::parse(&report.vin).map_err(|e| invalid(format!("VIN: {e}")))?;
+        crate::report::check_ecu_name("a campaign report", &report.ecu)
+            .map_err(|e| invalid(e.0))?;
         for (what, value) in [
             ("reason", &report.reason),
             ("version", &report.version_running),

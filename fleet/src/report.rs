@@ -131,6 +131,38 @@ fn check_text(what: &str, text: &str) -> Result<(), ReportError> {
     Ok(())
 }
 
+/// The ECU called `name`, by the name the gateway gives it ([`autoplug_can::ecu_name`]):
+/// recalls select ECUs by that name, so an alias, another spelling or an ECU the catalogue
+/// does not know would be stored where no query finds it.
+pub fn check_ecu_name(what: &str, name: &str) -> Result<autoplug_can::Node, ReportError> {
+    autoplug_can::parse_ecu(name)
+        .filter(|node| autoplug_can::ecu_name(*node) == name)
+        .ok_or_else(|| {
+            ReportError(format!(
+                "{what} names ECU \"{}\", which is none of the car's ({})",
+                cut(&name.escape_default().to_string()),
+                autoplug_can::ECU_NAME_LIST
+            ))
+        })
+}
+
+/// The longest trip the fleet takes, s (30 days): a trip ends when the car is parked.
+pub const MAX_TRIP_S: f64 = 30.0 * 24.0 * 3600.0;
+
+/// The most fuel any road car's engine burns, L/h, at full load (the fastest production
+/// cars stay near 500 L/h at their top speed; the AutoPlug car's model burns under 60).
+pub const MAX_FUEL_FLOW_L_PER_H: f64 = 600.0;
+
+/// The most events of one kind (ABS interventions, shifts...) per second of trip: one per
+/// 10 ms, the period of the fastest message that can show one.
+pub const MAX_EVENTS_PER_S: f64 = 100.0;
+
+/// The highest speed a trip can show, km/h: the top of VehicleSpeedMsg's range in the
+/// catalogue (the gateway's speed is that signal).
+pub fn max_speed_kmh() -> f64 {
+    f64::from(autoplug_can::VehicleSpeedMsg::VEHICLE_SPEED.physical_max())
+}
+
 impl InventoryReport {
     /// Checks a report before it is stored: a valid VIN, sane fields, each ECU once.
     pub fn check(&self) -> Result<Vin, ReportError> {
@@ -145,6 +177,14 @@ impl InventoryReport {
             check_text("an ECU name", &ecu.ecu)?;
             if ecu.ecu.is_empty() {
                 return Err(ReportError(format!("ECU {} has no name", i + 1)));
+            }
+            let node = check_ecu_name("the inventory", &ecu.ecu)?;
+            let number = node.diag_node_number().unwrap_or(0);
+            if ecu.node != number {
+                return Err(ReportError(format!(
+                    "the inventory gives ECU {} node 0x{:02X}; its node is 0x{number:02X}",
+                    ecu.ecu, ecu.node
+                )));
             }
             if self.ecus[..i].iter().any(|e| e.ecu == ecu.ecu) {
                 return Err(ReportError(format!("ECU {} is listed twice", ecu.ecu)));
@@ -169,16 +209,107 @@ impl TripReport {
     pub fn check(&self) -> Result<Vin, ReportError> {
         let vin = check_vin(&self.vin)?;
         let s = &self.stats;
+        let trip = self.trip;
+        // Short figures whatever their size (1.7e308 written out has 309 digits).
+        let figure = |v: f64| {
+            if v.abs() >= 1e9 {
+                format!("{v:e}")
+            } else {
+                format!("{}", (v * 10.0).round() / 10.0)
+            }
+        };
+        let implausible = |what: &str, value: f64, most: f64, why: &str| {
+            ReportError(format!(
+                "trip {trip}: {what} is {}, more than {} ({why})",
+                figure(value),
+                figure(most)
+            ))
+        };
         for (what, v) in [
             ("distance", s.distance_m),
             ("duration", s.duration_s),
+            ("moving time", s.moving_time_s),
             ("fuel used", s.fuel_used_l),
             ("maximum speed", s.max_speed_kmh),
+            ("mean speed", s.mean_speed_kmh),
+            ("ABS time", s.abs_time_s),
             ("cruise time", s.cruise_time_s),
+            ("differential time", s.diff_time_s),
         ] {
             if !v.is_finite() || v < 0.0 {
-                return Err(ReportError(format!("trip {}: {what} is {v}", self.trip)));
+                return Err(ReportError(format!("trip {trip}: {what} is {v}")));
             }
+        }
+        // What no car can show: see the bounds' constants. Sums over a fleet's trips stay
+        // far inside the database's numbers.
+        if s.duration_s > MAX_TRIP_S {
+            return Err(implausible(
+                "the duration (s)",
+                s.duration_s,
+                MAX_TRIP_S,
+                "30 days",
+            ));
+        }
+        // A little room for rounding in the gateway's integration.
+        let duration = s.duration_s * 1.01 + 1.0;
+        for (what, v) in [
+            ("the moving time (s)", s.moving_time_s),
+            ("the ABS time (s)", s.abs_time_s),
+            ("the cruise time (s)", s.cruise_time_s),
+            ("the differential time (s)", s.diff_time_s),
+        ] {
+            if v > duration {
+                return Err(implausible(what, v, duration, "the trip's duration"));
+            }
+        }
+        let top = max_speed_kmh();
+        for (what, v) in [
+            ("the maximum speed (km/h)", s.max_speed_kmh),
+            ("the mean speed (km/h)", s.mean_speed_kmh),
+        ] {
+            if v > top {
+                return Err(implausible(what, v, top, "VehicleSpeedMsg's range"));
+            }
+        }
+        let farthest = top / 3.6 * duration;
+        if s.distance_m > farthest {
+            return Err(implausible(
+                "the distance (m)",
+                s.distance_m,
+                farthest,
+                "the top speed for the whole trip",
+            ));
+        }
+        let most_fuel = MAX_FUEL_FLOW_L_PER_H / 3600.0 * duration + 1.0;
+        if s.fuel_used_l > most_fuel {
+            return Err(implausible(
+                "the fuel used (L)",
+                s.fuel_used_l,
+                most_fuel,
+                "600 L/h for the whole trip",
+            ));
+        }
+        let most_events = MAX_EVENTS_PER_S * duration;
+        for (what, n) in [
+            ("ABS interventions", s.abs_interventions),
+            ("hard brakings", s.hard_brakings),
+            ("shifts", s.shifts),
+            ("differential interventions", s.diff_interventions),
+        ] {
+            if f64::from(n) > most_events {
+                return Err(implausible(
+                    what,
+                    f64::from(n),
+                    most_events,
+                    "one per 10 ms",
+                ));
+            }
+        }
+        if self.ended_at_ms < self.started_at_ms {
+            return Err(ReportError(format!(
+                "trip {trip}: it ends ({}) before it starts ({})",
+                self.ended_at_ms, self.started_at_ms
+            )));
         }
         if self.verdicts.len() > 256 || self.dtcs.len() > 1024 {
             return Err(ReportError(format!(
@@ -189,6 +320,7 @@ impl TripReport {
             )));
         }
         for v in &self.verdicts {
+            check_ecu_name(&format!("trip {trip}: a verdict"), &v.ecu)?;
             for (what, text) in [
                 ("ECU", &v.ecu),
                 ("verdict", &v.verdict),
@@ -200,6 +332,7 @@ impl TripReport {
             }
         }
         for d in &self.dtcs {
+            check_ecu_name(&format!("trip {trip}: a trouble code"), &d.ecu)?;
             for (what, text) in [
                 ("ECU", &d.ecu),
                 ("code", &d.code),

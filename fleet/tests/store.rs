@@ -459,3 +459,82 @@ fn an_unreachable_server_is_named_in_the_error() {
     );
     assert!(!text.contains("s3cret"), "{text}");
 }
+
+#[test]
+fn figures_no_car_can_produce_and_ecus_the_catalogue_does_not_know_are_refused() {
+    for engine in engines() {
+        let label = engine.label();
+        let mut store = engine.open();
+        store.record_inventory(&inventory(1)).unwrap();
+        store
+            .record_trip(&trip(1, 1, 1_000_000, "ok", &[]))
+            .unwrap();
+        // Two trips of 1.7e308 m made the overview's distance sum overflow in PostgreSQL.
+        let refusals: Vec<(Box<dyn Fn(&mut TripReport)>, &str)> = vec![
+            (
+                Box::new(|t| t.stats.distance_m = 1.7e308),
+                "the distance (m) is 1.7e308, more than",
+            ),
+            (
+                Box::new(|t| t.stats.distance_m = 43_000.0),
+                "the top speed for the whole trip",
+            ),
+            (
+                Box::new(|t| t.stats.max_speed_kmh = 256.0),
+                "VehicleSpeedMsg's range",
+            ),
+            (Box::new(|t| t.stats.duration_s = 1e12), "30 days"),
+            (Box::new(|t| t.stats.fuel_used_l = 120.0), "600 L/h"),
+            (
+                Box::new(|t| t.stats.cruise_time_s = 700.0),
+                "the trip's duration",
+            ),
+            (Box::new(|t| t.stats.shifts = 70_000), "one per 10 ms"),
+            (
+                Box::new(|t| t.ended_at_ms = t.started_at_ms - 1),
+                "before it starts",
+            ),
+            (
+                Box::new(|t| t.verdicts[0].ecu = "brakes".into()),
+                "names ECU \"brakes\"",
+            ),
+            (
+                Box::new(|t| {
+                    t.dtcs.push(DtcRecord {
+                        ecu: "Engine".into(),
+                        code: "U0100".into(),
+                        status: 9,
+                        description: String::new(),
+                    })
+                }),
+                "names ECU \"Engine\"",
+            ),
+        ];
+        for (i, (spoil, says)) in refusals.iter().enumerate() {
+            let mut bad = trip(1, 10 + i as i64, 2_000_000, "ok", &[]);
+            spoil(&mut bad);
+            let error = store.record_trip(&bad).unwrap_err();
+            assert!(matches!(error, StoreError::Invalid(_)), "{label}");
+            assert!(error.to_string().contains(says), "{label}: {error}");
+        }
+        // An inventory naming an ECU the car has not, or an ECU at another's node.
+        let mut report = inventory(2);
+        report.ecus[0].ecu = "turbo".into();
+        let error = store.record_inventory(&report).unwrap_err();
+        assert!(
+            error.to_string().contains("none of the car's"),
+            "{label}: {error}"
+        );
+        let mut report = inventory(2);
+        report.ecus[0].node = 0x0E;
+        let error = store.record_inventory(&report).unwrap_err();
+        assert!(
+            error.to_string().contains("its node is 0x03"),
+            "{label}: {error}"
+        );
+        // Nothing of them was stored, and the overview still adds up.
+        let summary = store.summary().unwrap();
+        assert_eq!((summary.vehicles, summary.trips), (1, 1), "{label}");
+        assert!((summary.distance_km - 5.0).abs() < 1e-9, "{label}");
+    }
+}

@@ -1401,9 +1401,12 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     }
     crate::gateway::heard_dtcs(&watch.dtcs, out)?;
     if let Some(fleet) = watch.fleet.take() {
-        fleet_summary(&fleet, out)?;
+        let (vin, not_connected, broker) =
+            (fleet.vin(), fleet.not_connected.clone(), fleet.broker());
+        let reports = fleet.campaign_reports();
         // The last trip's report goes out before the connection closes.
-        fleet.close(Duration::from_secs(5));
+        let closed = fleet.close(Duration::from_secs(5));
+        fleet_summary(vin, not_connected, &broker, &reports, closed, out)?;
     }
     drop(fleet_runtime);
     result.map_err(|e| CliError::Log(e.to_string()))?;
@@ -1413,27 +1416,36 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     }
 }
 
-/// The fleet link at the end of a run: where it reported, what waits, the campaigns.
-fn fleet_summary(fleet: &crate::fleet_link::FleetLink, out: &mut dyn Write) -> io::Result<()> {
-    match (&fleet.vin(), &fleet.not_connected) {
+/// The fleet link at the end of a run: where it reported, what the fleet confirmed, the
+/// campaigns.
+fn fleet_summary(
+    vin: Option<String>,
+    not_connected: Option<String>,
+    broker: &str,
+    reports: &[autoplug_fleet::campaign::CampaignReport],
+    closed: crate::fleet_link::Closed,
+    out: &mut dyn Write,
+) -> io::Result<()> {
+    match (&vin, &not_connected) {
         (_, Some(why)) => writeln!(out, "fleet: {why}")?,
         (Some(vin), None) => writeln!(
             out,
-            "fleet: reported as {vin} to {}; {} report(s) waiting, {} dropped",
-            fleet.broker(),
-            fleet.waiting_reports(),
-            fleet.dropped_reports()
+            "fleet: reported as {vin} to {broker}; {} report(s) confirmed stored by the fleet, {} refused, {} published without a receipt yet (the broker holds them), {} not published, {} dropped",
+            closed.stored, closed.refused, closed.unconfirmed, closed.unsent, closed.dropped
         )?,
         (None, None) => {}
     }
-    for report in fleet.campaign_reports() {
+    for report in reports {
         writeln!(
             out,
             "fleet: campaign {} ({}): {}{}, running {}",
             report.campaign,
             report.ecu,
             report.state.name(),
-            report.reason.map_or(String::new(), |r| format!(" ({r})")),
+            report
+                .reason
+                .as_deref()
+                .map_or(String::new(), |r| format!(" ({r})")),
             report.version_running.as_deref().unwrap_or("?")
         )?;
     }

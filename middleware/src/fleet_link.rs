@@ -440,13 +440,58 @@ impl FleetLink {
         self.events.push_back(text);
     }
 
-    /// Disconnects, waiting at most `timeout` for the reports handed over to be sent.
-    pub fn close(mut self, timeout: Duration) {
-        self.flush();
-        if let Some(link) = self.link.take() {
-            link.close(timeout);
+    /// Sends what waits and disconnects, waiting at most `timeout` for the fleet's receipts
+    /// of what was sent (none come while no service runs) and for the broker to take the
+    /// rest; what then stands.
+    pub fn close(mut self, timeout: Duration) -> Closed {
+        let deadline = std::time::Instant::now() + timeout;
+        let receipts = self
+            .agent
+            .as_ref()
+            .map(|a| autoplug_fleet::topics::receipt(a.vin()));
+        while self.link.is_some() && !self.outbox.is_empty() && std::time::Instant::now() < deadline
+        {
+            self.flush();
+            let Some(link) = self.link.as_mut() else {
+                break;
+            };
+            if let Some(message) = link.recv_timeout(Duration::from_millis(20)) {
+                if Some(&message.topic) == receipts.as_ref() {
+                    let _ = self.outbox.on_receipt(&message.payload);
+                }
+            }
         }
+        let closed = Closed {
+            stored: self.outbox.stored,
+            refused: self.outbox.refused,
+            unsent: self.outbox.unsent(),
+            unconfirmed: self.outbox.len() - self.outbox.unsent(),
+            dropped: self.dropped_reports(),
+        };
+        if let Some(link) = self.link.take() {
+            link.close(
+                deadline
+                    .saturating_duration_since(std::time::Instant::now())
+                    .max(Duration::from_millis(200)),
+            );
+        }
+        closed
     }
+}
+
+/// Where the reports stood when the link closed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Closed {
+    /// Confirmed stored by the fleet.
+    pub stored: u64,
+    /// Refused by the fleet.
+    pub refused: u64,
+    /// Never handed to the broker.
+    pub unsent: usize,
+    /// Handed to the broker, no receipt yet (the broker holds them for the fleet).
+    pub unconfirmed: usize,
+    /// Dropped unconfirmed, the outbox being full.
+    pub dropped: u64,
 }
 
 fn unix_us() -> i64 {

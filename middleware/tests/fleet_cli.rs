@@ -425,7 +425,8 @@ fn a_gateway_reports_to_a_fleet_only_when_it_may_transmit_and_knows_the_fleet_ke
     ]))
     .unwrap();
     assert!(
-        reported.contains("fleet: reported as ") && reported.contains("0 report(s) waiting"),
+        reported.contains("fleet: reported as ")
+            && reported.contains(" 0 not published, 0 dropped"),
         "{reported}"
     );
 }
