@@ -221,6 +221,12 @@ pub enum FleetCommand {
         /// vehicle, read only) on this address, e.g. 127.0.0.1:8090.
         #[arg(long, value_name = "ADDR")]
         web: Option<std::net::SocketAddr>,
+        /// A host name besides the listening address the fleet page answers for (NAME or
+        /// NAME:PORT, as in the browser's address bar); repeatable. Other names are
+        /// refused (421), so a web page cannot point its own name at this server and read
+        /// the fleet.
+        #[arg(long = "allowed-host", value_name = "NAME", requires = "web")]
+        allowed_hosts: Vec<String>,
     },
     /// A fleet to try it on: N virtual cars, each with its gateway reporting to the broker
     /// (distinct VINs and serials, a mix of software releases, a share with the faulty
@@ -624,6 +630,7 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             group,
             clean_session,
             web,
+            allowed_hosts,
         } => {
             let mut options = LinkOptions::new(client_id);
             options.persistent_session = !clean_session;
@@ -637,6 +644,7 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
                 tick,
                 duration,
                 web,
+                allowed_hosts,
             };
             serve(&db, &broker, settings, options, out)
         }
@@ -957,6 +965,7 @@ struct ServeSettings {
     tick: f64,
     duration: Option<f64>,
     web: Option<std::net::SocketAddr>,
+    allowed_hosts: Vec<String>,
 }
 
 fn serve(
@@ -972,6 +981,7 @@ fn serve(
         tick,
         duration,
         web,
+        allowed_hosts,
     } = settings;
     if !(tick.is_finite() && (0.01..=3600.0).contains(&tick)) {
         return Err("--tick is 0.01 to 3600 seconds".into());
@@ -986,6 +996,7 @@ fn serve(
                 addr,
                 fleet: Some(Arc::new(page)),
                 live: false,
+                allowed_hosts,
                 ..autoplug_web::WebConfig::loopback(0)
             };
             let server = autoplug_web::WebServer::start(

@@ -54,6 +54,25 @@ impl FleetPage {
     }
 }
 
+impl Drop for FleetPage {
+    /// The synchronous PostgreSQL client runs a runtime of its own to close its
+    /// connection, which panics inside another: the web server drops the page last from
+    /// its runtime's thread when it stops. The connection is then closed on a thread of
+    /// its own.
+    fn drop(&mut self) {
+        let store = self
+            .store
+            .get_mut()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
+        if let Some(store) = store {
+            if tokio::runtime::Handle::try_current().is_ok() {
+                let _ = std::thread::spawn(move || drop(store)).join();
+            }
+        }
+    }
+}
+
 impl autoplug_web::FleetData for FleetPage {
     fn overview(&self) -> Result<Value, String> {
         self.with_store(|store| {

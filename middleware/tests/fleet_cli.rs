@@ -430,3 +430,80 @@ fn a_gateway_reports_to_a_fleet_only_when_it_may_transmit_and_knows_the_fleet_ke
         "{reported}"
     );
 }
+
+/// A raw HTTP/1.1 GET with the `Host` given: the status line's code and the body.
+fn get_with_host(addr: &str, path: &str, host: &str) -> (u16, String) {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(addr).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut response = String::new();
+    let _ = stream.read_to_string(&mut response);
+    let code = response
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    (code, response)
+}
+
+#[test]
+fn fleet_serve_with_its_page_answers_only_its_own_names_and_ends_cleanly_on_postgresql() {
+    let schema = autoplug_fleet::testing::PgSchema::new();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr = format!("127.0.0.1:{port}");
+    let client_id = format!("fleet-web-test-{}", std::process::id());
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_autoplug"))
+        .args([
+            "fleet",
+            "serve",
+            "--db",
+            &schema.url,
+            "--broker",
+            &broker_url(),
+            "--client-id",
+            &client_id,
+            "--clean-session",
+            "--web",
+            &addr,
+            "--allowed-host",
+            "fleet.example",
+            "--duration",
+            "4",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while std::net::TcpStream::connect(&addr).is_err() {
+        assert!(std::time::Instant::now() < deadline, "the page never listened");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Its own address and the allowed name are answered; a name pointed at it by a page
+    // elsewhere (DNS rebinding) is refused before anything is read.
+    let (own, body) = get_with_host(&addr, "/api/fleet", &addr);
+    assert_eq!(own, 200, "{body}");
+    assert!(body.contains("\"summary\""), "{body}");
+    let (allowed, _) = get_with_host(&addr, "/api/fleet", &format!("fleet.example:{port}"));
+    assert_eq!(allowed, 200);
+    let (foreign, body) = get_with_host(&addr, "/api/fleet", &format!("attacker.example:{port}"));
+    assert_eq!(foreign, 421, "{body}");
+    assert!(!body.contains("\"summary\""), "{body}");
+    // It ends by itself: status 0 and nothing panicked on the way out (the page's
+    // PostgreSQL client was dropped inside the web server's runtime and panicked).
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
