@@ -22,6 +22,10 @@ pub const MAX_INSTRUCTION_BYTES: usize = 8 * 1024;
 /// What the fleet tells one vehicle.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Instruction {
+    /// Its number in the vehicle's series (1, 2, ...: every instruction for the vehicle
+    /// gets the next): the vehicle refuses one not newer than the newest it has taken, so
+    /// a captured instruction cannot be played to it again.
+    pub number: u64,
     /// The campaign's number.
     pub campaign: i64,
     /// Its name.
@@ -264,6 +268,7 @@ mod tests {
 
     fn instruction() -> Instruction {
         Instruction {
+            number: 3,
             campaign: 7,
             name: "cruise-1.2.0".into(),
             vin: "JA3AP47H0YF000042".into(),

@@ -734,7 +734,11 @@ fn tick_one(
         )?;
         for r in &waiting {
             let (vin, attempts) = (text(r, 0).unwrap_or_default(), int(r, 1) + 1);
+            // The vehicle's next number, in the campaign row's transaction: two services
+            // never issue one number twice.
+            let number = next_instruction_number(db, &vin)?;
             let instruction = Instruction {
+                number,
                 campaign: id,
                 name: text(c, 6).unwrap_or_default(),
                 vin: vin.clone(),
@@ -778,6 +782,27 @@ fn tick_one(
             "UPDATE campaigns SET stage = $2, updated_at_ms = $3 WHERE id = $1",
             &[Value::Int(id), Value::Int(stage), Value::Int(now_ms)],
         )?;
+    }
+}
+
+/// The next number of `vin`'s instruction series (1 for its first), taken for good.
+fn next_instruction_number(db: &mut dyn Db, vin: &str) -> Result<u64, StoreError> {
+    let rows = db.query(
+        "INSERT INTO instruction_numbers (vin, issued) VALUES ($1, 1)
+         ON CONFLICT (vin) DO UPDATE SET issued = instruction_numbers.issued + 1
+         RETURNING issued",
+        &[Value::from(vin)],
+    )?;
+    rows.first()
+        .map(|r| int(r, 0) as u64)
+        .ok_or_else(|| invalid(format!("no instruction number for {vin}")))
+}
+
+impl FleetStore {
+    /// Takes the next number of `vin`'s instruction series, as signing an instruction for
+    /// it does (an instruction made outside the campaigns, e.g. a test's).
+    pub fn next_instruction_number(&mut self, vin: &str) -> Result<u64, StoreError> {
+        next_instruction_number(self.db(), vin)
     }
 }
 

@@ -30,6 +30,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "update campaigns",
         sql: include_str!("../migrations/002_campaigns.sql"),
     },
+    Migration {
+        version: 3,
+        name: "per-vehicle instruction numbers",
+        sql: include_str!("../migrations/003_instruction_numbers.sql"),
+    },
 ];
 
 /// The newest schema this program knows.

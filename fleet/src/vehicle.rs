@@ -11,6 +11,10 @@
 //! 1. The instruction's signature is checked with the fleet's key, then that it is for
 //!    this VIN and not expired. Nothing else of it is read before that; an instruction
 //!    that fails is noted and otherwise ignored (a forgery has no campaign to report to).
+//!    Its number must be newer than the newest the vehicle has taken, which the gateway
+//!    keeps across restarts ([`Action::Remember`]): a captured instruction played again
+//!    (a finished campaign's, which the driver declined) is refused, as Uptane's vehicles
+//!    refuse metadata older than what they have.
 //! 2. The ECU must be in this vehicle's inventory; an ECU already running the version is
 //!    reported installed at once (a retry, or a vehicle fixed at a workshop).
 //! 3. The image is fetched (retained at the broker under its SHA-256) and checked: its
@@ -122,6 +126,9 @@ pub enum Action {
     },
     /// Something for the gateway's event log.
     Note(String),
+    /// Keep this as the newest instruction number taken, across restarts (give it back
+    /// with [`VehicleAgent::set_newest_instruction`]), before anything else is done.
+    Remember(u64),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -157,6 +164,8 @@ pub struct VehicleAgent {
     reported: VecDeque<CampaignReport>,
     standing: bool,
     actions: VecDeque<Action>,
+    /// The newest instruction number taken.
+    newest_instruction: u64,
 }
 
 impl VehicleAgent {
@@ -171,7 +180,19 @@ impl VehicleAgent {
             reported: VecDeque::new(),
             standing: false,
             actions: VecDeque::new(),
+            newest_instruction: 0,
         }
+    }
+
+    /// The newest instruction number taken before (kept by the gateway across restarts):
+    /// an instruction not newer is refused.
+    pub fn set_newest_instruction(&mut self, number: u64) {
+        self.newest_instruction = self.newest_instruction.max(number);
+    }
+
+    /// The newest instruction number taken.
+    pub fn newest_instruction(&self) -> u64 {
+        self.newest_instruction
     }
 
     /// The vehicle.
@@ -398,10 +419,26 @@ impl VehicleAgent {
             // A repeated delivery (QoS 1 is at least once): the same answer again.
             return self.publish(ReportKind::Campaign, &done);
         }
+        if self
+            .job
+            .as_ref()
+            .is_some_and(|j| (j.instruction.campaign, j.instruction.attempt) == key)
+            || self
+                .waiting
+                .as_ref()
+                .is_some_and(|w| (w.campaign, w.attempt) == key)
+        {
+            return; // A repeated delivery of what runs or waits.
+        }
+        if instruction.number <= self.newest_instruction {
+            return self.note(format!(
+                "fleet: instruction {} (campaign {}) refused: not newer than the newest taken, {} (played again)",
+                instruction.number, instruction.campaign, self.newest_instruction
+            ));
+        }
+        self.newest_instruction = instruction.number;
+        self.actions.push_back(Action::Remember(instruction.number));
         if let Some(job) = &self.job {
-            if (job.instruction.campaign, job.instruction.attempt) == key {
-                return;
-            }
             let installing = matches!(job.step, Step::Flashing | Step::Checking { .. });
             if installing || job.instruction.campaign != instruction.campaign {
                 self.note(format!(

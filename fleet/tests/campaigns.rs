@@ -108,6 +108,7 @@ fn a_campaign_reaches_exactly_its_vehicles_stage_by_stage_and_finishes() {
         );
         // The same name again is refused.
         assert!(store.create_campaign(&spec("cruise-fix"), 0).is_err());
+        // A report for the campaign once it is over is refused (below, at the end).
 
         // Stage 1: 20 % of 10 = 2 vehicles, each with an instruction only it can open.
         let first = store.campaign_tick(&key, 1_000).unwrap();
@@ -115,8 +116,14 @@ fn a_campaign_reaches_exactly_its_vehicles_stage_by_stage_and_finishes() {
         for d in &first {
             let i = Instruction::open(&d.payload, &key.public_key(), &d.vin, 1_000).unwrap();
             assert_eq!(
-                (i.campaign, i.ecu.as_str(), i.version.as_str(), i.attempt),
-                (created.id, "cruise", "1.2.0", 1)
+                (
+                    i.campaign,
+                    i.ecu.as_str(),
+                    i.version.as_str(),
+                    i.attempt,
+                    i.number
+                ),
+                (created.id, "cruise", "1.2.0", 1, 1)
             );
             assert!(d.topic.ends_with(&format!("{}/command/campaign", d.vin)));
         }
@@ -158,7 +165,9 @@ fn a_campaign_reaches_exactly_its_vehicles_stage_by_stage_and_finishes() {
         );
         let opened =
             Instruction::open(&retry[0].payload, &key.public_key(), failing, 4_000).unwrap();
-        assert_eq!(opened.attempt, 2);
+        // Each instruction for a vehicle is numbered after the one before (the car refuses
+        // one not newer than the newest it took).
+        assert_eq!((opened.attempt, opened.number), (2, 2));
         store
             .record_campaign_report(&report(created.id, failing, 2, VehicleState::Installed))
             .unwrap();
@@ -175,6 +184,12 @@ fn a_campaign_reaches_exactly_its_vehicles_stage_by_stage_and_finishes() {
 
         let info = store.campaign(&created.id.to_string()).unwrap();
         assert_eq!(info.state, CampaignState::Finished, "{}", engine.label());
+        // A report after the end (a captured instruction played to a car that then
+        // installed, or declined) is refused: the campaign keeps what it ended with.
+        let late = store
+            .record_campaign_report(&report(created.id, silent, 2, VehicleState::Installed))
+            .unwrap_err();
+        assert!(late.to_string().contains("which is finished"), "{late}");
         assert_eq!(info.counts.get("installed"), Some(&9));
         assert_eq!(info.counts.get("no_answer"), Some(&1));
         let vehicles = store.campaign_vehicles(created.id).unwrap();

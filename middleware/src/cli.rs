@@ -870,7 +870,6 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                     max_bytes: rotate_mb.map(|mb| mb * 1_000_000),
                     max_duration_us: rotate_minutes.map(|m| m * 60_000_000),
                 },
-                db: (!no_db).then_some(db),
                 vehicle,
                 speed,
                 fast,
@@ -884,7 +883,10 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 }),
                 recordings_dir: None,
                 replay_pages: None,
-                fleet: fleet.config().map_err(CliError::Fleet)?,
+                fleet: fleet
+                    .config((!no_db).then(|| db.with_file_name("fleet-state.json")))
+                    .map_err(CliError::Fleet)?,
+                db: (!no_db).then_some(db),
             };
             gateway(&bus, options, out)
         }
@@ -968,7 +970,9 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                     ..autoplug_web::WebConfig::loopback(0)
                 }),
                 recordings_dir: Some(folder.recordings()),
-                fleet: fleet.config().map_err(CliError::Fleet)?,
+                fleet: fleet
+                    .config(Some(folder.root.join("fleet-state.json")))
+                    .map_err(CliError::Fleet)?,
             };
             gateway(&bus, options, out)
         }

@@ -54,6 +54,59 @@ pub struct FleetConfig {
     /// How long a report waits for its receipt before it is published again, ms (doubling
     /// each time): [`autoplug_fleet::outbox::RESEND_AFTER_MS`] unless a test is in a hurry.
     pub resend_after_ms: i64,
+    /// Where the vehicle keeps what it has seen of the fleet across restarts (the newest
+    /// instruction number taken: [`FleetState`]); none: in memory only (a simulated car).
+    pub state_file: Option<std::path::PathBuf>,
+}
+
+/// What the vehicle keeps of the fleet across restarts: the newest instruction number it
+/// has taken, so an instruction played again after the next ignition is refused. A small
+/// JSON file, replaced whole (written beside, then renamed) so a power cut leaves the old
+/// one or the new one.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct FleetState {
+    /// The vehicle it belongs to (a gateway moved to another car starts afresh).
+    pub vin: String,
+    /// The newest instruction number taken.
+    pub newest_instruction: u64,
+}
+
+impl FleetState {
+    /// Reads the state kept at `path` for `vin`: `Ok(None)` when there is none yet or it is
+    /// another vehicle's; an error naming the file when it cannot be read or is damaged.
+    pub fn load(path: &std::path::Path, vin: &str) -> Result<Option<FleetState>, String> {
+        let text = match std::fs::read(path) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(format!("cannot read {}: {e}", path.display())),
+        };
+        if text.len() > 4096 {
+            return Err(format!(
+                "{} is not a fleet state file (too large)",
+                path.display()
+            ));
+        }
+        let state: FleetState = serde_json::from_slice(&text)
+            .map_err(|e| format!("{} is damaged: {e}", path.display()))?;
+        Ok((state.vin == vin).then_some(state))
+    }
+
+    /// Writes it to `path` in place of what was there.
+    pub fn save(&self, path: &std::path::Path) -> Result<(), String> {
+        use std::io::Write;
+        let fail = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(fail)?;
+        }
+        let mut next = path.as_os_str().to_owned();
+        next.push(".new");
+        let next = std::path::PathBuf::from(next);
+        let mut file = std::fs::File::create(&next).map_err(fail)?;
+        file.write_all(&serde_json::to_vec(self).unwrap_or_default())
+            .and_then(|()| file.sync_all())
+            .map_err(fail)?;
+        std::fs::rename(&next, path).map_err(fail)
+    }
 }
 
 /// The link (see the module docs).
@@ -232,6 +285,15 @@ impl FleetLink {
             fleet_key: self.config.fleet_key,
             image_key: self.config.image_key,
         });
+        if let Some(path) = &self.config.state_file {
+            match FleetState::load(path, vin.as_str()) {
+                Ok(Some(state)) => agent.set_newest_instruction(state.newest_instruction),
+                Ok(None) => {}
+                // Refusing every instruction would block every update for good: start the
+                // series afresh, and say so.
+                Err(e) => self.event(format!("fleet: {e}: starting with no instruction taken")),
+            }
+        }
         for mut trip in std::mem::take(&mut self.held_trips) {
             trip.vin = vin.to_string();
             agent.on_trip(&trip);
@@ -379,6 +441,7 @@ impl FleetLink {
                 }
                 Action::Flash { ecu, image } => self.pending_flash = Some((ecu, image)),
                 Action::Note(text) => self.event(text),
+                Action::Remember(number) => self.remember(number),
             }
         }
         self.start_flash(tester);
@@ -431,6 +494,22 @@ impl FleetLink {
         self.outbox.send_due(now_ms(), |topic, payload| {
             link.publish(topic, payload.to_vec(), false).is_ok()
         });
+    }
+
+    /// Keeps the newest instruction number taken in the state file, if there is one.
+    fn remember(&mut self, number: u64) {
+        let (Some(path), Some(vin)) = (&self.config.state_file, self.vin()) else {
+            return;
+        };
+        let state = FleetState {
+            vin,
+            newest_instruction: number,
+        };
+        if let Err(e) = state.save(path) {
+            self.event(format!(
+                "fleet: {e} (a replayed instruction would not be recognised after a restart)"
+            ));
+        }
     }
 
     fn event(&mut self, text: String) {
@@ -498,4 +577,27 @@ fn unix_us() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as i64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fleet_state_survives_a_restart_and_a_damaged_or_foreign_one_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("data/fleet-state.json");
+        let vin = "JA3AP47H0YF000042";
+        assert_eq!(FleetState::load(&path, vin), Ok(None));
+        let state = FleetState {
+            vin: vin.into(),
+            newest_instruction: 7,
+        };
+        state.save(&path).unwrap();
+        assert_eq!(FleetState::load(&path, vin), Ok(Some(state)));
+        assert_eq!(FleetState::load(&path, "JA3AP47H2YF000043"), Ok(None));
+        std::fs::write(&path, b"{\"vin\": \"JA3AP").unwrap();
+        let e = FleetState::load(&path, vin).unwrap_err();
+        assert!(e.contains("fleet-state.json is damaged"), "{e}");
+    }
 }

@@ -94,6 +94,7 @@ fn fleet_config() -> FleetConfig {
         image_key: ecu_key().public_key(),
         security_secret: autoplug_middleware::DEV_SECURITY_SECRET.to_vec(),
         resend_after_ms: autoplug_fleet::outbox::RESEND_AFTER_MS,
+        state_file: None,
     }
 }
 
@@ -454,6 +455,7 @@ fn failures_forgeries_and_an_offline_car(address: &str, tag: &str, first_serial:
     let target = vins[8].clone();
     let vin = autoplug_vin::Vin::parse(&target).unwrap();
     let mut instruction = autoplug_fleet::campaign::Instruction {
+        number: store.next_instruction_number(&target).unwrap(),
         campaign: 999,
         name: "forged".into(),
         vin: target.clone(),
@@ -483,6 +485,7 @@ fn failures_forgeries_and_an_offline_car(address: &str, tag: &str, first_serial:
     publish_image(&runtime, &abs_image);
     let wrong_ecu_car = vins[9].clone();
     instruction.vin = wrong_ecu_car.clone();
+    instruction.number = store.next_instruction_number(&wrong_ecu_car).unwrap();
     instruction.campaign = 998;
     instruction.image_sha256 = sha256_hex(&abs_image);
     instruction.image_bytes = abs_image.len() as u64;
@@ -616,4 +619,101 @@ fn staged_pause_forged_instructions_bad_images_and_an_offline_car_on_both_engine
     failures_forgeries_and_an_offline_car(&address, "sqlite-2", 500_000);
     let schema = PgSchema::new();
     failures_forgeries_and_an_offline_car(&schema.url, "postgres-2", 700_000);
+}
+
+/// A gateway's fleet link as it starts: identified as `vin`, connected, its state in
+/// `state_file`.
+fn started_link(
+    runtime: &tokio::runtime::Runtime,
+    vin: autoplug_vin::Vin,
+    state_file: &std::path::Path,
+) -> autoplug_middleware::fleet_link::FleetLink {
+    let mut config = fleet_config();
+    config.state_file = Some(state_file.to_path_buf());
+    let mut link =
+        autoplug_middleware::fleet_link::FleetLink::new(config, runtime.handle().clone());
+    let cruise = autoplug_store::EcuIdentity {
+        ecu: "cruise".into(),
+        node: 0x0D,
+        part_number: Some("AP-CRUISE-0001".into()),
+        software_version: Some("1.1.0".into()),
+        hardware_version: Some("NUCLEO-F446RE".into()),
+        serial_number: Some("AP0D00000001".into()),
+    };
+    link.on_identification(Ok(Some(vin)), vec![cruise]);
+    wait_for("the link's connection", Duration::from_secs(10), || {
+        link.status()
+            .is_some_and(|s| s.connected && s.granted.len() == 2)
+    });
+    link
+}
+
+/// Polls `link` until an event contains `needle`.
+fn wait_event(link: &mut autoplug_middleware::fleet_link::FleetLink, needle: &str) {
+    let state = autoplug_gateway::CarState::new();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !link.events().any(|e| e.contains(needle)) {
+        assert!(
+            Instant::now() < deadline,
+            "no event with '{needle}': {:?}",
+            link.events().collect::<Vec<_>>()
+        );
+        link.poll(&state, None);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn an_instruction_captured_and_played_again_after_a_restart_is_refused() {
+    // Its car reports an inventory, which the other tests' services would take.
+    let _one = one_fleet();
+    let runtime = runtime();
+    let dir = tempfile::tempdir().unwrap();
+    let state_file = dir.path().join("fleet-state.json");
+    let serial = std::process::id() % 100_000;
+    let vin = autoplug_vin::Vin::with_check_digit(&format!("JA3AP47H0YR{serial:06}")).unwrap();
+    let image = fixed_cruise();
+    let instruction = autoplug_fleet::campaign::Instruction {
+        number: 5,
+        campaign: 41,
+        name: "cruise-1.1.0".into(),
+        vin: vin.to_string(),
+        ecu: "cruise".into(),
+        image_sha256: sha256_hex(&image),
+        image_bytes: image.len() as u64,
+        version: "1.2.0".into(),
+        attempt: 1,
+        issued_at_ms: now_ms(),
+        expires_at_ms: now_ms() + 3_600_000,
+        message: String::new(),
+    };
+    let captured = instruction.sign(&fleet_key());
+    let broker: Broker = broker_url().parse().unwrap();
+    let attacker = MqttLink::connect(
+        runtime.handle(),
+        &broker,
+        LinkOptions::new(format!("replayer-{serial}")),
+    );
+    attacker.wait_connected(Duration::from_secs(10)).unwrap();
+
+    // First ignition: the instruction arrives from the fleet and is taken; its number is
+    // kept on disk.
+    let mut first = started_link(&runtime, vin, &state_file);
+    attacker
+        .publish(&topics::command(&vin), captured.clone(), false)
+        .unwrap();
+    wait_event(&mut first, "campaign 41 (cruise-1.1.0): fetching");
+    first.close(Duration::from_secs(1));
+    let kept: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&state_file).unwrap()).unwrap();
+    assert_eq!(kept["newest_instruction"], 5, "{kept}");
+
+    // Next ignition: the same bytes played to it again are refused.
+    let mut second = started_link(&runtime, vin, &state_file);
+    attacker
+        .publish(&topics::command(&vin), captured, false)
+        .unwrap();
+    wait_event(&mut second, "not newer than the newest taken, 5");
+    assert_eq!(second.activity(), None);
+    assert!(second.offer().is_none());
 }

@@ -49,6 +49,7 @@ fn fixed_image(node: Node, key: &SigningKey) -> Vec<u8> {
 
 fn instruction_for(image: &[u8], attempt: u32) -> Instruction {
     Instruction {
+        number: attempt.into(),
         campaign: 3,
         name: "cruise-1.2.0".into(),
         vin: VIN.into(),
@@ -353,4 +354,53 @@ fn an_image_that_never_comes_and_an_offer_that_expires_end_the_attempt() {
     let actions = drain(&mut agent);
     assert!(actions.contains(&Action::Withdraw(3)));
     assert_eq!(agent.offer(), None);
+}
+
+#[test]
+fn an_instruction_played_again_after_a_restart_is_refused_and_a_newer_one_taken() {
+    // The driver declines campaign 3 (instruction number 1): the gateway is told to keep
+    // the number.
+    let image = fixed_image(Node::Cruise, &ecu_key());
+    let (mut agent, actions) = offered(&image);
+    assert!(actions.contains(&Action::Remember(1)), "{actions:?}");
+    agent.consent(3, false, NOW).unwrap();
+    drain(&mut agent);
+    let kept = agent.newest_instruction();
+    assert_eq!(kept, 1);
+
+    // The next ignition: a new agent given the kept number. The captured instruction,
+    // played to it again, is refused: nothing fetched, nothing offered, nothing reported.
+    let captured = instruction_for(&image, 1).sign(&fleet_key());
+    let mut agent = new_agent();
+    agent.set_newest_instruction(kept);
+    agent.on_inventory(inventory("1.1.0"), NOW + 1_000);
+    drain(&mut agent);
+    agent.on_message(&command_topic(), &captured, NOW + 2_000);
+    let actions = drain(&mut agent);
+    assert_eq!(actions.len(), 1, "{actions:?}");
+    assert!(
+        matches!(&actions[0], Action::Note(n) if n.contains("not newer than the newest taken, 1")),
+        "{actions:?}"
+    );
+    assert_eq!(agent.activity(), None);
+    assert_eq!(agent.offer(), None);
+
+    // Without the kept number (a gateway that forgot it) the same bytes are acted on:
+    // what the number protects against.
+    let mut forgetful = new_agent();
+    forgetful.on_inventory(inventory("1.1.0"), NOW + 1_000);
+    forgetful.on_message(&command_topic(), &captured, NOW + 2_000);
+    assert!(drain(&mut forgetful)
+        .iter()
+        .any(|a| matches!(a, Action::Subscribe(_))));
+
+    // The fleet's next instruction for this vehicle (number 2, a new attempt) is taken.
+    agent.on_message(
+        &command_topic(),
+        &instruction_for(&image, 2).sign(&fleet_key()),
+        NOW + 3_000,
+    );
+    let actions = drain(&mut agent);
+    assert!(actions.contains(&Action::Remember(2)), "{actions:?}");
+    assert!(actions.iter().any(|a| matches!(a, Action::Subscribe(_))));
 }
