@@ -2,7 +2,7 @@
 //! where the PostgreSQL server and the broker are (`AUTOPLUG_TEST_POSTGRES`,
 //! `AUTOPLUG_TEST_MQTT`; defaults: the local servers on their standard ports), and a
 //! throwaway schema per test on the server, so tests running at once never see each
-//! other's rows.
+//! other's rows; and a broker of a test's own, run from the shipped configuration.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
@@ -58,4 +58,233 @@ impl Drop for PgSchema {
             let _ = admin.batch_execute(&format!("DROP SCHEMA IF EXISTS {} CASCADE", self.name));
         }
     }
+}
+
+/// A Mosquitto of the test's own, run from the project's broker configuration (logins and
+/// rights in the dynamic-security plugin, persistence) on free ports; killed when dropped.
+/// The binary: `$MOSQUITTO`, else
+/// `/usr/sbin/mosquitto`, else `mosquitto` on the PATH.
+pub struct PrivateBroker {
+    /// Its directory (removed when dropped).
+    pub dir: std::path::PathBuf,
+    /// Its configuration's files.
+    pub files: crate::broker::BrokerDir,
+    /// The vehicles' listener.
+    pub port: u16,
+    /// The fleet services' listener.
+    pub fleet_port: u16,
+    child: std::process::Child,
+}
+
+impl PrivateBroker {
+    /// Starts one; panics naming what is missing (a test helper).
+    pub fn start() -> Self {
+        static NEXT: AtomicU32 = AtomicU32::new(0);
+        let dir = std::env::temp_dir().join(format!(
+            "autoplug-broker-{}-{}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let free = || {
+            std::net::TcpListener::bind("127.0.0.1:0")
+                .unwrap()
+                .local_addr()
+                .unwrap()
+                .port()
+        };
+        let (port, fleet_port) = (free(), free());
+        let files = crate::broker::init(
+            &dir.join("broker"),
+            "127.0.0.1",
+            port,
+            "127.0.0.1",
+            fleet_port,
+        )
+        .unwrap();
+        let child = Self::spawn(&files);
+        let broker = Self {
+            dir,
+            files,
+            port,
+            fleet_port,
+            child,
+        };
+        broker.wait_listening();
+        broker
+    }
+
+    fn spawn(files: &crate::broker::BrokerDir) -> std::process::Child {
+        let binary = std::env::var("MOSQUITTO").unwrap_or_else(|_| {
+            if std::path::Path::new("/usr/sbin/mosquitto").exists() {
+                "/usr/sbin/mosquitto".into()
+            } else {
+                "mosquitto".into()
+            }
+        });
+        std::process::Command::new(&binary)
+            .arg("-c")
+            .arg(&files.config)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot run {binary} (scripts/setup-tests installs Mosquitto): {e}")
+            })
+    }
+
+    fn wait_listening(&self) {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        for port in [self.port, self.fleet_port] {
+            while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+                assert!(
+                    std::time::Instant::now() < deadline,
+                    "mosquitto did not listen on {port}"
+                );
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+        }
+    }
+
+    /// Adds a login to the running broker (through the plugin's control topic, as
+    /// `autoplug fleet broker add` does).
+    pub fn add_login(&self, user: &str, password: &str) {
+        crate::broker::add_login(&self.files, user, password).unwrap();
+    }
+
+    /// Adds many logins at once.
+    pub fn add_logins(&self, logins: &[(String, String)]) {
+        crate::broker::add_logins(&self.files, logins).unwrap();
+    }
+
+    /// The address for `user` with `password`: the fleet services' listener for the
+    /// fleet's login, the vehicles' for any other.
+    pub fn url(&self, user: &str, password: &str) -> crate::mqtt::Broker {
+        let port = if user == crate::broker::FLEET_USER {
+            self.fleet_port
+        } else {
+            self.port
+        };
+        self.url_at(port, user, password)
+    }
+
+    /// The address of the listener on `port` for `user` with `password`.
+    pub fn url_at(&self, port: u16, user: &str, password: &str) -> crate::mqtt::Broker {
+        format!("mqtt://{user}:{password}@127.0.0.1:{port}")
+            .parse()
+            .unwrap()
+    }
+
+    /// Stops the broker as a restart would (SIGTERM: it saves its persistence) and starts it
+    /// again from the same directory.
+    pub fn restart(&mut self) {
+        let _ = std::process::Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        let _ = self.child.wait();
+        self.child = Self::spawn(&self.files);
+        self.wait_listening();
+    }
+}
+
+impl Drop for PrivateBroker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// A trip report numbered `n` of `vin` (a short standing trip: every figure plausible).
+pub fn trip_report(vin: &autoplug_vin::Vin, n: i64) -> crate::TripReport {
+    crate::TripReport {
+        vin: vin.to_string(),
+        trip: n,
+        started_at_ms: n * 1000,
+        ended_at_ms: n * 1000 + 500,
+        stats: autoplug_trips::TripStats::default(),
+        end: autoplug_trips::TripEnd::Parked,
+        verdicts: Vec::new(),
+        dtcs: Vec::new(),
+    }
+}
+
+/// A fleet service's intake as `autoplug fleet serve` runs it (persistent session, the
+/// shared subscription, manual acks, receipts) as `client_id` on `broker`, storing into
+/// `store`, on a thread of its own until `stop`; it returns what it did and its link's
+/// state. Waits for the subscription before it returns; panics naming what failed (a
+/// test and benchmark helper).
+pub fn intake_thread(
+    runtime: &tokio::runtime::Handle,
+    broker: &crate::mqtt::Broker,
+    client_id: &str,
+    store: crate::FleetStore,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<(crate::ingest::IngestStats, crate::mqtt::LinkStatus)> {
+    use std::time::{Duration, Instant};
+    let mut options = crate::mqtt::LinkOptions::new(client_id);
+    options.persistent_session = true;
+    options.manual_acks = true;
+    options.subscriptions = vec![crate::topics::REPORTS_SHARED.to_string()];
+    options.max_backoff = Duration::from_secs(1);
+    let link = crate::mqtt::MqttLink::connect(runtime, broker, options);
+    link.wait_connected(Duration::from_secs(10)).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while link.status().granted.is_empty() {
+        assert!(Instant::now() < deadline, "no SUBACK: {:?}", link.status());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::spawn(move || {
+        let mut ingest = crate::ingest::Ingest::new(store, link);
+        ingest.run(&stop, Duration::from_millis(50), |_| {});
+        (ingest.stats, ingest.link.status())
+    })
+}
+
+/// A car as the gateway reports: its reports in an outbox until the fleet's receipt, sent
+/// again while none comes (after `resend_after_ms`, doubling), over a persistent session
+/// with its VIN as client id. It publishes `trips` trips one every `pace` and returns once
+/// every one is confirmed (or after `deadline`), with its outbox and its link's state.
+pub fn reporting_car(
+    runtime: &tokio::runtime::Handle,
+    broker: &crate::mqtt::Broker,
+    vin: autoplug_vin::Vin,
+    trips: usize,
+    pace: std::time::Duration,
+    resend_after_ms: i64,
+    deadline: std::time::Duration,
+) -> std::thread::JoinHandle<(crate::outbox::Outbox, crate::mqtt::LinkStatus)> {
+    use std::time::{Duration, Instant};
+    let mut options = crate::mqtt::LinkOptions::new(vin.to_string());
+    options.persistent_session = true;
+    options.subscriptions = vec![crate::topics::receipt(&vin)];
+    options.max_backoff = Duration::from_millis(500);
+    let mut link = crate::mqtt::MqttLink::connect(runtime, broker, options);
+    std::thread::spawn(move || {
+        let mut outbox = crate::outbox::Outbox::new(4096, resend_after_ms);
+        let started = Instant::now();
+        let mut pushed = 0;
+        let mut next = Instant::now();
+        while started.elapsed() < deadline && (pushed < trips || !outbox.is_empty()) {
+            if pushed < trips && Instant::now() >= next {
+                pushed += 1;
+                let report =
+                    serde_json::to_vec(&trip_report(&vin, pushed as i64)).unwrap_or_default();
+                outbox.push(
+                    crate::topics::report(&vin, crate::topics::ReportKind::Trip),
+                    report,
+                );
+                next += pace;
+            }
+            outbox.send_due(crate::unix_ms(), |topic, payload| {
+                link.publish(topic, payload.to_vec(), false).is_ok()
+            });
+            if let Some(message) = link.recv_timeout(Duration::from_millis(5)) {
+                let _ = outbox.on_receipt(&message.payload);
+            }
+        }
+        let status = link.status();
+        (outbox, status)
+    })
 }

@@ -9,12 +9,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use autoplug_fleet::broker::FLEET_USER;
-use autoplug_fleet::ingest::{Ingest, IngestStats};
+use autoplug_fleet::ingest::IngestStats;
 use autoplug_fleet::mqtt::{LinkOptions, LinkStatus, MqttLink};
 use autoplug_fleet::outbox::Outbox;
+use autoplug_fleet::testing::{intake_thread, reporting_car, trip_report};
 use autoplug_fleet::topics::{self, ReportKind};
-use autoplug_fleet::{FleetStore, TripReport};
-use autoplug_trips::{TripEnd, TripStats};
+use autoplug_fleet::FleetStore;
 use autoplug_vin::Vin;
 use common::{runtime, PgSchema, PrivateBroker};
 
@@ -67,7 +67,7 @@ impl Car {
     fn publish(&mut self, n: usize) {
         for _ in 0..n {
             self.published += 1;
-            let trip = trip(&self.vin, self.published as i64);
+            let trip = trip_report(&self.vin, self.published as i64);
             self.client
                 .try_publish(
                     topics::report(&self.vin, ReportKind::Trip),
@@ -87,19 +87,6 @@ impl Car {
 impl Drop for Car {
     fn drop(&mut self) {
         self.task.abort();
-    }
-}
-
-fn trip(vin: &Vin, n: i64) -> TripReport {
-    TripReport {
-        vin: vin.to_string(),
-        trip: n,
-        started_at_ms: n * 1000,
-        ended_at_ms: n * 1000 + 500,
-        stats: TripStats::default(),
-        end: TripEnd::Parked,
-        verdicts: Vec::new(),
-        dtcs: Vec::new(),
     }
 }
 
@@ -123,8 +110,8 @@ fn wait_for(what: &str, timeout: Duration, mut done: impl FnMut() -> Result<(), 
     }
 }
 
-/// A fleet service's intake as `autoplug fleet serve` runs it (persistent session, the
-/// shared subscription, manual acks), on its own thread until `stop`.
+/// A fleet service's intake as `autoplug fleet serve` runs it, on its own thread until
+/// `stop`.
 fn service(
     rt: &tokio::runtime::Runtime,
     broker: &PrivateBroker,
@@ -132,22 +119,14 @@ fn service(
     client_id: &str,
     stop: Arc<AtomicBool>,
 ) -> std::thread::JoinHandle<(IngestStats, LinkStatus)> {
-    let mut options = LinkOptions::new(client_id);
-    options.persistent_session = true;
-    options.manual_acks = true;
-    options.subscriptions = vec![topics::REPORTS_SHARED.to_string()];
-    let link = MqttLink::connect(rt.handle(), &broker.url(FLEET_USER, "pw-fleet"), options);
-    link.wait_connected(Duration::from_secs(10)).unwrap();
-    wait_for("the service's SUBACK", Duration::from_secs(10), || {
-        let s = link.status();
-        (s.granted.len() == 1).then_some(()).ok_or(format!("{s:?}"))
-    });
     let store = FleetStore::open(&schema.url).unwrap();
-    std::thread::spawn(move || {
-        let mut ingest = Ingest::new(store, link);
-        ingest.run(&stop, Duration::from_millis(50), |_| {});
-        (ingest.stats, ingest.link.status())
-    })
+    intake_thread(
+        rt.handle(),
+        &broker.url(FLEET_USER, "pw-fleet"),
+        client_id,
+        store,
+        stop,
+    )
 }
 
 fn stored_trips(store: &mut FleetStore) -> i64 {
@@ -178,10 +157,9 @@ fn stored_per_vin(schema: &PgSchema) -> (Vec<(String, i64)>, i64) {
 
 fn broker_with_logins(cars: &[Vin]) -> PrivateBroker {
     let broker = PrivateBroker::start();
-    broker.add_login(FLEET_USER, "pw-fleet");
-    for v in cars {
-        broker.add_login(v.as_str(), &format!("pw-{v}"));
-    }
+    let mut logins = vec![(FLEET_USER.to_string(), "pw-fleet".to_string())];
+    logins.extend(cars.iter().map(|v| (v.to_string(), format!("pw-{v}"))));
+    broker.add_logins(&logins);
     broker
 }
 
@@ -269,80 +247,100 @@ fn two_services_and_a_campaign_publisher_log_in_side_by_side_and_store_every_rep
 }
 
 #[test]
-fn a_vehicle_cannot_log_in_where_the_fleet_picks_its_own_client_ids() {
-    let vins = vins(1);
+fn a_vehicle_logs_in_only_with_its_vin_as_client_id_on_either_listener() {
+    let vins = vins(2);
     let broker = broker_with_logins(&vins);
     let rt = runtime();
-    let vin = vins[0].to_string();
-    // On the fleet's listener a client names its own client id: a car there could take
-    // over another car's session, so its login is not valid there.
-    let mut options = LinkOptions::new("JA3AP47H2YF000043");
-    options.max_backoff = Duration::from_millis(200);
+    let (vin, other) = (vins[0].to_string(), vins[1].to_string());
+    // With another car's VIN as client id a car could take over that car's session: its
+    // login is refused, on the vehicles' listener and on the fleet's alike.
+    for port in [broker.port, broker.fleet_port] {
+        let mut options = LinkOptions::new(other.clone());
+        options.max_backoff = Duration::from_millis(200);
+        let car = MqttLink::connect(
+            rt.handle(),
+            &broker.url_at(port, &vin, &format!("pw-{vin}")),
+            options,
+        );
+        let refused = car.wait_connected(Duration::from_secs(5)).unwrap_err();
+        assert!(refused.0.contains("refused the login"), "{port}: {refused}");
+    }
+    // With its own VIN it is let in.
     let car = MqttLink::connect(
         rt.handle(),
-        &broker.url_at(broker.fleet_port, &vin, &format!("pw-{vin}")),
-        options,
+        &broker.url(&vin, &format!("pw-{vin}")),
+        LinkOptions::new(vin.clone()),
     );
-    let refused = car.wait_connected(Duration::from_secs(5)).unwrap_err();
-    assert!(refused.0.contains("refused the login"), "{refused}");
-    // Nor is the fleet's login valid on the vehicles' listener.
-    let mut options = LinkOptions::new("fleet-x");
-    options.max_backoff = Duration::from_millis(200);
-    let fleet = MqttLink::connect(
-        rt.handle(),
-        &broker.url_at(broker.port, FLEET_USER, "pw-fleet"),
-        options,
-    );
-    let refused = fleet.wait_connected(Duration::from_secs(5)).unwrap_err();
-    assert!(refused.0.contains("refused the login"), "{refused}");
+    car.wait_connected(Duration::from_secs(5)).unwrap();
 }
 
-/// A car as the gateway reports: its reports in an outbox until the fleet's receipt, sent
-/// again while none comes ([`Outbox`]), over a persistent session with its own login. It
-/// publishes `trips` trips one every `pace` and returns once every one is confirmed (or
-/// after `deadline`), with its outbox and its link's state.
-fn reporting_car(
-    rt: &tokio::runtime::Runtime,
-    broker: &PrivateBroker,
-    vin: Vin,
-    trips: usize,
-    pace: Duration,
-    deadline: Duration,
-) -> std::thread::JoinHandle<(Outbox, LinkStatus)> {
-    let mut options = LinkOptions::new(vin.to_string());
-    options.persistent_session = true;
-    options.subscriptions = vec![topics::receipt(&vin)];
-    options.max_backoff = Duration::from_millis(500);
-    let mut link = MqttLink::connect(
+#[test]
+fn a_vehicle_cannot_join_the_services_group_and_every_report_is_stored() {
+    const PER_CAR: usize = 60;
+    let vins = vins(4);
+    let broker = broker_with_logins(&vins);
+    let schema = PgSchema::new();
+    let rt = runtime();
+    let stop = Arc::new(AtomicBool::new(false));
+    let service = service(&rt, &broker, &schema, "fleet-a", stop.clone());
+    // The fourth car tries to take a turn of every car's reports (the services' shared
+    // group, with 3.1.1 or 5), to read them all, or another car's commands.
+    let thief_vin = vins[3];
+    let stolen = [
+        topics::REPORTS_SHARED.to_string(),
+        "$share/other-group/autoplug/v1/vehicles/+/report/#".to_string(),
+        topics::REPORTS.to_string(),
+        topics::command(&vins[0]),
+        "#".to_string(),
+    ];
+    let mut options = LinkOptions::new(thief_vin.to_string());
+    options.subscriptions = stolen.to_vec();
+    let mut thief = MqttLink::connect(
         rt.handle(),
-        &broker.url(vin.as_str(), &format!("pw-{vin}")),
+        &broker.url(thief_vin.as_str(), &format!("pw-{thief_vin}")),
         options,
     );
-    std::thread::spawn(move || {
-        let mut outbox = Outbox::new(1024, 1_000);
-        let started = Instant::now();
-        let mut pushed = 0;
-        let mut next = Instant::now();
-        while started.elapsed() < deadline && (pushed < trips || !outbox.is_empty()) {
-            if pushed < trips && Instant::now() >= next {
-                pushed += 1;
-                let report = serde_json::to_vec(&trip(&vin, pushed as i64)).unwrap();
-                outbox.push(topics::report(&vin, ReportKind::Trip), report);
-                next += pace;
-            }
-            while let Some(message) = link.try_recv() {
-                outbox.on_receipt(&message.payload).unwrap();
-            }
-            outbox.send_due(autoplug_fleet::campaign::now_ms(), |topic, payload| {
-                link.publish(topic, payload.to_vec(), false).is_ok()
-            });
-            if let Some(message) = link.recv_timeout(Duration::from_millis(5)) {
-                outbox.on_receipt(&message.payload).unwrap();
-            }
-        }
-        let status = link.status();
-        (outbox, status)
-    })
+    thief.wait_connected(Duration::from_secs(10)).unwrap();
+    wait_for("the thief's SUBACK", Duration::from_secs(10), || {
+        let s = thief.status();
+        (s.granted.len() + s.denied.len() == stolen.len())
+            .then_some(())
+            .ok_or(format!("{s:?}"))
+    });
+    let status = thief.status();
+    assert!(status.granted.is_empty(), "granted: {:?}", status.granted);
+    assert_eq!(status.denied, stolen.to_vec());
+
+    // Three cars report, with no resend: a report the thief took would be lost.
+    let mut cars: Vec<Car> = vins[..3]
+        .iter()
+        .map(|v| Car::start(&rt, &broker, *v))
+        .collect();
+    for car in &mut cars {
+        car.publish(PER_CAR);
+    }
+    wait_for("every report's PUBACK", Duration::from_secs(60), || {
+        let acked: Vec<usize> = cars.iter().map(Car::acked).collect();
+        acked
+            .iter()
+            .all(|&a| a == PER_CAR)
+            .then_some(())
+            .ok_or(format!("{acked:?}"))
+    });
+    let mut check = FleetStore::open(&schema.url).unwrap();
+    let expected = (3 * PER_CAR) as i64;
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while stored_trips(&mut check) < expected && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    stop.store(true, Ordering::Relaxed);
+    service.join().unwrap();
+    assert_eq!(stored_trips(&mut check), expected);
+    assert_eq!(
+        thief.try_recv().map(|m| m.topic),
+        None,
+        "the thief read something"
+    );
 }
 
 #[test]
@@ -359,11 +357,12 @@ fn a_broker_restarted_mid_ingest_loses_no_report() {
         .iter()
         .map(|v| {
             reporting_car(
-                &rt,
-                &broker,
+                rt.handle(),
+                &broker.url(v.as_str(), &format!("pw-{v}")),
                 *v,
                 PER_CAR,
                 Duration::from_millis(15),
+                1_000,
                 Duration::from_secs(90),
             )
         })

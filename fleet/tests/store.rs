@@ -460,6 +460,9 @@ fn an_unreachable_server_is_named_in_the_error() {
     assert!(!text.contains("s3cret"), "{text}");
 }
 
+/// What makes a good report bad.
+type Spoil = Box<dyn Fn(&mut TripReport)>;
+
 #[test]
 fn figures_no_car_can_produce_and_ecus_the_catalogue_does_not_know_are_refused() {
     for engine in engines() {
@@ -470,7 +473,7 @@ fn figures_no_car_can_produce_and_ecus_the_catalogue_does_not_know_are_refused()
             .record_trip(&trip(1, 1, 1_000_000, "ok", &[]))
             .unwrap();
         // Two trips of 1.7e308 m made the overview's distance sum overflow in PostgreSQL.
-        let refusals: Vec<(Box<dyn Fn(&mut TripReport)>, &str)> = vec![
+        let refusals: Vec<(Spoil, &str)> = vec![
             (
                 Box::new(|t| t.stats.distance_m = 1.7e308),
                 "the distance (m) is 1.7e308, more than",

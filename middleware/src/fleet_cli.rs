@@ -62,11 +62,20 @@ pub struct VehicleFleetArgs {
     /// with it before the driver is asked.
     #[arg(long, value_name = "FILE.pub", requires = "fleet")]
     pub image_key: Option<PathBuf>,
+    /// Where the gateway keeps what it has seen of the fleet across restarts (the newest
+    /// campaign instruction's number: one played again is refused); default
+    /// `fleet-state.json` in the dashboard's data folder, or beside the gateway's --db.
+    #[arg(long, value_name = "FILE", requires = "fleet")]
+    pub fleet_state: Option<PathBuf>,
 }
 
 impl VehicleFleetArgs {
-    /// The link's configuration, if the gateway reports to a fleet.
-    pub fn config(&self) -> Result<Option<crate::fleet_link::FleetConfig>, String> {
+    /// The link's configuration, if the gateway reports to a fleet; its state in
+    /// `--fleet-state`, else in `default_state`.
+    pub fn config(
+        &self,
+        default_state: Option<PathBuf>,
+    ) -> Result<Option<crate::fleet_link::FleetConfig>, String> {
         let Some(broker) = &self.fleet else {
             return Ok(None);
         };
@@ -85,6 +94,7 @@ impl VehicleFleetArgs {
             image_key: crate::image_tool::read_public_key(image_key).map_err(|e| e.to_string())?,
             security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
             resend_after_ms: autoplug_fleet::outbox::RESEND_AFTER_MS,
+            state_file: self.fleet_state.clone().or(default_state),
         }))
     }
 }
@@ -269,6 +279,16 @@ pub enum FleetCommand {
         /// as JSON.
         #[arg(long, value_name = "FILE.json")]
         truth: Option<PathBuf>,
+        /// The share of drivers who decline an update (0 to 1), drawn per car from the
+        /// seed.
+        #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
+        decline_share: f64,
+        /// Give every car a login of its own (its VIN, a fresh password) on the running
+        /// broker of this directory (`fleet broker init`), and connect each with it to the
+        /// vehicles' listener of --broker: the per-vehicle rights are then exercised as on
+        /// the road.
+        #[arg(long, value_name = "DIR")]
+        broker_dir: Option<PathBuf>,
     },
     /// Recall by inventory: the vehicles carrying what is described, each with the ECU
     /// that matched.
@@ -414,7 +434,8 @@ pub enum BrokerCommand {
         #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:1884")]
         fleet_listen: std::net::SocketAddr,
     },
-    /// Add a login: a vehicle (its VIN) or a fleet service (autoplug-fleet). Prints the
+    /// Add a login to the running broker: a vehicle (its VIN) or the fleet services
+    /// (autoplug-fleet); a login there already gets the new password. Prints the
     /// password once unless --password-file names one to use.
     Add {
         /// The directory of `broker init`.
@@ -453,6 +474,7 @@ fn simulate(
     fleet_key: &Path,
     image_key: &Path,
     truth: Option<&Path>,
+    broker_dir: Option<&Path>,
     out: &mut dyn Write,
 ) -> Result<(), String> {
     use crate::fleet_sim::{self, Order, SimFleet};
@@ -472,11 +494,29 @@ fn simulate(
         image_key: crate::image_tool::read_public_key(image_key).map_err(|e| e.to_string())?,
         security_secret: crate::DEV_SECURITY_SECRET.to_vec(),
         resend_after_ms: autoplug_fleet::outbox::RESEND_AFTER_MS,
+        // A simulated car lives as long as the run.
+        state_file: None,
     };
     let threads = threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
         .clamp(1, 256);
-    let specs = fleet_sim::plan(&plan);
+    let mut specs = fleet_sim::plan(&plan);
+    if let Some(dir) = broker_dir {
+        let mut logins = Vec::with_capacity(specs.len());
+        for spec in &mut specs {
+            let password = broker::random_password()?;
+            logins.push((spec.vin.clone(), password.clone()));
+            spec.broker_password = Some(password);
+        }
+        broker::add_logins(&broker::BrokerDir::at(dir), &logins)?;
+        writeln!(
+            out,
+            "{} logins added to the broker of {} (one per car: its VIN)",
+            logins.len(),
+            dir.display()
+        )
+        .map_err(io)?;
+    }
     let carriers = specs.iter().filter(|s| s.cruise_faulty).count();
     writeln!(
         out,
@@ -594,9 +634,15 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             fleet_key,
             image_key,
             truth,
+            decline_share,
+            broker_dir,
         } => {
             let mut plan = crate::fleet_sim::FleetPlan::new(vehicles, seed);
             plan.drives = drives;
+            if !(decline_share.is_finite() && (0.0..=1.0).contains(&decline_share)) {
+                return Err("--decline-share is a fraction, 0 to 1".into());
+            }
+            plan.decline_share = decline_share;
             plan.first_serial = first_serial;
             if let Some(minutes) = drive_minutes {
                 if !(minutes.is_finite() && (0.5..=50.0).contains(&minutes))
@@ -617,6 +663,7 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
                 &fleet_key,
                 &image_key,
                 truth.as_deref(),
+                broker_dir.as_deref(),
                 out,
             )
         }
@@ -740,11 +787,11 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             )?;
             writeln!(
                 out,
-                "wrote {} (with the ACL and empty password files): vehicles on {listen}, fleet services on {fleet_listen}\nadd logins with: autoplug fleet broker add --dir {} --user VIN (or --user {})\nrun it with: mosquitto -c {}",
+                "wrote {} (with the logins' file, dynamic-security.json, and the administrator's password): vehicles on {listen}, fleet services on {fleet_listen}\nrun it with: mosquitto -c {}\nthen add logins with: autoplug fleet broker add --dir {} --user VIN (or --user {})",
+                files.config.display(),
                 files.config.display(),
                 dir.display(),
-                broker::FLEET_USER,
-                files.config.display()
+                broker::FLEET_USER
             )
             .map_err(io)?;
             Ok(())
@@ -754,11 +801,6 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             user,
             password_file,
         }) => {
-            if user != broker::FLEET_USER {
-                autoplug_vin::Vin::parse(&user).map_err(|e| {
-                    format!("'{user}' is neither a VIN ({e}) nor {}", broker::FLEET_USER)
-                })?;
-            }
             let (password, show) = match password_file {
                 Some(path) => (
                     std::fs::read_to_string(&path)
@@ -770,7 +812,7 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
                 None => (broker::random_password()?, true),
             };
             broker::add_login(&broker::BrokerDir::at(&dir), &user, &password)?;
-            writeln!(out, "added {user} (a running broker reads it on SIGHUP)").map_err(io)?;
+            writeln!(out, "added {user} to the running broker").map_err(io)?;
             if show {
                 writeln!(out, "password: {password}").map_err(io)?;
             }

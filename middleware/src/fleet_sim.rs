@@ -143,6 +143,10 @@ pub struct VehicleSpec {
     pub drives: Vec<Drive>,
     /// Whether its driver agrees to updates.
     pub consents: bool,
+    /// Its own broker password (its login is its VIN), when the broker has one for it;
+    /// none: the fleet configuration's login. Never written to the truth.
+    #[serde(skip)]
+    pub broker_password: Option<String>,
 }
 
 fn pick(rng: &mut ChaCha8Rng, releases: &[(Version, f64)]) -> Version {
@@ -207,6 +211,7 @@ pub fn plan(plan: &FleetPlan) -> Vec<VehicleSpec> {
                 cruise_faulty: cruise == FAULTY_CRUISE,
                 drives,
                 consents: !rng.random_bool(plan.decline_share.clamp(0.0, 1.0)),
+                broker_password: None,
             }
         })
         .collect()
@@ -322,9 +327,13 @@ impl SimVehicle {
     /// The car of `spec`, its gateway reporting through `fleet`, connections on `runtime`.
     pub fn new(
         spec: VehicleSpec,
-        fleet: FleetConfig,
+        mut fleet: FleetConfig,
         runtime: tokio::runtime::Handle,
     ) -> Result<Self, String> {
+        if let Some(password) = &spec.broker_password {
+            fleet.broker.username = Some(spec.vin.clone());
+            fleet.broker.password = Some(password.clone());
+        }
         let scenario = spec.scenario()?;
         let mut car = VirtualCar::new(&scenario);
         car.take_wheel();

@@ -463,7 +463,7 @@ fn fleet_serve_with_its_page_answers_only_its_own_names_and_ends_cleanly_on_post
         .port();
     let addr = format!("127.0.0.1:{port}");
     let client_id = format!("fleet-web-test-{}", std::process::id());
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_autoplug"))
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_autoplug"))
         .args([
             "fleet",
             "serve",
@@ -487,7 +487,10 @@ fn fleet_serve_with_its_page_answers_only_its_own_names_and_ends_cleanly_on_post
         .unwrap();
     let deadline = std::time::Instant::now() + Duration::from_secs(20);
     while std::net::TcpStream::connect(&addr).is_err() {
-        assert!(std::time::Instant::now() < deadline, "the page never listened");
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the page never listened"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     // Its own address and the allowed name are answered; a name pointed at it by a page
@@ -506,4 +509,89 @@ fn fleet_serve_with_its_page_answers_only_its_own_names_and_ends_cleanly_on_post
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn fleet_simulate_logs_each_car_in_as_itself_on_the_shipped_broker_and_its_drivers_decline() {
+    let broker = autoplug_fleet::testing::PrivateBroker::start();
+    broker.add_login(autoplug_fleet::broker::FLEET_USER, "pw-fleet");
+    let dir = tempfile::tempdir().unwrap();
+    let key_base = dir.path().join("fleet");
+    run_args(&args(&["keygen", "--out", &key_base.display().to_string()])).unwrap();
+    let fleet_pub = dir.path().join("fleet.pub").display().to_string();
+    let truth = dir.path().join("truth.json");
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    // The fleet's side reads every report on its own listener.
+    let mut options = LinkOptions::new("simulate-logins-test");
+    options.subscriptions = vec![topics::REPORTS.to_string()];
+    let mut listener = MqttLink::connect(
+        runtime.handle(),
+        &broker.url(autoplug_fleet::broker::FLEET_USER, "pw-fleet"),
+        options,
+    );
+    listener.wait_connected(Duration::from_secs(10)).unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while listener.status().granted.is_empty() && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let vehicles = format!("mqtt://127.0.0.1:{}", broker.port);
+    let simulate = |share: &str| {
+        run_args(&args(&[
+            "fleet",
+            "simulate",
+            "--vehicles",
+            "4",
+            "--drives",
+            "1",
+            "--seed",
+            "12",
+            "--threads",
+            "2",
+            "--broker",
+            &vehicles,
+            "--broker-dir",
+            &broker.files.dir.display().to_string(),
+            "--decline-share",
+            share,
+            "--fleet-key",
+            &fleet_pub,
+            "--truth",
+            &truth.display().to_string(),
+        ]))
+    };
+    let wrong = simulate("1.5").unwrap_err();
+    assert!(wrong.contains("--decline-share is a fraction"), "{wrong}");
+    let output = simulate("1").unwrap();
+    assert!(output.contains("4 logins added"), "{output}");
+    assert!(!output.contains("errors:"), "{output}");
+    let cars: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+    // Every driver declines (a share of 1), and no password reached the truth.
+    assert!(
+        cars.iter().all(|c| c["plan"]["consents"] == false),
+        "{cars:?}"
+    );
+    assert!(!std::fs::read_to_string(&truth)
+        .unwrap()
+        .contains("password"));
+    // Each car reported as itself through its own login: the broker lets a login publish
+    // only under its own VIN, and anonymous clients not at all.
+    let vins: std::collections::BTreeSet<String> = cars
+        .iter()
+        .map(|c| c["plan"]["vin"].as_str().unwrap().to_string())
+        .collect();
+    let mut reported = std::collections::BTreeSet::new();
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while reported.len() < vins.len() && std::time::Instant::now() < deadline {
+        if let Some(message) = listener.recv_timeout(Duration::from_millis(200)) {
+            if let Ok((vin, ReportKind::Inventory)) = topics::parse_report(&message.topic) {
+                reported.insert(vin.to_string());
+            }
+        }
+    }
+    assert_eq!(reported, vins);
 }
