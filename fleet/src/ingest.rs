@@ -306,3 +306,60 @@ impl Ingest {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn message(topic: &str, payload: &[u8]) -> Message {
+        Message {
+            topic: topic.to_string(),
+            payload: payload.to_vec(),
+            retained: false,
+            publish: rumqttc::Publish::new(topic, rumqttc::QoS::AtLeastOnce, payload.to_vec()),
+        }
+    }
+
+    #[test]
+    fn refusals_are_notices_as_they_happen_five_a_window_and_the_rest_counted() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = FleetStore::open(&dir.path().join("fleet.db").display().to_string()).unwrap();
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .enable_all()
+            .build()
+            .unwrap();
+        // Nothing listens on port 9: acknowledgements and receipts go nowhere, which the
+        // intake survives.
+        let link = MqttLink::connect(
+            runtime.handle(),
+            &"mqtt://127.0.0.1:9".parse().unwrap(),
+            crate::mqtt::LinkOptions::new("refusal-test"),
+        );
+        let mut ingest = Ingest::new(store, link);
+        let stop = AtomicBool::new(false);
+        let topic = "autoplug/v1/vehicles/JA3AP47H0YF000042/report/trip";
+        ingest.take(&message(topic, b"{not json"), &stop);
+        // At once, naming the car, the kind and why.
+        let notices = ingest.take_notices();
+        assert_eq!(notices.len(), 1, "{notices:?}");
+        assert!(
+            notices[0].contains("refused a trip report of JA3AP47H0YF000042 (1 since start)")
+                && notices[0].contains("not valid"),
+            "{notices:?}"
+        );
+        for _ in 0..9 {
+            ingest.take(&message(topic, b"[]"), &stop);
+        }
+        // Four more shown in this window, five counted.
+        assert_eq!(ingest.take_notices().len(), 4);
+        ingest.refusal_window.0 -= REFUSAL_WINDOW;
+        let notices = ingest.take_notices();
+        assert_eq!(notices.len(), 1, "{notices:?}");
+        assert!(
+            notices[0].contains("refused 5 more reports in the last 10 s (10 refused since start)"),
+            "{notices:?}"
+        );
+        assert_eq!(ingest.stats.rejected, 10);
+    }
+}

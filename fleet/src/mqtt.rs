@@ -177,7 +177,7 @@ pub struct Message {
     pub payload: Vec<u8>,
     /// Whether the broker delivered it as a retained message.
     pub retained: bool,
-    publish: Publish,
+    pub(crate) publish: Publish,
 }
 
 /// What the connection is doing, for the caller to show.
