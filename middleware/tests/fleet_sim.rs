@@ -355,6 +355,30 @@ fn a_simulated_fleet_is_recalled_exactly_and_fixed_over_the_air_on_sqlite_and_po
     recall_and_campaign(&schema.url, "postgres", 300_000);
 }
 
+/// An instruction to install `image` as cruise 1.2.0 on `vin`, valid for an hour, made
+/// outside the fleet's campaigns (number `number` of the vehicle's series).
+fn cruise_instruction(
+    number: u64,
+    campaign: i64,
+    vin: &str,
+    image: &[u8],
+) -> autoplug_fleet::campaign::Instruction {
+    autoplug_fleet::campaign::Instruction {
+        number,
+        campaign,
+        name: format!("campaign-{campaign}"),
+        vin: vin.to_string(),
+        ecu: "cruise".into(),
+        image_sha256: sha256_hex(image),
+        image_bytes: image.len() as u64,
+        version: "1.2.0".into(),
+        attempt: 1,
+        issued_at_ms: now_ms(),
+        expires_at_ms: now_ms() + 3_600_000,
+        message: String::new(),
+    }
+}
+
 /// Parks the fleet until `done` holds of the store (at most `timeout`), then returns every
 /// car's status.
 fn park_until(
@@ -454,20 +478,12 @@ fn failures_forgeries_and_an_offline_car(address: &str, tag: &str, first_serial:
     // Forged and altered instructions are refused without a trace of acting on them.
     let target = vins[8].clone();
     let vin = autoplug_vin::Vin::parse(&target).unwrap();
-    let mut instruction = autoplug_fleet::campaign::Instruction {
-        number: store.next_instruction_number(&target).unwrap(),
-        campaign: 999,
-        name: "forged".into(),
-        vin: target.clone(),
-        ecu: "cruise".into(),
-        image_sha256: sha256_hex(&image),
-        image_bytes: image.len() as u64,
-        version: "1.2.0".into(),
-        attempt: 1,
-        issued_at_ms: now_ms(),
-        expires_at_ms: now_ms() + 3_600_000,
-        message: String::new(),
-    };
+    let mut instruction = cruise_instruction(
+        store.next_instruction_number(&target).unwrap(),
+        999,
+        &target,
+        &image,
+    );
     let forged = instruction.sign(&SigningKey::from_seed([13; 32]));
     let mut altered: autoplug_fleet::campaign::Envelope =
         serde_json::from_slice(&instruction.sign(&fleet_key())).unwrap();
@@ -673,20 +689,7 @@ fn an_instruction_captured_and_played_again_after_a_restart_is_refused() {
     let serial = std::process::id() % 100_000;
     let vin = autoplug_vin::Vin::with_check_digit(&format!("JA3AP47H0YR{serial:06}")).unwrap();
     let image = fixed_cruise();
-    let instruction = autoplug_fleet::campaign::Instruction {
-        number: 5,
-        campaign: 41,
-        name: "cruise-1.1.0".into(),
-        vin: vin.to_string(),
-        ecu: "cruise".into(),
-        image_sha256: sha256_hex(&image),
-        image_bytes: image.len() as u64,
-        version: "1.2.0".into(),
-        attempt: 1,
-        issued_at_ms: now_ms(),
-        expires_at_ms: now_ms() + 3_600_000,
-        message: String::new(),
-    };
+    let instruction = cruise_instruction(5, 41, vin.as_str(), &image);
     let captured = instruction.sign(&fleet_key());
     let broker: Broker = broker_url().parse().unwrap();
     let attacker = MqttLink::connect(
@@ -702,7 +705,7 @@ fn an_instruction_captured_and_played_again_after_a_restart_is_refused() {
     attacker
         .publish(&topics::command(&vin), captured.clone(), false)
         .unwrap();
-    wait_event(&mut first, "campaign 41 (cruise-1.1.0): fetching");
+    wait_event(&mut first, "campaign 41 (campaign-41): fetching");
     first.close(Duration::from_secs(1));
     let kept: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&state_file).unwrap()).unwrap();
