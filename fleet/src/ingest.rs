@@ -228,7 +228,7 @@ impl Ingest {
         let receipt = Receipt::of(&message.payload, refused);
         if self
             .link
-            .publish(&topics::receipt(&vin), receipt.to_json(), false)
+            .publish_waiting(&topics::receipt(&vin), receipt.to_json(), false)
             .is_err()
         {
             self.receipts_not_sent += 1;

@@ -36,6 +36,10 @@ pub const INCOMING_CAPACITY: usize = 256;
 /// Requests (publish, subscribe, acknowledge) that may wait for the connection.
 pub const REQUEST_CAPACITY: usize = 256;
 
+/// The longest [`MqttLink::ack`] and [`MqttLink::publish_waiting`] wait for room in the
+/// request queue.
+pub const REQUEST_WAIT: Duration = Duration::from_secs(5);
+
 /// A broker's address and the login to use: `mqtt://[USER[:PASSWORD]@]HOST[:PORT]`.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Broker {
@@ -247,7 +251,6 @@ impl MqttLink {
         let subscribing = Subscribing::default();
         let task = runtime.spawn(run(
             eventloop,
-            client.clone(),
             tx,
             status.clone(),
             subscribing.clone(),
@@ -345,11 +348,57 @@ impl MqttLink {
             .flatten()
     }
 
-    /// Acknowledges a message (with manual acks): the broker may forget it.
+    /// Acknowledges a message (with manual acks): the broker may forget it. Waits for room
+    /// in the request queue (at most [`REQUEST_WAIT`]): an acknowledgement dropped for a
+    /// full queue would hold one of the broker's in-flight slots for the connection's
+    /// life, and a few dozen of them stop its deliveries. While disconnected there is
+    /// nothing to acknowledge: the broker delivers the message again on the next
+    /// connection (the session is kept).
     pub fn ack(&self, message: &Message) -> Result<(), LinkError> {
-        self.client
-            .try_ack(&message.publish)
-            .map_err(|e| LinkError(format!("cannot acknowledge: {e}")))
+        self.send_waiting("acknowledge", self.client.ack(&message.publish))
+    }
+
+    /// Publishes at QoS 1 like [`Self::publish`], but waits (at most [`REQUEST_WAIT`]) for
+    /// room in the request queue instead of failing at once; fails at once while
+    /// disconnected.
+    pub fn publish_waiting(
+        &self,
+        topic: &str,
+        payload: Vec<u8>,
+        retain: bool,
+    ) -> Result<(), LinkError> {
+        if payload.len() > MAX_PACKET_BYTES - topic.len() - 16 {
+            return Err(LinkError(format!(
+                "a message of {} bytes is larger than the {MAX_PACKET_BYTES} bytes allowed",
+                payload.len()
+            )));
+        }
+        self.send_waiting(
+            "publish",
+            self.client
+                .publish(topic, QoS::AtLeastOnce, retain, payload),
+        )
+    }
+
+    fn send_waiting(
+        &self,
+        what: &str,
+        request: impl std::future::Future<Output = Result<(), rumqttc::ClientError>>,
+    ) -> Result<(), LinkError> {
+        if !self.status().connected {
+            return Err(LinkError(format!("cannot {what}: not connected")));
+        }
+        match self
+            .runtime
+            .block_on(async { tokio::time::timeout(REQUEST_WAIT, request).await })
+        {
+            Ok(Ok(())) => Ok(()),
+            Ok(Err(e)) => Err(LinkError(format!("cannot {what}: {e}"))),
+            Err(_) => Err(LinkError(format!(
+                "cannot {what}: the request queue stayed full for {} s",
+                REQUEST_WAIT.as_secs()
+            ))),
+        }
     }
 
     /// Disconnects cleanly (the broker keeps a persistent session), waiting at most
@@ -380,14 +429,31 @@ fn set(status: &Mutex<LinkStatus>, change: impl FnOnce(&mut LinkStatus)) {
 /// hands publishes to the caller.
 async fn run(
     mut eventloop: rumqttc::EventLoop,
-    client: AsyncClient,
     tx: mpsc::Sender<Message>,
     status: Arc<Mutex<LinkStatus>>,
     subscribing: Subscribing,
     options: LinkOptions,
 ) {
     let mut backoff = options.backoff;
+    // With manual acks, messages the caller's queue had no room for wait here rather than
+    // stop the event loop: a caller acknowledging (or publishing a receipt) waits for the
+    // event loop to take its request, and an event loop waiting for the caller to take a
+    // message never would (the keep-alive then expired and the service took nothing more).
+    // The broker sends a client at most its in-flight window of unacknowledged messages
+    // (Mosquitto: 20), which bounds what waits; every acknowledgement wakes this loop to
+    // hand the next over.
+    let mut held: std::collections::VecDeque<Message> = std::collections::VecDeque::new();
     loop {
+        while let Some(message) = held.pop_front() {
+            match tx.try_send(message) {
+                Ok(()) => {}
+                Err(mpsc::error::TrySendError::Full(message)) => {
+                    held.push_front(message);
+                    break;
+                }
+                Err(mpsc::error::TrySendError::Closed(_)) => return,
+            }
+        }
         match eventloop.poll().await {
             Ok(Event::Incoming(Packet::ConnAck(_))) => {
                 backoff = options.backoff;
@@ -406,6 +472,11 @@ async fn run(
                 // (`$share/…`) subscriptions, so a service that trusted `session_present`
                 // stayed connected and subscribed to nothing. Subscribing again to what a
                 // session holds changes nothing else.
+                //
+                // The SUBSCRIBE goes first, ahead of the request queue: while the broker was
+                // away that queue filled (a service's acknowledgements and receipts), and a
+                // SUBSCRIBE refused for a full queue left the service subscribed to nothing
+                // (20 cars through a broker restart: ingest stopped for good).
                 if !options.subscriptions.is_empty() {
                     if let Ok(mut pending) = subscribing.lock() {
                         pending.push_back(options.subscriptions.clone());
@@ -414,9 +485,9 @@ async fn run(
                         .subscriptions
                         .iter()
                         .map(|t| SubscribeFilter::new(t.clone(), QoS::AtLeastOnce));
-                    if let Err(e) = client.try_subscribe_many(filters) {
-                        set(&status, |s| s.last_error = Some(format!("subscribe: {e}")));
-                    }
+                    eventloop.pending.push_front(rumqttc::Request::Subscribe(
+                        rumqttc::Subscribe::new_many(filters),
+                    ));
                 }
             }
             Ok(Event::Incoming(Packet::SubAck(ack))) => {
@@ -442,7 +513,19 @@ async fn run(
                     retained: publish.retain,
                     publish,
                 };
-                if tx.send(message).await.is_err() {
+                if options.manual_acks {
+                    if held.is_empty() {
+                        match tx.try_send(message) {
+                            Ok(()) => {}
+                            Err(mpsc::error::TrySendError::Full(message)) => {
+                                held.push_back(message)
+                            }
+                            Err(mpsc::error::TrySendError::Closed(_)) => return,
+                        }
+                    } else {
+                        held.push_back(message);
+                    }
+                } else if tx.send(message).await.is_err() {
                     return; // The link was dropped.
                 }
             }
