@@ -163,14 +163,18 @@ fn broker_with_logins(cars: &[Vin]) -> PrivateBroker {
     broker
 }
 
+/// A schema of the test's own on the PostgreSQL server, a runtime for the MQTT links, and
+/// the flag that stops the services.
+fn servers() -> (PgSchema, tokio::runtime::Runtime, Arc<AtomicBool>) {
+    (PgSchema::new(), runtime(), Arc::new(AtomicBool::new(false)))
+}
+
 #[test]
 fn two_services_and_a_campaign_publisher_log_in_side_by_side_and_store_every_report_once() {
     const PER_CAR: usize = 100;
     let vins = vins(3);
     let broker = broker_with_logins(&vins);
-    let schema = PgSchema::new();
-    let rt = runtime();
-    let stop = Arc::new(AtomicBool::new(false));
+    let (schema, rt, stop) = servers();
     // Two services of one group, as the README scales out: distinct client ids, one login.
     let a = service(&rt, &broker, &schema, "fleet-a", stop.clone());
     let b = service(&rt, &broker, &schema, "fleet-b", stop.clone());
@@ -279,9 +283,7 @@ fn a_vehicle_cannot_join_the_services_group_and_every_report_is_stored() {
     const PER_CAR: usize = 60;
     let vins = vins(4);
     let broker = broker_with_logins(&vins);
-    let schema = PgSchema::new();
-    let rt = runtime();
-    let stop = Arc::new(AtomicBool::new(false));
+    let (schema, rt, stop) = servers();
     let service = service(&rt, &broker, &schema, "fleet-a", stop.clone());
     // The fourth car tries to take a turn of every car's reports (the services' shared
     // group, with 3.1.1 or 5), to read them all, or another car's commands.
@@ -351,9 +353,7 @@ fn a_broker_restarted_mid_ingest_loses_no_report() {
     const PER_CAR: usize = 60;
     let vins = vins(CARS);
     let mut broker = broker_with_logins(&vins);
-    let schema = PgSchema::new();
-    let rt = runtime();
-    let stop = Arc::new(AtomicBool::new(false));
+    let (schema, rt, stop) = servers();
     let service = service(&rt, &broker, &schema, "fleet-a", stop.clone());
     let mut check = FleetStore::open(&schema.url).unwrap();
     let cars: Vec<_> = vins
