@@ -149,13 +149,16 @@ pub fn check_ecu_name(what: &str, name: &str) -> Result<autoplug_can::Node, Repo
 /// The longest trip the fleet takes, s (30 days): a trip ends when the car is parked.
 pub const MAX_TRIP_S: f64 = 30.0 * 24.0 * 3600.0;
 
-/// The most fuel any road car's engine burns, L/h, at full load (the fastest production
-/// cars stay near 500 L/h at their top speed; the AutoPlug car's model burns under 60).
+/// The most fuel any road car's engine burns, L/h, at full load: a generous road-car bound
+/// (the AutoPlug engine ECU publishes 150 L/h as its own counter's limit,
+/// `ecu_engine::FUEL_FLOW_MAX_L_PER_H`, which the fleet does not link).
 pub const MAX_FUEL_FLOW_L_PER_H: f64 = 600.0;
 
 /// The most events of one kind (ABS interventions, shifts...) per second of trip: one per
-/// 10 ms, the period of the fastest message that can show one.
-pub const MAX_EVENTS_PER_S: f64 = 100.0;
+/// period of the fastest message that can show one (AbsMsg's, in the catalogue: 10 ms).
+pub fn max_events_per_s() -> f64 {
+    1000.0 / f64::from(autoplug_can::AbsMsg::CYCLE_TIME_MS)
+}
 
 /// The highest speed a trip can show, km/h: the top of VehicleSpeedMsg's range in the
 /// catalogue (the gateway's speed is that signal).
@@ -289,7 +292,7 @@ impl TripReport {
                 "600 L/h for the whole trip",
             ));
         }
-        let most_events = MAX_EVENTS_PER_S * duration;
+        let most_events = max_events_per_s() * duration;
         for (what, n) in [
             ("ABS interventions", s.abs_interventions),
             ("hard brakings", s.hard_brakings),
