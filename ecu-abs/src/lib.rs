@@ -143,13 +143,14 @@
 #![deny(missing_docs)]
 
 use autoplug_can::{AbsMsg, Frame, Node, PedalBrake, TracMsg, VehicleSpeedMsg, WheelSpeedMsg};
-use autoplug_ecu::{
-    receive, supervise, Dtc, DtcSystem, Dtcs, EcuLogic, Input, Instant, PeriodicTx,
-    FTB_SIGNAL_PLAUSIBILITY,
-};
+use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_pid::{Pid, PidConfig};
 
 pub use autoplug_ecu::Variant;
+
+// The published parameters (calibration, thresholds, trouble codes) live with the
+// other ECUs' in `autoplug-ecu-params`, where the gateway's diagnostics read them.
+pub use autoplug_ecu_params::abs::*;
 
 /// The variant this build runs: [`Variant::Faulty`] with the `faulty` cargo feature (the
 /// demonstration's broken firmware), [`Variant::Correct`] otherwise. The virtual car
@@ -159,11 +160,6 @@ pub const BUILD_VARIANT: Variant = if cfg!(feature = "faulty") {
 } else {
     Variant::Correct
 };
-
-/// Releases of brake pressure closer together than this belong to one ABS intervention:
-/// the ABS pulses a locking wheel several times a second, and one braking on a slippery
-/// stretch is one intervention, however many pulses it takes.
-pub const INTERVENTION_MERGE_GAP_US: u64 = 1_000_000;
 
 /// Control period. Wheel dynamics are fast (a wheel locks within ~100 ms at full brake), so
 /// the ABS runs at twice the message rate; messages still go out at their 10 ms periods
@@ -433,15 +429,6 @@ pub const WHEEL_PLAUSIBILITY_DIFF_KMH: f32 = 50.0;
 /// An implausible wheel speed sets its DTC after this long (µs). Longer than any wheel
 /// lock the correct ABS allows, so braking does not trip it.
 pub const WHEEL_PLAUSIBILITY_DEBOUNCE_US: u64 = 500_000;
-
-/// Wheel speed sensor DTCs, FL, FR, RL, RR (the common SAE chassis codes C0035, C0040,
-/// C0045, C0050 "wheel speed sensor circuit"), with failure type 0x64.
-pub const WHEEL_SENSOR_DTCS: [Dtc; 4] = [
-    Dtc::new(DtcSystem::C, 0x0035, FTB_SIGNAL_PLAUSIBILITY),
-    Dtc::new(DtcSystem::C, 0x0040, FTB_SIGNAL_PLAUSIBILITY),
-    Dtc::new(DtcSystem::C, 0x0045, FTB_SIGNAL_PLAUSIBILITY),
-    Dtc::new(DtcSystem::C, 0x0050, FTB_SIGNAL_PLAUSIBILITY),
-];
 
 /// ABS control channels: front left, front right, rear axle (select-low).
 const CHANNELS: usize = 3;

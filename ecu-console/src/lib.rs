@@ -25,13 +25,9 @@
 use autoplug_can::{AccMsg, EngineMode, Frame, Node, PedalBrake, ShiftMode};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 
-/// Brake command above which the brake lights come on, %: above the noise of a foot
-/// resting on the pedal, below any braking a follower would need to know about.
-pub const BRAKE_LIGHTS_ON_PCT: f32 = 2.0;
-
-/// Brake command at or below which the brake lights go off again, %: one catalogue step
-/// below the on threshold (hysteresis).
-pub const BRAKE_LIGHTS_OFF_PCT: f32 = 1.0;
+// The published parameters (calibration, thresholds, trouble codes) live with the
+// other ECUs' in `autoplug-ecu-params`, where the gateway's diagnostics read them.
+pub use autoplug_ecu_params::console::*;
 
 /// Control period: brake lights follow PedalBrake (10 ms) within a step.
 pub const STEP_PERIOD_US: u64 = 10_000;

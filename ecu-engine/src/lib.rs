@@ -31,6 +31,10 @@ use autoplug_can::{AccMsg, EngineMode, EngineMsg, Frame, Node};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_scaling::clamp_finite;
 
+// The published parameters (calibration, thresholds, trouble codes) live with the
+// other ECUs' in `autoplug-ecu-params`, where the gateway's diagnostics read them.
+pub use autoplug_ecu_params::engine::*;
+
 /// Highest engine speed at which the engine ECU lets itself be reprogrammed, rpm: engine
 /// off or idling (the EVO VI idles at 850 rpm), never while driven.
 pub const PROGRAMMING_MAX_RPM: f32 = 1200.0;
@@ -40,10 +44,6 @@ pub const ENGINE_RPM_MAX: f32 = 9000.0;
 
 /// Highest fuel level EngineMsg carries, litres (raw 255 at 0.25 L); the tank holds 48 L.
 pub const FUEL_LEVEL_MAX_L: f32 = 63.75;
-
-/// Highest fuel flow the ECU's input reads, L/h (the EVO VI burns about 90 L/h at full
-/// power).
-pub const FUEL_FLOW_MAX_L_PER_H: f32 = 150.0;
 
 /// Longest step the fuel integration trusts, µs: a longer gap (a stalled loop, a clock
 /// jump) counts as this long, so one bad timestamp cannot add litres.

@@ -42,10 +42,9 @@ use autoplug_can::{
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_scaling::clamp_finite;
 
-/// A pedal counts as pressed above this many pedal units: enough to ignore a foot resting
-/// on it and sensor noise, small enough that any deliberate press cancels cruise (and a
-/// deliberate brake press overrides the accelerator).
-pub const PEDAL_PRESSED_THRESHOLD: f32 = 5.0;
+// The published parameters (calibration, thresholds, trouble codes) live with the
+// other ECUs' in `autoplug-ecu-params`, where the gateway's diagnostics read them.
+pub use autoplug_ecu_params::pedals::*;
 
 /// Full pedal travel and full command, pedal units (the catalogue's 0..100).
 pub const PEDAL_FULL: f32 = 100.0;

@@ -36,6 +36,10 @@
 use autoplug_can::{CruiseMode, CruiseModeMsg, Frame, Node, ShiftMsg, ShiftRequest, SteeringMsg};
 use autoplug_ecu::{invalid_data, receive_from, Dtc, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 
+// The published parameters (calibration, thresholds, trouble codes) live with the
+// other ECUs' in `autoplug-ecu-params`, where the gateway's diagnostics read them.
+pub use autoplug_ecu_params::steering::*;
+
 /// The steering range, degrees either side of straight ahead: the catalogue's SteeringMsg
 /// range (raw 10..90), and what the steering actuator accepts.
 pub const STEERING_LIMIT_DEG: f32 = 135.0;
@@ -43,10 +47,6 @@ pub const STEERING_LIMIT_DEG: f32 = 135.0;
 /// A button's new level must be seen on this many consecutive steps before it counts:
 /// 20 ms at the 10 ms step, longer than contact bounce, far shorter than a deliberate press.
 pub const DEBOUNCE_STEPS: u8 = 2;
-
-/// How long a shift request stays on ShiftMsg after a paddle press: 5 frames at 20 ms, so
-/// the transmission sees it even if a frame is lost, and short enough to be one shift.
-pub const SHIFT_PULSE_MS: u64 = 100;
 
 /// Control period: the rate SteeringMsg is published at.
 pub const STEP_PERIOD_US: u64 = 10_000;

@@ -1,0 +1,296 @@
+#!/usr/bin/env python3
+"""Cross-checks autoplug-logs against python-can and cantools.
+
+    python3 middleware/logs/tests/check_with_python.py     (from the workspace root or anywhere)
+
+Needs python-can 4.x and cantools (`pip install python-can cantools`, or scripts/setup).
+It builds the `convert` example of autoplug-logs, then:
+
+1. writes a candump log with python-can's CanutilsLogWriter (with its R/T suffix): frames
+   of every message of shared/can/autoplug.dbc with random payloads, plus extended,
+   remote, error and second-channel frames; the Rust reader must give exactly these;
+2. (a) converts it with the Rust candump writer (plain, and with R/T) and reads the
+   result with cantools' logreader and python-can's CanutilsLogReader;
+   (b) converts it with the Rust ASC writer and reads that with python-can's ASCReader
+   (cantools' logreader does not read ASC: that is checked too, for information);
+   every frame's identifier, data, kind, direction and time must agree to the
+   microsecond, and every catalogue frame must decode with cantools to the same
+   signals as the original;
+3. reads the python-can fixtures in tests/data (candump, ASC, BLF) with the Rust reader
+   and with python-can's readers, and converts the BLF to ASC for python-can's ASCReader;
+4. writes 6000 frames with python-can's BLFWriter and cuts the file's last 200 bytes, as a
+   logger that lost power leaves it: the Rust reader must give the frames python-can reads,
+   then one fatal error saying the file is truncated.
+
+Exits 1 on any disagreement, listing each.
+"""
+
+import json
+import pathlib
+import random
+import subprocess
+import sys
+import tempfile
+
+try:
+    import can
+    import cantools
+    import cantools.logreader
+except ImportError as e:  # pragma: no cover
+    sys.exit(f"check_with_python: {e}; install with: pip install python-can cantools")
+
+HERE = pathlib.Path(__file__).resolve().parent
+ROOT = HERE.parents[2]
+DBC = ROOT / "shared/can/autoplug.dbc"
+T0_US = 1_700_000_000_000_000
+
+failures = []
+checks = 0
+
+
+def check(what, ok, detail=""):
+    global checks
+    checks += 1
+    if not ok:
+        failures.append(f"{what}: {detail}")
+        print(f"FAIL {what}: {detail}")
+
+
+def convert_binary():
+    subprocess.run(
+        ["cargo", "build", "-q", "-p", "autoplug-logs", "--example", "convert"],
+        cwd=ROOT, check=True)
+    meta = json.loads(subprocess.run(
+        ["cargo", "metadata", "-q", "--format-version", "1", "--no-deps"],
+        cwd=ROOT, check=True, capture_output=True, text=True).stdout)
+    return pathlib.Path(meta["target_directory"]) / "debug/examples/convert"
+
+
+def rust_items(convert, path):
+    """What the Rust reader gives: frames as dicts, errors as {"error": ...}."""
+    out = subprocess.run([str(convert), "--json", str(path)], capture_output=True, text=True)
+    if out.returncode != 0:
+        failures.append(f"rust reader on {path.name}: {out.stderr.strip()}")
+    return [json.loads(line) for line in out.stdout.splitlines()]
+
+
+def rust_convert(convert, src, dst, *flags):
+    out = subprocess.run([str(convert), *flags, str(src), str(dst)], capture_output=True, text=True)
+    check(f"convert {src.name} -> {dst.name}", out.returncode == 0, out.stderr.strip())
+
+
+def us(seconds):
+    return round(seconds * 1_000_000)
+
+
+def from_python(message, channel):
+    """A python-can message in the form of the Rust dump."""
+    if message.is_error_frame:
+        kind = "error"
+    elif message.is_remote_frame:
+        kind = "remote"
+    else:
+        kind = "data"
+    data = b"" if message.is_remote_frame else bytes(message.data)
+    return {
+        "t_us": us(message.timestamp), "channel": channel, "id": message.arbitration_id,
+        "extended": message.is_extended_id, "kind": kind,
+        "direction": "rx" if message.is_rx else "tx",
+        "len": message.dlc if message.is_remote_frame else len(data),
+        "data": data.hex().upper(),
+    }
+
+
+def canutils_channel(message):
+    """`can1` -> 1. python-can's candump reader keeps no channel for error frames: 0."""
+    return int(message.channel[3:]) if message.channel else 0
+
+
+def same(a, b, fields):
+    return {k: a[k] for k in fields} == {k: b[k] for k in fields}
+
+
+ALL = ["t_us", "channel", "id", "extended", "kind", "direction", "len", "data"]
+# An error frame's identifier and flags mean different things in each format.
+ERROR_FIELDS = ["t_us", "channel", "kind", "direction"]
+
+
+def compare(what, rust, python, fields=ALL):
+    """Rust frames against python's, in order; python-can's CAN FD messages must be
+    Rust errors at the same place."""
+    check(f"{what}: count", len(rust) == len(python), f"rust {len(rust)}, python {len(python)}")
+    for i, (r, p) in enumerate(zip(rust, python)):
+        if p is None:  # CAN FD on the python side
+            check(f"{what}: item {i + 1} is refused as CAN FD",
+                  "error" in r and "CAN FD" in r["error"], str(r))
+            continue
+        if "error" in r:
+            check(f"{what}: item {i + 1}", False, f"rust error {r['error']}, python {p}")
+            continue
+        f = ERROR_FIELDS if p["kind"] == "error" else fields
+        check(f"{what}: item {i + 1}", same(r, p, f), f"rust {r}\n      python {p}")
+
+
+def decoded(db, frame_id, data):
+    try:
+        message = db.get_message_by_frame_id(frame_id)
+    except KeyError:
+        return None
+    return message.decode(bytes(data), decode_choices=False)
+
+
+def make_input(db):
+    """The messages of step 1, and what the Rust reader must give for them."""
+    rng = random.Random(2011)
+    messages = []
+    t = T0_US
+    for message in sorted(db.messages, key=lambda m: m.frame_id):
+        for _ in range(3):
+            t += rng.randrange(1, 5000)
+            messages.append(can.Message(
+                timestamp=t / 1e6, arbitration_id=message.frame_id, is_extended_id=False,
+                data=bytes(rng.randrange(256) for _ in range(message.length)),
+                is_rx=rng.random() < 0.8, channel=0))
+    extras = [
+        can.Message(arbitration_id=0x1ABCDEF0, is_extended_id=True, data=b"\x01\x02\x03", channel=0),
+        can.Message(arbitration_id=0x00000123, is_extended_id=True, data=b"", is_rx=False, channel=0),
+        can.Message(arbitration_id=0x123, is_extended_id=False, is_remote_frame=True, channel=0),
+        can.Message(is_error_frame=True, channel=0),
+        can.Message(arbitration_id=0x003, is_extended_id=False, data=b"\x64", channel=1),
+    ]
+    for extra in extras:
+        t += 1_000_001
+        extra.timestamp = t / 1e6
+        messages.append(extra)
+    expected = [from_python(m, m.channel) for m in messages]
+    # python-can writes error frames as CAN_ERR_FLAG | CAN_ERR_BUSERROR: class 0x80.
+    for e, m in zip(expected, messages):
+        if m.is_error_frame:
+            e["id"], e["extended"] = 0x80, False
+    return messages, expected
+
+
+def truncated_blf(convert, tmp):
+    """Step 4: a BLF cut short, read by python-can and by the Rust reader."""
+    rng = random.Random(6000)
+    path = tmp / "cut.blf"
+    writer = can.BLFWriter(path)
+    t = T0_US
+    for _ in range(6000):
+        writer.on_message_received(can.Message(
+            timestamp=t / 1e6, arbitration_id=rng.randrange(0x800), is_extended_id=False,
+            data=bytes(rng.randrange(256) for _ in range(rng.randrange(9))),
+            is_rx=rng.random() < 0.8, channel=0))
+        t += rng.randrange(100, 2000)
+    writer.stop()
+    path.write_bytes(path.read_bytes()[:-200])
+    python = [from_python(m, m.channel) for m in can.BLFReader(path)]
+    out = subprocess.run([str(convert), "--json", str(path)], capture_output=True, text=True)
+    items = [json.loads(line) for line in out.stdout.splitlines()]
+    last = items[-1] if items else {}
+    check("rust on a BLF cut short: one fatal error at the end",
+          last.get("fatal") is True and "truncated file?" in last.get("error", "")
+          and sum("error" in i for i in items) == 1, str(last))
+    check("python-can reads most of the BLF cut short", 5900 < len(python) < 6000, str(len(python)))
+    compare("rust and python-can read a BLF cut short", items[:-1], python)
+
+
+def main():
+    db = cantools.database.load_file(str(DBC))
+    convert = convert_binary()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        messages, expected = make_input(db)
+        source = tmp / "input.log"
+        writer = can.CanutilsLogWriter(source)
+        for m in messages:
+            writer.on_message_received(m)
+        writer.stop()
+
+        # 1. The Rust reader on python-can's candump.
+        rust = rust_items(convert, source)
+        compare("rust reads python-can's candump", rust, expected)
+
+        # 2a. The Rust candump writer, read by cantools and python-can.
+        plain, with_rt, asc = tmp / "out.log", tmp / "out-rt.log", tmp / "out.asc"
+        rust_convert(convert, source, plain)
+        rust_convert(convert, source, with_rt, "--direction")
+        rust_convert(convert, source, asc)
+        for path, directions in [(plain, False), (with_rt, True)]:
+            want = [dict(e) for e in expected]
+            if not directions:
+                for e in want:
+                    e["direction"] = "rx"
+            with open(path) as fd:
+                got = list(cantools.logreader.Parser(fd))
+            no_errors = [e for e in want if e["kind"] != "error"]
+            cantools_frames = [{
+                "t_us": us(f.timestamp.timestamp()), "channel": int(f.channel[3:]),
+                "id": f.frame_id, "extended": f.is_extended_frame,
+                "kind": "remote" if f.is_remote_frame else "data",
+                "direction": "rx", "len": len(f.data), "data": f.data.hex().upper(),
+            } for f in got]
+            compare(f"cantools logreader reads rust's {path.name}", cantools_frames, no_errors,
+                    ["t_us", "channel", "id", "extended", "kind", "data"])
+            for f, m in zip(got, [m for m in messages if not m.is_error_frame]):
+                if not f.is_remote_frame:
+                    original = decoded(db, m.arbitration_id, m.data) if not m.is_extended_id else None
+                    again = decoded(db, f.frame_id, f.data) if not f.is_extended_frame else None
+                    check(f"cantools decodes {path.name} frame {f.frame_id:#x}", original == again,
+                          f"{original} != {again}")
+            python = [from_python(m, canutils_channel(m)) for m in can.CanutilsLogReader(path)]
+            compare(f"python-can CanutilsLogReader reads rust's {path.name}", python, want)
+
+        # 2b. The Rust ASC writer, read by python-can (and not by cantools).
+        with open(asc) as fd:
+            n = len(list(cantools.logreader.Parser(fd)))
+        print(f"info: cantools.logreader finds {n} frames in an ASC file"
+              + (" (it does not read ASC: python-can's ASCReader is used)" if n == 0 else ""))
+        got = list(can.ASCReader(asc))
+        python = [from_python(m, m.channel) for m in got]
+        want = [dict(e, t_us=e["t_us"] - expected[0]["t_us"]) for e in expected]
+        for e in want:
+            if e["kind"] == "remote":
+                e["len"] = 0  # python-can's candump writer dropped the DLC
+        compare("python-can ASCReader reads rust's out.asc", python, want)
+        decodes = 0
+        for m, original in zip(got, messages):
+            if m.is_error_frame or m.is_remote_frame or m.is_extended_id:
+                continue
+            a, b = decoded(db, original.arbitration_id, original.data), decoded(db, m.arbitration_id, m.data)
+            check(f"cantools decodes out.asc frame {m.arbitration_id:#x}", a == b, f"{a} != {b}")
+            decodes += a is not None
+        check("catalogue frames decoded from ASC", decodes >= len(db.messages) * 3, str(decodes))
+
+        # 3. The python-can fixtures, Rust against python-can.
+        data = HERE / "data"
+        fixtures = [
+            ("python-can.log", lambda p: can.CanutilsLogReader(p), canutils_channel),
+            ("python-can.asc", lambda p: can.ASCReader(p), lambda m: m.channel),
+            ("python-can.blf", lambda p: can.BLFReader(p), lambda m: m.channel),
+            ("python-can-stored.blf", lambda p: can.BLFReader(p), lambda m: m.channel),
+            ("python-can-split.blf", lambda p: can.BLFReader(p), lambda m: m.channel),
+        ]
+        for name, reader, channel in fixtures:
+            python = [None if m.is_fd else from_python(m, channel(m)) for m in reader(data / name)]
+            compare(f"rust and python-can read {name}", rust_items(convert, data / name), python)
+        blf_asc = tmp / "blf.asc"
+        rust_convert(convert, data / "python-can.blf", blf_asc)
+        blf = [m for m in can.BLFReader(data / "python-can.blf") if not m.is_fd]
+        t0 = us(blf[0].timestamp)
+        want = [dict(from_python(m, m.channel), t_us=us(m.timestamp) - t0) for m in blf]
+        python = [from_python(m, m.channel) for m in can.ASCReader(blf_asc)]
+        compare("python-can ASCReader reads rust's ASC of python-can.blf", python, want)
+
+        # 4. A BLF cut short.
+        truncated_blf(convert, tmp)
+
+    if failures:
+        print(f"\n{len(failures)} of {checks} checks FAILED")
+        return 1
+    print(f"all {checks} checks passed (python-can {can.__version__}, cantools {cantools.__version__})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
