@@ -6,12 +6,17 @@
 //! The data lives in PostgreSQL (a server any number of stateless fleet services share)
 //! or, on one machine, in an SQLite file: one schema, one set of statements, versioned
 //! migrations for both ([`migrations`]).
+//!
+//! The vehicle's side is here too: the campaign agent ([`vehicle`], sans-IO), its outbox
+//! ([`outbox`]) and the gateway's link that runs them against MQTT and the car's tester
+//! ([`link`]).
 
 pub mod broker;
 pub mod campaign;
 pub mod campaigns;
 pub mod db;
 pub mod ingest;
+pub mod link;
 pub mod migrations;
 pub mod mqtt;
 pub mod outbox;

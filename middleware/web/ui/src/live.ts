@@ -27,7 +27,7 @@ export interface BusFigures {
   diagnostic_frames: number;
 }
 
-// The session's state, as the gateway writes it (see middleware/autoplug/src/session.rs).
+// The session's state, as the gateway writes it (see middleware/dashboard/src/session.rs).
 export interface Session {
   source: { name: string; kind: string; transmit: boolean; drive: boolean; replay: boolean };
   tester: string | null;
