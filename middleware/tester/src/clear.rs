@@ -2,12 +2,10 @@
 //! (`14 FF FF FF`, answered `54`), one ECU after the other, in the default session. The
 //! ECUs keep only "all groups", so that is what a tester sends.
 
-use std::convert::Infallible;
-
 use autoplug_can::Node;
-use autoplug_ecu::Instant;
 
-use super::{Job, Response, Tester, TesterConfig, UdsError};
+use super::job::{EachEcu, Requests};
+use super::{Response, TesterConfig, UdsError};
 
 /// The request: clear the codes of all groups.
 pub const CLEAR_ALL_DTCS: [u8; 4] = [0x14, 0xFF, 0xFF, 0xFF];
@@ -23,87 +21,52 @@ pub struct EcuClearReport {
 
 /// Clears the codes of the given ECUs; never fails as a whole: each report says what
 /// happened.
-#[derive(Debug)]
-pub struct ClearDtcsJob {
-    tester: Tester,
-    ecus: Vec<Node>,
-    next: usize,
-    in_flight: bool,
-    reports: Vec<EcuClearReport>,
-    result: Option<Vec<EcuClearReport>>,
-    done: bool,
-}
+pub type ClearDtcsJob = EachEcu<Clearing>;
 
 impl ClearDtcsJob {
     /// A job clearing `ecus` in that order.
     pub fn new(ecus: &[Node], config: TesterConfig) -> Self {
-        Self {
-            tester: Tester::new(config),
-            ecus: ecus.to_vec(),
-            next: 0,
-            in_flight: false,
-            reports: Vec::new(),
-            result: None,
-            done: false,
-        }
+        EachEcu::with(
+            Clearing {
+                ecus: ecus.to_vec(),
+                reports: Vec::new(),
+            },
+            config,
+        )
     }
 }
 
-impl Job for ClearDtcsJob {
+/// The requests of a [`ClearDtcsJob`]: `14 FF FF FF` to each ECU.
+#[derive(Debug)]
+pub struct Clearing {
+    ecus: Vec<Node>,
+    reports: Vec<EcuClearReport>,
+}
+
+impl Requests for Clearing {
     type Output = Vec<EcuClearReport>;
-    type Error = Infallible;
 
-    fn tester(&self) -> &Tester {
-        &self.tester
+    fn next_request(&self) -> Option<(Node, Vec<u8>, usize)> {
+        let ecu = *self.ecus.get(self.reports.len())?;
+        Some((ecu, CLEAR_ALL_DTCS.to_vec(), 0))
     }
 
-    fn tester_mut(&mut self) -> &mut Tester {
-        &mut self.tester
+    fn answered(&mut self, outcome: Result<Response, UdsError>) {
+        let outcome = match outcome {
+            Ok(Response::Positive(response)) if response.first() == Some(&0x54) => Ok(()),
+            Ok(Response::Positive(response)) => Err(UdsError::UnexpectedResponse {
+                service: CLEAR_ALL_DTCS[0],
+                response,
+                expected: "54".into(),
+            }),
+            Ok(Response::Functional(_)) => Err(UdsError::Busy),
+            Err(error) => Err(error),
+        };
+        let ecu = self.ecus[self.reports.len()];
+        self.reports.push(EcuClearReport { ecu, outcome });
     }
 
-    fn advance(&mut self, now: Instant) {
-        while !self.done {
-            if self.in_flight {
-                let Some(outcome) = self.tester.take_response() else {
-                    return;
-                };
-                self.in_flight = false;
-                let outcome = match outcome {
-                    Ok(Response::Positive(response)) if response.first() == Some(&0x54) => Ok(()),
-                    Ok(Response::Positive(response)) => Err(UdsError::UnexpectedResponse {
-                        service: CLEAR_ALL_DTCS[0],
-                        response,
-                        expected: "54".into(),
-                    }),
-                    Ok(Response::Functional(_)) => Err(UdsError::Busy),
-                    Err(error) => Err(error),
-                };
-                self.reports.push(EcuClearReport {
-                    ecu: self.ecus[self.next],
-                    outcome,
-                });
-                self.next += 1;
-                continue;
-            }
-            let Some(&ecu) = self.ecus.get(self.next) else {
-                self.done = true;
-                self.result = Some(std::mem::take(&mut self.reports));
-                return;
-            };
-            match self.tester.request(now, ecu, &CLEAR_ALL_DTCS) {
-                Ok(()) => self.in_flight = true,
-                Err(error) => {
-                    self.reports.push(EcuClearReport {
-                        ecu,
-                        outcome: Err(error),
-                    });
-                    self.next += 1;
-                }
-            }
-        }
-    }
-
-    fn take_result(&mut self) -> Option<Result<Vec<EcuClearReport>, Infallible>> {
-        self.result.take().map(Ok)
+    fn finish(&mut self) -> Vec<EcuClearReport> {
+        std::mem::take(&mut self.reports)
     }
 }

@@ -3,14 +3,14 @@
 //! session. The answer (`59 02 mask`, then 3 bytes of code and 1 of status per code) may
 //! span several frames; the tester sends their flow control.
 
-use std::convert::Infallible;
 use std::fmt::Write as _;
 
 use autoplug_can::Node;
 use autoplug_diagnostics::{describe_dtc, DtcEntry};
-use autoplug_ecu::{Dtc, Instant};
+use autoplug_ecu::Dtc;
 
-use super::{Job, Response, Tester, TesterConfig, UdsError};
+use super::job::{EachEcu, Requests};
+use super::{Response, TesterConfig, UdsError};
 use crate::names::ecu_name;
 
 /// The request: report the codes whose status matches 0xFF (all of them).
@@ -45,83 +45,48 @@ pub fn parse_report(response: &[u8]) -> Result<Vec<DtcEntry>, UdsError> {
 
 /// Reads the codes of the given ECUs; never fails as a whole: each report says what
 /// happened.
-#[derive(Debug)]
-pub struct DtcJob {
-    tester: Tester,
-    ecus: Vec<Node>,
-    next: usize,
-    in_flight: bool,
-    reports: Vec<EcuDtcReport>,
-    done: bool,
-    result: Option<Vec<EcuDtcReport>>,
-}
+pub type DtcJob = EachEcu<DtcReading>;
 
 impl DtcJob {
     /// A job reading `ecus` in that order.
     pub fn new(ecus: &[Node], config: TesterConfig) -> Self {
-        Self {
-            tester: Tester::new(config),
-            ecus: ecus.to_vec(),
-            next: 0,
-            in_flight: false,
-            reports: Vec::new(),
-            done: false,
-            result: None,
-        }
+        EachEcu::with(
+            DtcReading {
+                ecus: ecus.to_vec(),
+                reports: Vec::new(),
+            },
+            config,
+        )
     }
 }
 
-impl Job for DtcJob {
+/// The requests of a [`DtcJob`]: `19 02 FF` to each ECU.
+#[derive(Debug)]
+pub struct DtcReading {
+    ecus: Vec<Node>,
+    reports: Vec<EcuDtcReport>,
+}
+
+impl Requests for DtcReading {
     type Output = Vec<EcuDtcReport>;
-    type Error = Infallible;
 
-    fn tester(&self) -> &Tester {
-        &self.tester
+    fn next_request(&self) -> Option<(Node, Vec<u8>, usize)> {
+        let ecu = *self.ecus.get(self.reports.len())?;
+        Some((ecu, REPORT_ALL_DTCS.to_vec(), 1))
     }
 
-    fn tester_mut(&mut self) -> &mut Tester {
-        &mut self.tester
+    fn answered(&mut self, outcome: Result<Response, UdsError>) {
+        let entries = match outcome {
+            Ok(Response::Positive(response)) => parse_report(&response),
+            Ok(Response::Functional(_)) => Err(UdsError::Busy),
+            Err(error) => Err(error),
+        };
+        let ecu = self.ecus[self.reports.len()];
+        self.reports.push(EcuDtcReport { ecu, entries });
     }
 
-    fn advance(&mut self, now: Instant) {
-        while !self.done {
-            if self.in_flight {
-                let Some(outcome) = self.tester.take_response() else {
-                    return;
-                };
-                self.in_flight = false;
-                let entries = match outcome {
-                    Ok(Response::Positive(response)) => parse_report(&response),
-                    Ok(Response::Functional(_)) => Err(UdsError::Busy),
-                    Err(error) => Err(error),
-                };
-                self.reports.push(EcuDtcReport {
-                    ecu: self.ecus[self.next],
-                    entries,
-                });
-                self.next += 1;
-                continue;
-            }
-            let Some(&ecu) = self.ecus.get(self.next) else {
-                self.done = true;
-                self.result = Some(std::mem::take(&mut self.reports));
-                return;
-            };
-            match self.tester.request_echoing(now, ecu, &REPORT_ALL_DTCS, 1) {
-                Ok(()) => self.in_flight = true,
-                Err(error) => {
-                    self.reports.push(EcuDtcReport {
-                        ecu,
-                        entries: Err(error),
-                    });
-                    self.next += 1;
-                }
-            }
-        }
-    }
-
-    fn take_result(&mut self) -> Option<Result<Vec<EcuDtcReport>, Infallible>> {
-        self.result.take().map(Ok)
+    fn finish(&mut self) -> Vec<EcuDtcReport> {
+        std::mem::take(&mut self.reports)
     }
 }
 

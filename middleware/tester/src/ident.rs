@@ -6,16 +6,16 @@
 //! length field, so a response to several DIDs at once could not be split where one
 //! string ends and the next identifier starts.
 
-use std::convert::Infallible;
 use std::fmt::Write as _;
 
 use autoplug_can::Node;
-use autoplug_ecu::Instant;
+
 use autoplug_image::{BootState, ImageSlot};
 use autoplug_uds::server::{did, parse_boot_slot};
 use autoplug_vin::Vin;
 
-use super::{Job, Response, Tester, TesterConfig, UdsError};
+use super::job::{EachEcu, Requests};
+use super::{Response, TesterConfig, UdsError};
 use crate::names::ecu_name;
 
 /// The DIDs read, in table order: part number, software version, serial number, hardware
@@ -227,32 +227,34 @@ pub fn identification_table(rows: &[EcuIdentification]) -> String {
 /// Reads the identification DIDs of the given ECUs, one request at a time. An ECU that
 /// does not answer its first request is not asked the rest (each would only time out
 /// again); the job never fails as a whole, each value says what happened.
-#[derive(Debug)]
-pub struct IdentJob {
-    tester: Tester,
-    rows: Vec<EcuIdentification>,
-    ecu: usize,
-    did: usize,
-    in_flight: bool,
-    done: Option<Vec<EcuIdentification>>,
-}
+pub type IdentJob = EachEcu<Identifying>;
 
 impl IdentJob {
     /// A job reading `ecus` (in that order) with the given timing.
     pub fn new(ecus: &[Node], config: TesterConfig) -> Self {
-        Self {
-            tester: Tester::new(config),
-            rows: ecus
-                .iter()
-                .map(|&ecu| EcuIdentification::new(ecu))
-                .collect(),
-            ecu: 0,
-            did: 0,
-            in_flight: false,
-            done: None,
-        }
+        EachEcu::with(
+            Identifying {
+                rows: ecus
+                    .iter()
+                    .map(|&ecu| EcuIdentification::new(ecu))
+                    .collect(),
+                ecu: 0,
+                did: 0,
+            },
+            config,
+        )
     }
+}
 
+/// The requests of an [`IdentJob`]: every identification DID of each ECU in turn.
+#[derive(Debug)]
+pub struct Identifying {
+    rows: Vec<EcuIdentification>,
+    ecu: usize,
+    did: usize,
+}
+
+impl Identifying {
     fn next_did(&mut self) {
         self.did += 1;
         if self.did == IDENTIFICATION_DIDS.len() {
@@ -262,83 +264,47 @@ impl IdentJob {
     }
 }
 
-impl Job for IdentJob {
+impl Requests for Identifying {
     type Output = Vec<EcuIdentification>;
-    type Error = Infallible;
 
-    fn tester(&self) -> &Tester {
-        &self.tester
+    fn next_request(&self) -> Option<(Node, Vec<u8>, usize)> {
+        let row = self.rows.get(self.ecu)?;
+        let did = IDENTIFICATION_DIDS[self.did].to_be_bytes();
+        Some((row.ecu, vec![0x22, did[0], did[1]], 2))
     }
 
-    fn tester_mut(&mut self) -> &mut Tester {
-        &mut self.tester
-    }
-
-    fn advance(&mut self, now: Instant) {
-        loop {
-            if self.done.is_some() {
-                return;
-            }
-            if self.in_flight {
-                let Some(outcome) = self.tester.take_response() else {
-                    return;
-                };
-                self.in_flight = false;
-                let did = IDENTIFICATION_DIDS[self.did];
-                let value = match outcome {
-                    Ok(Response::Positive(response)) => match response.as_slice() {
-                        [0x62, hi, lo, data @ ..] if u16::from_be_bytes([*hi, *lo]) == did => {
-                            Ok(data.to_vec())
-                        }
-                        _ => Err(UdsError::UnexpectedResponse {
-                            service: 0x22,
-                            response,
-                            expected: format!(
-                                "62 {:02X} {:02X} and the data",
-                                did >> 8,
-                                did & 0xFF
-                            ),
-                        }),
-                    },
-                    Ok(Response::Functional(_)) => Err(UdsError::Busy),
-                    Err(error) => Err(error),
-                };
-                let silent = matches!(value, Err(UdsError::Timeout { .. }));
-                let row = &mut self.rows[self.ecu];
-                if silent {
-                    // Nobody there: the remaining DIDs get the same answer without asking.
-                    for index in self.did..IDENTIFICATION_DIDS.len() {
-                        *row.slot(index) = value.clone();
-                    }
-                    self.did = 0;
-                    self.ecu += 1;
-                } else {
-                    *row.slot(self.did) = value;
-                    self.next_did();
+    fn answered(&mut self, outcome: Result<Response, UdsError>) {
+        let did = IDENTIFICATION_DIDS[self.did];
+        let value = match outcome {
+            Ok(Response::Positive(response)) => match response.as_slice() {
+                [0x62, hi, lo, data @ ..] if u16::from_be_bytes([*hi, *lo]) == did => {
+                    Ok(data.to_vec())
                 }
-                continue;
+                _ => Err(UdsError::UnexpectedResponse {
+                    service: 0x22,
+                    response,
+                    expected: format!("62 {:02X} {:02X} and the data", did >> 8, did & 0xFF),
+                }),
+            },
+            Ok(Response::Functional(_)) => Err(UdsError::Busy),
+            Err(error) => Err(error),
+        };
+        let row = &mut self.rows[self.ecu];
+        if matches!(value, Err(UdsError::Timeout { .. })) {
+            // Nobody there: the remaining DIDs get the same answer without asking.
+            for index in self.did..IDENTIFICATION_DIDS.len() {
+                *row.slot(index) = value.clone();
             }
-            let Some(row) = self.rows.get(self.ecu) else {
-                self.done = Some(std::mem::take(&mut self.rows));
-                return;
-            };
-            let ecu = row.ecu;
-            let did = IDENTIFICATION_DIDS[self.did].to_be_bytes();
-            match self
-                .tester
-                .request_echoing(now, ecu, &[0x22, did[0], did[1]], 2)
-            {
-                Ok(()) => self.in_flight = true,
-                Err(error) => {
-                    *self.rows[self.ecu].slot(self.did) = Err(error);
-                    self.next_did();
-                }
-            }
+            self.did = 0;
+            self.ecu += 1;
+        } else {
+            *row.slot(self.did) = value;
+            self.next_did();
         }
     }
 
-    fn take_result(&mut self) -> Option<Result<Vec<EcuIdentification>, Infallible>> {
-        self.done.take().map(Ok)
+    fn finish(&mut self) -> Vec<EcuIdentification> {
+        std::mem::take(&mut self.rows)
     }
 }
 

@@ -1,9 +1,11 @@
 //! A job: a sequence of requests run by a [`Tester`], driven like the tester itself.
 
-use autoplug_can::Frame;
+use std::convert::Infallible;
+
+use autoplug_can::{Frame, Node};
 use autoplug_ecu::Instant;
 
-use super::Tester;
+use super::{Response, Tester, TesterConfig, UdsError};
 
 /// A state machine that issues requests through its [`Tester`] one after the other and
 /// ends with a result.
@@ -79,5 +81,88 @@ pub trait Job {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         }
+    }
+}
+
+/// What varies between the jobs that ask each ECU in turn (identification, trouble codes,
+/// clearing): which request comes next and what its answer means. [`EachEcu`] does the
+/// rest: one request in flight at a time, a failure to send taken as that request's
+/// answer, the result once no request is left.
+pub trait Requests {
+    /// What the job gives at its end.
+    type Output;
+
+    /// The next request: the ECU, the request's bytes, and how many bytes after the
+    /// service identifier its positive response echoes; `None` when all are asked.
+    fn next_request(&self) -> Option<(Node, Vec<u8>, usize)>;
+
+    /// The answer to the request [`Requests::next_request`] gave last (or why there is
+    /// none: it could not be sent, it timed out, it was refused).
+    fn answered(&mut self, outcome: Result<Response, UdsError>);
+
+    /// What was gathered, once no request is left.
+    fn finish(&mut self) -> Self::Output;
+}
+
+/// A job of requests to the ECUs one after the other; it never fails as a whole: its
+/// output says, ECU by ECU, what each answered.
+#[derive(Debug)]
+pub struct EachEcu<R: Requests> {
+    tester: Tester,
+    requests: R,
+    in_flight: bool,
+    result: Option<R::Output>,
+    done: bool,
+}
+
+impl<R: Requests> EachEcu<R> {
+    /// A job asking what `requests` says, with its own tester of `config`.
+    pub fn with(requests: R, config: TesterConfig) -> Self {
+        Self {
+            tester: Tester::new(config),
+            requests,
+            in_flight: false,
+            result: None,
+            done: false,
+        }
+    }
+}
+
+impl<R: Requests> Job for EachEcu<R> {
+    type Output = R::Output;
+    type Error = Infallible;
+
+    fn tester(&self) -> &Tester {
+        &self.tester
+    }
+
+    fn tester_mut(&mut self) -> &mut Tester {
+        &mut self.tester
+    }
+
+    fn advance(&mut self, now: Instant) {
+        while !self.done {
+            if self.in_flight {
+                let Some(outcome) = self.tester.take_response() else {
+                    return;
+                };
+                self.in_flight = false;
+                self.requests.answered(outcome);
+                continue;
+            }
+            let Some((ecu, request, echo)) = self.requests.next_request() else {
+                self.done = true;
+                self.result = Some(self.requests.finish());
+                return;
+            };
+            match self.tester.request_echoing(now, ecu, &request, echo) {
+                Ok(()) => self.in_flight = true,
+                Err(error) => self.requests.answered(Err(error)),
+            }
+        }
+    }
+
+    fn take_result(&mut self) -> Option<Result<R::Output, Infallible>> {
+        self.result.take().map(Ok)
     }
 }

@@ -98,16 +98,16 @@ mod flash;
 mod ident;
 mod job;
 
-pub use clear::{ClearDtcsJob, EcuClearReport, CLEAR_ALL_DTCS};
-pub use dtcs::{dtc_table, parse_report, DtcJob, EcuDtcReport, REPORT_ALL_DTCS};
+pub use clear::{ClearDtcsJob, Clearing, EcuClearReport, CLEAR_ALL_DTCS};
+pub use dtcs::{dtc_table, parse_report, DtcJob, DtcReading, EcuDtcReport, REPORT_ALL_DTCS};
 pub use flash::{
     FlashConfig, FlashError, FlashFailure, FlashJob, FlashReport, Phase, PhaseTiming, Progress,
 };
 pub use ident::{
     boot_slot_text, identification_table, value_text, vehicle_vin, vin_line, EcuIdentification,
-    IdentJob, IDENTIFICATION_DIDS,
+    IdentJob, Identifying, IDENTIFICATION_DIDS,
 };
-pub use job::Job;
+pub use job::{EachEcu, Job, Requests};
 
 use std::collections::VecDeque;
 use std::fmt;
