@@ -9,7 +9,7 @@
 
 import assert from 'node:assert/strict';
 import { mkdirSync } from 'node:fs';
-import { chromium } from 'playwright-core';
+import { launchChromium, steps, until } from './harness.mjs';
 
 const [base, token, shots] = process.argv.slice(2);
 if (!base || !token || !shots) {
@@ -29,24 +29,8 @@ const VIEWS = {
   drive: '[data-testid=drive-speed]',
 };
 
-let step = 0;
-const started = Date.now();
-function ok(what) {
-  step += 1;
-  console.log(`ok ${step} - ${what} [${((Date.now() - started) / 1000).toFixed(1)} s]`);
-}
-
-const browser = await chromium.launch({
-  executablePath: '/usr/bin/chromium',
-  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-});
-const problems = [];
-function watch(page) {
-  page.on('console', (m) => {
-    if (m.type() === 'error') problems.push(`console error: ${m.text()}`);
-  });
-  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
-}
+const browser = await launchChromium();
+const { ok, watch, problems, run, count } = steps(browser);
 
 async function state() {
   const response = await fetch(`${base}/api/state`);
@@ -60,16 +44,6 @@ async function view(page, name) {
 
 async function shownSpeed(page) {
   return Number(await page.getAttribute('[data-testid=speed]', 'data-value'));
-}
-
-async function until(what, check, timeoutMs) {
-  const deadline = Date.now() + timeoutMs;
-  for (;;) {
-    const value = await check();
-    if (value) return value;
-    if (Date.now() > deadline) throw new Error(`timed out after ${timeoutMs / 1000} s waiting for ${what}`);
-    await new Promise((r) => setTimeout(r, 100));
-  }
 }
 
 async function speedNow() {
@@ -143,7 +117,7 @@ async function flash(page, ecu, image) {
   ok(`flashed ${image} into ${ecu} from the ECUs view (bar seen at ${midway.toFixed(0)} %), inventory shows ${inventory}, ${before} → ${running}`);
 }
 
-try {
+await run(async () => {
   // Without the token, a write is refused.
   const refused = await fetch(`${base}/api/recording`, { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: '{"on":true}' });
   assert.equal(refused.status, 401);
@@ -343,11 +317,5 @@ try {
 
   assert.deepEqual(problems, [], `the pages logged errors:\n${problems.join('\n')}`);
   ok('no console errors on any page');
-} catch (error) {
-  console.error(`not ok ${step + 1} - ${error.message}`);
-  if (problems.length) console.error(problems.join('\n'));
-  await browser.close();
-  process.exit(1);
-}
-await browser.close();
-console.log(`dashboard: ${step} checks passed`);
+});
+console.log(`dashboard: ${count()} checks passed`);

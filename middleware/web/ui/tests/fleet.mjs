@@ -18,7 +18,7 @@
 import assert from 'node:assert/strict';
 import { execFileSync } from 'node:child_process';
 import { mkdirSync } from 'node:fs';
-import { chromium } from 'playwright-core';
+import { launchChromium, steps, until } from './harness.mjs';
 
 const args = process.argv.slice(2);
 const split = args.indexOf('--');
@@ -30,37 +30,11 @@ if (!base || !token || !fleetPage || !shots || split < 0 || create.length === 0)
 }
 mkdirSync(shots, { recursive: true });
 
-let step = 0;
-const started = Date.now();
-function ok(what) {
-  step += 1;
-  console.log(`ok ${step} - ${what} [${((Date.now() - started) / 1000).toFixed(1)} s]`);
-}
-
-const browser = await chromium.launch({
-  executablePath: '/usr/bin/chromium',
-  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-});
-const problems = [];
-function watch(page) {
-  page.on('console', (m) => {
-    if (m.type() === 'error') problems.push(`console error: ${m.text()}`);
-  });
-  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
-}
+const browser = await launchChromium();
+const { ok, watch, problems, run, count } = steps(browser);
 
 async function session() {
   return (await (await fetch(`${base}/api/state`)).json()).session;
-}
-
-async function until(what, check, timeoutMs) {
-  const deadline = Date.now() + timeoutMs;
-  for (;;) {
-    const value = await check();
-    if (value) return value;
-    if (Date.now() > deadline) throw new Error(`timed out after ${timeoutMs / 1000} s waiting for ${what}`);
-    await new Promise((r) => setTimeout(r, 100));
-  }
 }
 
 async function speedNow() {
@@ -71,7 +45,7 @@ function cruiseVersion(s) {
   return s.inventory.find((row) => row.ecu === 'cruise')?.software_version;
 }
 
-try {
+await run(async () => {
   const s0 = await until('the VIN read and the fleet link up', async () => {
     const s = await session();
     return s?.fleet?.vin && s.fleet.connected && cruiseVersion(s) ? s : null;
@@ -200,11 +174,5 @@ try {
 
   assert.deepEqual(problems, [], `the pages logged errors:\n${problems.join('\n')}`);
   ok('no console errors on any page');
-} catch (error) {
-  console.error(`not ok ${step + 1} - ${error.message}`);
-  if (problems.length) console.error(problems.join('\n'));
-  await browser.close();
-  process.exit(1);
-}
-await browser.close();
-console.log(`fleet: ${step} checks passed`);
+});
+console.log(`fleet: ${count()} checks passed`);

@@ -10,17 +10,14 @@
 // node tests/latency.mjs BASE_URL SOCKETCAND_HOST:PORT [FRAMES]
 
 import net from 'node:net';
-import { chromium } from 'playwright-core';
+import { launchChromium } from './harness.mjs';
 
 const [base, socketcand, framesArg] = process.argv.slice(2);
 const frames = Number(framesArg ?? 200);
 const [host, port] = socketcand.split(':');
 const now = () => performance.timeOrigin + performance.now();
 
-const browser = await chromium.launch({
-  executablePath: '/usr/bin/chromium',
-  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-});
+const browser = await launchChromium();
 const page = await browser.newPage({ viewport: { width: 1280, height: 900 } });
 let firstLoad = 0;
 const files = [];
