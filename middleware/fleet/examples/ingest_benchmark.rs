@@ -26,24 +26,12 @@ use std::time::{Duration, Instant};
 use autoplug_fleet::ingest::Ingest;
 use autoplug_fleet::mqtt::{Broker, LinkOptions, MqttLink};
 use autoplug_fleet::service::FleetService;
-use autoplug_fleet::testing::{broker_url, PgSchema};
+use autoplug_fleet::testing::{broker_url, ecus, PgSchema};
 use autoplug_fleet::topics::{self, ReportKind};
 use autoplug_fleet::{FleetStore, InventoryReport, TripReport};
 use autoplug_store::{DtcRecord, EcuIdentity, VerdictRecord};
 use autoplug_trips::{TripEnd, TripStats};
 use autoplug_vin::Vin;
-
-const ECUS: [(&str, u8); 9] = [
-    ("engine", 0x01),
-    ("trans", 0x02),
-    ("abs", 0x03),
-    ("diff", 0x04),
-    ("steering", 0x05),
-    ("pedals", 0x06),
-    ("cabin", 0x07),
-    ("console", 0x08),
-    ("cruise", 0x0D),
-];
 
 /// Reports published beyond those stored, at most.
 const WINDOW: usize = 100;
@@ -59,11 +47,10 @@ fn inventory(vin: &Vin, i: usize) -> InventoryReport {
     InventoryReport {
         vin: vin.to_string(),
         read_at_ms: 1_790_000_000_000,
-        ecus: ECUS
-            .iter()
+        ecus: ecus()
             .map(|(ecu, node)| EcuIdentity {
                 ecu: ecu.to_string(),
-                node: *node,
+                node,
                 part_number: Some(format!("AP-{}-0001", ecu.to_uppercase())),
                 software_version: Some(format!("1.{}.0", i % 3)),
                 hardware_version: Some("NUCLEO-F446RE".into()),
@@ -89,12 +76,11 @@ fn trip(vin: &Vin, i: usize, n: usize) -> TripReport {
         ended_at_ms: ended,
         stats,
         end: TripEnd::BusSilent,
-        verdicts: ECUS
-            .iter()
+        verdicts: ecus()
             .map(|(ecu, _)| VerdictRecord {
                 ecu: ecu.to_string(),
                 routine: "presence".into(),
-                verdict: if faulty && *ecu == "cruise" {
+                verdict: if faulty && ecu == "cruise" {
                     "faulty"
                 } else {
                     "ok"

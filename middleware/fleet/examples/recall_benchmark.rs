@@ -17,22 +17,11 @@ use std::io::Write;
 use std::time::Instant;
 
 use autoplug_fleet::db::Value;
-use autoplug_fleet::testing::PgSchema;
+use autoplug_fleet::testing::{ecus, PgSchema};
 use autoplug_fleet::{EvidenceQuery, Finding, FleetStore, InventoryQuery};
 use autoplug_image::Version;
 use autoplug_vin::Vin;
 
-const ECUS: [(&str, u8); 9] = [
-    ("engine", 0x01),
-    ("trans", 0x02),
-    ("abs", 0x03),
-    ("diff", 0x04),
-    ("steering", 0x05),
-    ("pedals", 0x06),
-    ("cabin", 0x07),
-    ("console", 0x08),
-    ("cruise", 0x0D),
-];
 const DAY_MS: i64 = 86_400_000;
 /// The year the trips fall in ends here (ms since the epoch).
 const YEAR_END_MS: i64 = 1_790_000_000_000;
@@ -88,7 +77,7 @@ fn fill(url: &str, vehicles: u64) -> Result<(), postgres::Error> {
         } else {
             "NUCLEO-F446RE"
         };
-        for (ecu, node) in ECUS {
+        for (ecu, node) in ecus() {
             let (ma, mi, pa) = if ecu == "cruise" {
                 cruise_version(i)
             } else {

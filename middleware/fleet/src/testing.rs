@@ -288,3 +288,14 @@ pub fn reporting_car(
         (outbox, status)
     })
 }
+
+/// The nine ECUs as the fleet's reports name them: the catalogue's short name and
+/// diagnostic node number (what the plausibility checks accept).
+pub fn ecus() -> impl Iterator<Item = (&'static str, u8)> {
+    autoplug_can::ECUS.into_iter().map(|node| {
+        (
+            autoplug_can::ecu_name(node),
+            node.diag_node_number().unwrap_or(0),
+        )
+    })
+}
