@@ -21,7 +21,7 @@ pub mod state;
 
 pub use pipeline::{Observer, Pipeline, PipelineError, Strictness};
 pub use sinks::RecordingSink;
-pub use source::{FrameSource, LogSource, Paced, Poll, SourceError, VecSource};
+pub use source::{FrameSource, LogSource, Paced, Pacer, Poll, SourceError, VecSource};
 pub use state::{BusCounters, CarState, MessageStats, SignalName, SignalState, Update};
 
 #[cfg(test)]

@@ -228,40 +228,86 @@ impl FrameSource for VecSource {
     }
 }
 
-/// Replays another source at `speed` × its own time (1.0: as recorded). Each frame is
-/// held until its time has come on the wall clock, measured from the first frame; a jump
-/// back in the log's time is not waited for.
-pub struct Paced<S> {
-    inner: S,
+/// A log's time on the wall clock at a speed: when each frame of a replay is due. It counts
+/// from an anchor (a log time and the wall time it was reached); a pause, a seek or a new
+/// speed starts counting again from where the log is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pacer {
     speed: f64,
-    start: Option<(Instant, u64)>,
-    held: Option<LogFrame>,
+    anchor: Option<(Instant, u64)>,
 }
 
-impl<S: FrameSource> Paced<S> {
-    /// Paces `inner` at `speed` (finite, above zero; others are taken as 1.0).
-    pub fn new(inner: S, speed: f64) -> Self {
+impl Pacer {
+    /// A pacer at `speed` × the log's time (finite, above zero; others are taken as 1.0).
+    pub fn new(speed: f64) -> Self {
         let speed = if speed.is_finite() && speed > 0.0 {
             speed
         } else {
             1.0
         };
         Self {
-            inner,
             speed,
-            start: None,
-            held: None,
+            anchor: None,
         }
     }
 
-    fn due(&mut self, frame: &LogFrame) -> Instant {
-        self.due_at(frame.t_us)
+    /// × the log's time.
+    pub fn speed(&self) -> f64 {
+        self.speed
     }
 
-    fn due_at(&mut self, t_us: u64) -> Instant {
-        let (wall, t0) = *self.start.get_or_insert((Instant::now(), t_us));
-        let offset_us = t_us.saturating_sub(t0) as f64 / self.speed;
-        wall + Duration::from_micros(offset_us as u64)
+    /// Counts from log time `t_us`, reached now, unless it counts already.
+    pub fn start_at(&mut self, t_us: u64) {
+        self.anchor.get_or_insert((Instant::now(), t_us));
+    }
+
+    /// Stops counting: the next [`Pacer::start_at`] (or frame) anchors again.
+    pub fn restart(&mut self) {
+        self.anchor = None;
+    }
+
+    /// When log time `t_us` is due on the wall clock (counting from it, now, if not
+    /// counting yet); a time before the anchor is due at once.
+    pub fn due(&mut self, t_us: u64) -> Instant {
+        let (wall, t0) = *self.anchor.get_or_insert((Instant::now(), t_us));
+        wall + Duration::from_secs_f64(t_us.saturating_sub(t0) as f64 * 1e-6 / self.speed)
+    }
+
+    /// Sleeps until log time `t_us` is due, or for `max_wait` if that comes first: whether
+    /// it is due (a caller told no holds the frame, so its idle duties still run).
+    pub fn wait_until_due(&mut self, t_us: u64, max_wait: Duration) -> bool {
+        let due = self.due(t_us);
+        let now = Instant::now();
+        if due <= now {
+            return true;
+        }
+        let wait = due - now;
+        if wait > max_wait {
+            std::thread::sleep(max_wait);
+            return false;
+        }
+        std::thread::sleep(wait);
+        true
+    }
+}
+
+/// Replays another source at `speed` × its own time (1.0: as recorded). Each frame is
+/// held until its time has come on the wall clock, measured from the first frame; a jump
+/// back in the log's time is not waited for.
+pub struct Paced<S> {
+    inner: S,
+    pacer: Pacer,
+    held: Option<LogFrame>,
+}
+
+impl<S: FrameSource> Paced<S> {
+    /// Paces `inner` at `speed` (finite, above zero; others are taken as 1.0).
+    pub fn new(inner: S, speed: f64) -> Self {
+        Self {
+            inner,
+            pacer: Pacer::new(speed),
+            held: None,
+        }
     }
 }
 
@@ -275,35 +321,24 @@ impl<S: FrameSource> FrameSource for Paced<S> {
                     // A source with a clock (the virtual car) went on through a silence:
                     // its time is paced like its frames', or it would race ahead.
                     if let Some(t_us) = self.inner.clock_us() {
-                        let due = self.due_at(t_us);
-                        let now = Instant::now();
-                        if due > now {
-                            std::thread::sleep((due - now).min(max_wait));
-                        }
+                        self.pacer.wait_until_due(t_us, max_wait);
                     }
                     return Ok(Poll::Idle);
                 }
                 other => return Ok(other),
             },
         };
-        let due = self.due(&frame);
-        let now = Instant::now();
-        if due <= now {
-            return Ok(Poll::Frame(frame));
-        }
-        let wait = due - now;
-        if wait > max_wait {
-            // Hold it, so the pipeline's idle duties (flushing, redrawing) still run.
-            std::thread::sleep(max_wait);
+        if self.pacer.wait_until_due(frame.t_us, max_wait) {
+            Ok(Poll::Frame(frame))
+        } else {
+            // Held, so the pipeline's idle duties (flushing, redrawing) still run.
             self.held = Some(frame);
-            return Ok(Poll::Idle);
+            Ok(Poll::Idle)
         }
-        std::thread::sleep(wait);
-        Ok(Poll::Frame(frame))
     }
 
     fn describe(&self) -> String {
-        format!("{} (x{})", self.inner.describe(), self.speed)
+        format!("{} (x{})", self.inner.describe(), self.pacer.speed())
     }
 
     fn transmit(&mut self, frame: &autoplug_can::Frame) -> Result<bool, SourceError> {

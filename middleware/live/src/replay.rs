@@ -9,9 +9,9 @@
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use autoplug_gateway::{FrameSource, LogSource, Poll, SourceError};
+use autoplug_gateway::{FrameSource, LogSource, Pacer, Poll, SourceError};
 use autoplug_logs::LogFrame;
 
 /// The slowest and fastest replay, × the log's own time.
@@ -86,9 +86,10 @@ pub struct ControlledReplay {
     source: LogSource,
     desk: Rc<RefCell<ReplayDesk>>,
     first_us: u64,
-    /// Wall time and log time the pacing counts from (set again at every speed change,
-    /// pause and seek).
-    anchor: Option<(Instant, u64, f64)>,
+    /// The log's time on the wall clock (counting again at every speed change, pause and
+    /// seek), and the speed the desk asked for it.
+    pacer: Pacer,
+    speed: f64,
     held: Option<LogFrame>,
     /// The log time reached, µs.
     now_us: u64,
@@ -113,7 +114,8 @@ impl ControlledReplay {
             source: LogSource::open(path)?,
             desk,
             first_us,
-            anchor: None,
+            pacer: Pacer::new(1.0),
+            speed: 1.0,
             held: None,
             now_us: first_us,
             prime_until: None,
@@ -137,7 +139,7 @@ impl ControlledReplay {
             }
         }
         self.now_us = primed_from;
-        self.anchor = None;
+        self.pacer.restart();
         let mut desk = self.desk.borrow_mut();
         desk.position_s = to_s;
         desk.at_end = self.held.is_none();
@@ -175,13 +177,13 @@ impl FrameSource for ControlledReplay {
                     self.held = other;
                     self.prime_until = None;
                     self.now_us = until;
-                    self.anchor = None;
+                    self.pacer.restart();
                 }
             }
         }
         if !playing {
             // Paused: the log's clock stands; the session still takes commands.
-            self.anchor = None;
+            self.pacer.restart();
             std::thread::sleep(max_wait.min(Duration::from_millis(20)));
             return Ok(Poll::Idle);
         }
@@ -200,26 +202,15 @@ impl FrameSource for ControlledReplay {
                 other => return Ok(other),
             },
         };
-        let (wall, t0, anchored_speed) =
-            *self
-                .anchor
-                .get_or_insert((Instant::now(), self.now_us.min(frame.t_us), speed));
-        if anchored_speed != speed {
-            self.anchor = Some((Instant::now(), self.now_us, speed));
+        if speed != self.speed {
+            // The new speed counts from where the log is.
+            self.speed = speed;
+            self.pacer = Pacer::new(speed);
+        }
+        self.pacer.start_at(self.now_us.min(frame.t_us));
+        if !self.pacer.wait_until_due(frame.t_us, max_wait) {
             self.held = Some(frame);
             return Ok(Poll::Idle);
-        }
-        let due =
-            wall + Duration::from_secs_f64(frame.t_us.saturating_sub(t0) as f64 * 1e-6 / speed);
-        let now = Instant::now();
-        if due > now {
-            let wait = due - now;
-            if wait > max_wait {
-                std::thread::sleep(max_wait);
-                self.held = Some(frame);
-                return Ok(Poll::Idle);
-            }
-            std::thread::sleep(wait);
         }
         self.now_us = self.now_us.max(frame.t_us);
         self.desk.borrow_mut().position_s = self.now_us.saturating_sub(self.first_us) as f64 * 1e-6;
