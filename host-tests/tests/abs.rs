@@ -198,7 +198,7 @@ fn a_stop_counts_from_the_tick_the_pedal_went_down() {
                 car.vehicle().speed_mps,
             );
             car.tick();
-            if car.controls().brake > 0.0 {
+            if car.controls().held.brake > 0.0 {
                 at_press = Some(before);
             }
         }

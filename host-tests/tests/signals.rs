@@ -33,7 +33,7 @@ steering_deg = -100.0
         // The model's values now, before the tick in which the ECUs read them.
         let model_rpm = car.vehicle().engine_rpm;
         let model_fuel = car.vehicle().fuel_l;
-        let model_angle = car.controls().steering_deg;
+        let model_angle = car.controls().held.steering_deg;
         let seen = car.log().len();
         car.tick();
         for entry in &car.log()[seen..] {
@@ -199,10 +199,10 @@ brake = 35.0
             match Message::from_frame(&entry.frame).expect("catalogue frame") {
                 Message::PedalAccel(m) => {
                     accel_frames += 1;
-                    let driver = if pedals.brake > 5.0 {
+                    let driver = if pedals.held.brake > 5.0 {
                         0.0
                     } else {
-                        pedals.accelerator
+                        pedals.held.accelerator
                     };
                     assert!(
                         (f64::from(m.accel_cmd) - driver).abs() <= 0.5 + 0.8,
@@ -213,10 +213,10 @@ brake = 35.0
                 Message::PedalBrake(m) => {
                     brake_frames += 1;
                     assert!(
-                        (f64::from(m.brake_cmd) - pedals.brake).abs() <= 0.5 + 0.8,
+                        (f64::from(m.brake_cmd) - pedals.held.brake).abs() <= 0.5 + 0.8,
                         "BrakeCmd {} vs pedal {:.2}",
                         m.brake_cmd,
-                        pedals.brake
+                        pedals.held.brake
                     );
                 }
                 _ => {}

@@ -20,9 +20,9 @@ use autoplug_can::Node;
 use autoplug_gateway::{CarState, Observer, RecordingSink, Update};
 use autoplug_image::ImageSet;
 use autoplug_logs::{LogFrame, RotatePolicy};
-use autoplug_virtual_car::driver::HeldControls;
-use autoplug_virtual_car::scenario::{Button, FRICTION_RANGE};
-use autoplug_web::{Action, Answer, Command, Commands, LiveTable, Press, Publisher, ReplayAction};
+use autoplug_virtual_car::driver::clamped;
+use autoplug_virtual_car::scenario::FRICTION_RANGE;
+use autoplug_web::{Action, Answer, Command, Commands, LiveTable, Publisher, ReplayAction};
 use serde_json::{json, Value};
 
 use autoplug_live::driving::{DeskInput, DriverDesk};
@@ -204,29 +204,12 @@ impl<'a> Session<'a> {
                     // The page may have gone: nobody to tell.
                     let _ = reply.send(answer);
                 }
-                Command::Drive(input) => {
-                    let held = HeldControls {
-                        accelerator: input.accelerator,
-                        brake: input.brake,
-                        steering_deg: input.steering_deg,
-                        headlights: input.headlights,
-                        economy_mode: input.economy_mode,
-                        manual_mode: input.manual_mode,
-                        set_temp_f: input.set_temp_f,
-                    };
-                    if held.clamped().is_some() {
+                Command::Drive(held) => {
+                    if clamped(held).is_some() {
                         self.hand_to_desk(DeskInput::Hold(held));
                     }
                 }
-                Command::Press(press) => {
-                    let button = match press {
-                        Press::CruiseOn => Button::CruiseOn,
-                        Press::CruiseOff => Button::CruiseOff,
-                        Press::ShiftUp => Button::ShiftUp,
-                        Press::ShiftDown => Button::ShiftDown,
-                    };
-                    self.hand_to_desk(DeskInput::Press(button));
-                }
+                Command::Press(button) => self.hand_to_desk(DeskInput::Press(button)),
                 Command::DriverLeft => self.hand_to_desk(DeskInput::Release),
             }
         }

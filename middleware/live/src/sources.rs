@@ -418,7 +418,10 @@ mod tests {
         while source.car().time_us() < 500_000 {
             source.poll(Duration::ZERO).unwrap();
         }
-        assert!(source.car().controls().brake > 0.0, "the brake is pressed");
+        assert!(
+            source.car().controls().held.brake > 0.0,
+            "the brake is pressed"
+        );
         assert!(source.car().brake_presses().is_empty());
     }
 

@@ -80,39 +80,9 @@ pub enum ReplayAction {
     },
 }
 
-/// What a person at the wheel holds (the Drive view sends it while it drives).
-#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DriveInput {
-    /// Accelerator pedal, %.
-    pub accelerator: f64,
-    /// Brake pedal, %.
-    pub brake: f64,
-    /// Steering wheel, degrees, positive to the left.
-    pub steering_deg: f64,
-    /// Headlight switch.
-    pub headlights: bool,
-    /// Engine-mode switch (economy).
-    pub economy_mode: bool,
-    /// Transmission-mode switch (manual).
-    pub manual_mode: bool,
-    /// Cabin set temperature, °F.
-    pub set_temp_f: f64,
-}
-
-/// A steering-wheel button.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Press {
-    /// Cruise on / set.
-    CruiseOn,
-    /// Cruise off.
-    CruiseOff,
-    /// Shift up.
-    ShiftUp,
-    /// Shift down.
-    ShiftDown,
-}
+/// What a person at the wheel holds (the Drive view sends it while it drives) and the
+/// steering-wheel buttons: the virtual car's own definitions of the driver's controls.
+pub use autoplug_vehicle::controls::{Button, HeldControls};
 
 /// The session's answer to an [`Action`]: a JSON value, or why it was refused.
 pub type Answer = Result<serde_json::Value, String>;
@@ -128,9 +98,9 @@ pub enum Command {
         reply: oneshot::Sender<Answer>,
     },
     /// The person at the wheel moved the controls.
-    Drive(DriveInput),
+    Drive(HeldControls),
     /// The person pressed a button.
-    Press(Press),
+    Press(Button),
     /// The page that drove went away: pedals released.
     DriverLeft,
 }

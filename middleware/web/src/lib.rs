@@ -36,7 +36,7 @@ pub mod fleet;
 pub mod live;
 pub mod server;
 
-pub use control::{Action, Answer, Command, Commands, Control, DriveInput, Press, ReplayAction};
+pub use control::{Action, Answer, Button, Command, Commands, Control, HeldControls, ReplayAction};
 pub use fleet::FleetData;
 pub use live::{LiveTable, Publisher};
 pub use server::{WebConfig, WebServer};

@@ -27,7 +27,7 @@ use axum::{Json, Router};
 use serde::Deserialize;
 use tokio::sync::oneshot;
 
-use crate::control::{Command, Control, DriveInput, Press, SendError};
+use crate::control::{Button, Command, Control, HeldControls, SendError};
 use crate::live::LiveTable;
 
 /// How often a client gets an update at most (20 Hz, the dashboard's rate).
@@ -369,9 +369,9 @@ enum ClientMessage {
     /// The write token: this stream may drive from now on (answered `auth`, `ok`).
     Auth { token: String },
     /// The person at the wheel (after `auth`).
-    Drive(DriveInput),
+    Drive(HeldControls),
     /// A steering-wheel button (after `auth`).
-    Press { button: Press },
+    Press { button: Button },
 }
 
 /// A stream's client, as far as driving goes.
@@ -380,7 +380,7 @@ struct Driver {
     authenticated: bool,
     drove: bool,
     /// Controls received and not passed on yet (the latest).
-    pending: Option<DriveInput>,
+    pending: Option<HeldControls>,
     /// When controls were last passed on.
     last_drive: Option<tokio::time::Instant>,
     /// Presses in the current second, and when it began.

@@ -410,7 +410,7 @@ fn driving_over_the_stream_needs_the_token_and_reaches_the_session() {
     }
     assert_eq!(got.len(), 3, "{got:?}");
     assert!(
-        got[0].starts_with("Drive(DriveInput { accelerator: 40.0"),
+        got[0].starts_with("Drive(HeldControls { accelerator: 40.0"),
         "{got:?}"
     );
     assert_eq!(got[1], "Press(CruiseOn)");

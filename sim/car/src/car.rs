@@ -701,8 +701,8 @@ impl VirtualCar {
             wheel_speed_kmh: s.wheel_speed_mps.map(|v| v * 3.6),
             brake: self.applied_brake().map(|b| b * 100.0),
             abs_release: abs.release.map(f64::from),
-            accel_pedal: c.accelerator,
-            brake_pedal: c.brake,
+            accel_pedal: c.held.accelerator,
+            brake_pedal: c.held.brake,
             accel_cmd: f64::from(pedals.accelerator_cmd),
             brake_cmd: f64::from(pedals.brake_cmd),
             steering_deg: self.steering_command(),
@@ -710,7 +710,7 @@ impl VirtualCar {
             engine_rpm: s.engine_rpm,
             fuel_l: s.fuel_l,
             cabin_temp_f: f64::from(celsius_to_fahrenheit(s.cabin_temp_c as f32)),
-            cabin_set_f: c.set_temp_f,
+            cabin_set_f: c.held.set_temp_f,
             fan: self.ecus.cabin.outputs.map_or(0.0, |a| f64::from(a.fan)),
             cruise_on: cruise.engaged,
             cruise_set_kmh: f64::from(cruise.set_speed_kmh),
@@ -746,7 +746,7 @@ impl VirtualCar {
         let t_s = t_us as f64 * 1e-6;
 
         // The driver, and the road and fault changes of the timeline.
-        let previous_brake = self.controls.brake;
+        let previous_brake = self.controls.held.brake;
         let mut road_changes = Vec::new();
         self.controls = self
             .timeline
@@ -754,7 +754,7 @@ impl VirtualCar {
         if let Some(person) = self.manual.as_mut() {
             self.controls = person.controls_at(t_s);
         }
-        if self.controls.brake > 0.0 && previous_brake <= 0.0 {
+        if self.controls.held.brake > 0.0 && previous_brake <= 0.0 {
             // The state is still the one at `t_us`: the model integrates below.
             let s = self.vehicle.state();
             self.brake_presses.push(BrakePress {
@@ -791,20 +791,20 @@ impl VirtualCar {
         let s = self.vehicle.state();
         let c = self.controls;
         e.pedals.step_if_due(t_us, || ecu_pedals::Sensors {
-            accelerator_pedal: c.accelerator as f32,
-            brake_pedal: c.brake as f32,
+            accelerator_pedal: c.held.accelerator as f32,
+            brake_pedal: c.held.brake as f32,
         });
         e.steering.step_if_due(t_us, || ecu_steering::Sensors {
-            wheel_angle_deg: c.steering_deg as f32,
+            wheel_angle_deg: c.held.steering_deg as f32,
             shift_up_button: c.buttons.shift_up,
             shift_down_button: c.buttons.shift_down,
             cruise_on_button: c.buttons.cruise_on,
             cruise_off_button: c.buttons.cruise_off,
         });
         e.console.step_if_due(t_us, || ecu_console::Sensors {
-            headlight_switch: c.headlights,
-            economy_mode_switch: c.economy_mode,
-            manual_mode_switch: c.manual_mode,
+            headlight_switch: c.held.headlights,
+            economy_mode_switch: c.held.economy_mode,
+            manual_mode_switch: c.held.manual_mode,
         });
         e.engine.step_if_due(t_us, || ecu_engine::Sensors {
             engine_rpm: s.engine_rpm as f32,
@@ -816,7 +816,7 @@ impl VirtualCar {
         });
         e.cabin.step_if_due(t_us, || ecu_cabin::Sensors {
             cabin_temp_f: s.cabin_temp_sensor_f(),
-            set_temp_f: c.set_temp_f as f32,
+            set_temp_f: c.held.set_temp_f as f32,
         });
         e.diff.step_if_due(t_us, || ecu_diff::Sensors {
             yaw_rate_error_rad_s: s.yaw_rate_error_rad_s as f32,

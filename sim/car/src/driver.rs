@@ -3,39 +3,7 @@
 
 use crate::scenario::{Button, Event, Scenario, BUTTON_PRESS_S};
 
-/// The steering-wheel buttons held at a moment.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Buttons {
-    /// Cruise on.
-    pub cruise_on: bool,
-    /// Cruise off.
-    pub cruise_off: bool,
-    /// Shift up.
-    pub shift_up: bool,
-    /// Shift down.
-    pub shift_down: bool,
-}
-
-/// Everything the driver operates, at one moment.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DriverControls {
-    /// Accelerator pedal, % (0..100).
-    pub accelerator: f64,
-    /// Brake pedal, % (0..100).
-    pub brake: f64,
-    /// Steering wheel angle, degrees, positive to the left.
-    pub steering_deg: f64,
-    /// Headlight switch.
-    pub headlights: bool,
-    /// Engine-mode switch (true: economy).
-    pub economy_mode: bool,
-    /// Transmission-mode switch (true: manual).
-    pub manual_mode: bool,
-    /// Cabin set-temperature knob, °F.
-    pub set_temp_f: f64,
-    /// Steering-wheel buttons held.
-    pub buttons: Buttons,
-}
+pub use autoplug_vehicle::controls::{Buttons, DriverControls, HeldControls};
 
 /// A control moving linearly from one value to another.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -77,13 +45,15 @@ impl Timeline {
             events: scenario.at.clone(),
             next: 0,
             controls: DriverControls {
-                accelerator: d.accelerator.unwrap_or(0.0),
-                brake: d.brake.unwrap_or(0.0),
-                steering_deg: d.steering_deg.unwrap_or(0.0),
-                headlights: d.headlights.unwrap_or(false),
-                economy_mode: d.economy_mode.unwrap_or(false),
-                manual_mode: d.manual_mode.unwrap_or(false),
-                set_temp_f: d.set_temp_f.unwrap_or(72.0),
+                held: HeldControls {
+                    accelerator: d.accelerator.unwrap_or(0.0),
+                    brake: d.brake.unwrap_or(0.0),
+                    steering_deg: d.steering_deg.unwrap_or(0.0),
+                    headlights: d.headlights.unwrap_or(false),
+                    economy_mode: d.economy_mode.unwrap_or(false),
+                    manual_mode: d.manual_mode.unwrap_or(false),
+                    set_temp_f: d.set_temp_f.unwrap_or(72.0),
+                },
                 buttons: Buttons::default(),
             },
             ramps: [None; 3],
@@ -109,7 +79,7 @@ impl Timeline {
             on_event(&event);
             self.next += 1;
         }
-        let c = &mut self.controls;
+        let c = &mut self.controls.held;
         for (ramp, value) in
             self.ramps
                 .iter()
@@ -120,7 +90,7 @@ impl Timeline {
             }
         }
         let held = |start: Option<f64>| start.is_some_and(|s| t_s >= s && t_s < s + BUTTON_PRESS_S);
-        c.buttons = Buttons {
+        self.controls.buttons = Buttons {
             cruise_on: held(self.pressed_at[0]),
             cruise_off: held(self.pressed_at[1]),
             shift_up: held(self.pressed_at[2]),
@@ -132,9 +102,9 @@ impl Timeline {
     fn apply(&mut self, event: &Event) {
         let targets = [event.accelerator, event.brake, event.steering_deg];
         let current = [
-            self.controls.accelerator,
-            self.controls.brake,
-            self.controls.steering_deg,
+            self.controls.held.accelerator,
+            self.controls.held.brake,
+            self.controls.held.steering_deg,
         ];
         for ((ramp, target), from) in self.ramps.iter_mut().zip(targets).zip(current) {
             if let Some(to) = target {
@@ -146,7 +116,7 @@ impl Timeline {
                 });
             }
         }
-        let c = &mut self.controls;
+        let c = &mut self.controls.held;
         if let Some(v) = event.headlights {
             c.headlights = v;
         }
@@ -165,46 +135,23 @@ impl Timeline {
     }
 }
 
-/// What a person at the wheel holds at a moment (the buttons are pressed separately: see
-/// [`ManualDriver::press`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HeldControls {
-    /// Accelerator pedal, % (0..100).
-    pub accelerator: f64,
-    /// Brake pedal, % (0..100).
-    pub brake: f64,
-    /// Steering wheel angle, degrees, positive to the left.
-    pub steering_deg: f64,
-    /// Headlight switch.
-    pub headlights: bool,
-    /// Engine-mode switch (true: economy).
-    pub economy_mode: bool,
-    /// Transmission-mode switch (true: manual).
-    pub manual_mode: bool,
-    /// Cabin set-temperature knob, °F.
-    pub set_temp_f: f64,
-}
-
-impl HeldControls {
-    /// The same values, clamped into the range of each control; `None` if one is not a
-    /// number.
-    pub fn clamped(self) -> Option<Self> {
-        let ok = [
-            self.accelerator,
-            self.brake,
-            self.steering_deg,
-            self.set_temp_f,
-        ]
-        .iter()
-        .all(|v| v.is_finite());
-        ok.then(|| Self {
-            accelerator: self.accelerator.clamp(0.0, 100.0),
-            brake: self.brake.clamp(0.0, 100.0),
-            steering_deg: self.steering_deg.clamp(-MAX_STEERING_DEG, MAX_STEERING_DEG),
-            set_temp_f: self.set_temp_f.clamp(MIN_SET_TEMP_F, MAX_SET_TEMP_F),
-            ..self
-        })
-    }
+/// `held`, each value clamped into its control's range; `None` if one is not a number.
+pub fn clamped(held: HeldControls) -> Option<HeldControls> {
+    let ok = [
+        held.accelerator,
+        held.brake,
+        held.steering_deg,
+        held.set_temp_f,
+    ]
+    .iter()
+    .all(|v| v.is_finite());
+    ok.then(|| HeldControls {
+        accelerator: held.accelerator.clamp(0.0, 100.0),
+        brake: held.brake.clamp(0.0, 100.0),
+        steering_deg: held.steering_deg.clamp(-MAX_STEERING_DEG, MAX_STEERING_DEG),
+        set_temp_f: held.set_temp_f.clamp(MIN_SET_TEMP_F, MAX_SET_TEMP_F),
+        ..held
+    })
 }
 
 /// The steering wheel's travel either way, degrees: the steering sensor's range.
@@ -230,15 +177,7 @@ impl ManualDriver {
     /// Takes over from `controls` as they are.
     pub fn taking_over(controls: &DriverControls) -> Self {
         Self {
-            held: HeldControls {
-                accelerator: controls.accelerator,
-                brake: controls.brake,
-                steering_deg: controls.steering_deg,
-                headlights: controls.headlights,
-                economy_mode: controls.economy_mode,
-                manual_mode: controls.manual_mode,
-                set_temp_f: controls.set_temp_f,
-            },
+            held: controls.held,
             pressed_at: [None; 4],
             pending: [false; 4],
         }
@@ -252,7 +191,7 @@ impl ManualDriver {
     /// The person moves the controls (values clamped to each control's range; a value
     /// that is not a number leaves the controls as they were and is refused).
     pub fn hold(&mut self, held: HeldControls) -> Result<(), &'static str> {
-        self.held = held.clamped().ok_or("a driver control is not a number")?;
+        self.held = clamped(held).ok_or("a driver control is not a number")?;
         Ok(())
     }
 
@@ -269,15 +208,8 @@ impl ManualDriver {
             }
         }
         let held = |start: Option<f64>| start.is_some_and(|s| t_s >= s && t_s < s + BUTTON_PRESS_S);
-        let h = self.held;
         DriverControls {
-            accelerator: h.accelerator,
-            brake: h.brake,
-            steering_deg: h.steering_deg,
-            headlights: h.headlights,
-            economy_mode: h.economy_mode,
-            manual_mode: h.manual_mode,
-            set_temp_f: h.set_temp_f,
+            held: self.held,
             buttons: Buttons {
                 cruise_on: held(self.pressed_at[0]),
                 cruise_off: held(self.pressed_at[1]),

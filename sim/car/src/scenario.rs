@@ -236,19 +236,7 @@ pub struct DriverSettings {
     pub set_temp_f: Option<f64>,
 }
 
-/// A momentary button on the steering wheel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Button {
-    /// Cruise on.
-    CruiseOn,
-    /// Cruise off.
-    CruiseOff,
-    /// Shift up (manual mode, or out of neutral).
-    ShiftUp,
-    /// Shift down.
-    ShiftDown,
-}
+pub use autoplug_vehicle::controls::Button;
 
 /// A fault injected on the bus.
 #[derive(Clone, Debug, PartialEq, Deserialize)]

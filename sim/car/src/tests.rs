@@ -173,22 +173,22 @@ fn the_timeline_ramps_latches_and_presses() {
     let mut timeline = Timeline::new(&s);
     let mut road_events = Vec::new();
     let c = timeline.advance(0.0, |_| {});
-    assert_eq!((c.accelerator, c.buttons.cruise_on), (20.0, false));
+    assert_eq!((c.held.accelerator, c.buttons.cruise_on), (20.0, false));
     let c = timeline.advance(2.0, |_| {});
-    assert_eq!((c.accelerator, c.buttons.cruise_on), (0.0, true));
+    assert_eq!((c.held.accelerator, c.buttons.cruise_on), (0.0, true));
     let c = timeline.advance(2.09, |_| {});
     assert!(c.buttons.cruise_on, "held for 100 ms");
     let c = timeline.advance(2.1, |_| {});
     assert!(!c.buttons.cruise_on, "released after 100 ms");
     let c = timeline.advance(6.0, |_| {});
     assert!(
-        (c.steering_deg - 15.0).abs() < 1e-9,
+        (c.held.steering_deg - 15.0).abs() < 1e-9,
         "half-way through the 2 s ramp: {}",
-        c.steering_deg
+        c.held.steering_deg
     );
-    assert!(c.headlights);
+    assert!(c.held.headlights);
     let c = timeline.advance(7.5, |_| {});
-    assert_eq!(c.steering_deg, 30.0);
+    assert_eq!(c.held.steering_deg, 30.0);
     timeline.advance(20.0, |e| road_events.push(e.grade_percent));
     assert_eq!(road_events, vec![Some(6.0)]);
     timeline.advance(30.0, |e| road_events.push(e.grade_percent));
@@ -660,7 +660,7 @@ fn a_person_at_the_wheel_drives_the_car_through_its_sensors() {
     person.hold(release).unwrap();
     run(&mut car, 3.0);
     assert_eq!(
-        car.controls().accelerator,
+        car.controls().held.accelerator,
         0.0,
         "the timeline no longer drives"
     );

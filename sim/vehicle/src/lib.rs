@@ -34,6 +34,7 @@
 #![deny(missing_docs)]
 
 mod body;
+pub mod controls;
 mod driveline;
 mod engine;
 mod interface;
