@@ -25,6 +25,43 @@ fn autoplug(args: &[&str]) -> Output {
         .expect("the autoplug binary runs")
 }
 
+/// `autoplug gateway --bus BUS --fast --quiet` recording into `DIR/rec` and storing its
+/// trips in `DIR/trips.db`, with `extra` arguments: the output, the recording folder and
+/// the database.
+fn record_fast(bus: &str, dir: &Path, extra: &[&str]) -> (Output, PathBuf, PathBuf) {
+    let (rec, db) = (dir.join("rec"), dir.join("trips.db"));
+    let mut args = vec![
+        "gateway",
+        "--bus",
+        bus,
+        "--fast",
+        "--quiet",
+        "--record",
+        rec.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    (autoplug(&args), rec, db)
+}
+
+/// `autoplug replay` of the recording's (first) file into `db`, which must succeed.
+fn replay_recording(rec: &Path, db: &Path) {
+    let file = std::fs::read_dir(rec)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let replay = autoplug(&[
+        "replay",
+        file.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+    ]);
+    assert!(replay.status.success(), "{replay:?}");
+}
+
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
@@ -32,21 +69,11 @@ fn text(bytes: &[u8]) -> String {
 #[test]
 fn the_live_gateway_records_the_bus_and_stores_the_trip() {
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("trips.db");
-    let rec = dir.path().join("rec");
-    let output = autoplug(&[
-        "gateway",
-        "--bus",
+    let (output, rec, db) = record_fast(
         "virtual:scenarios/stop-100-dry.toml",
-        "--fast",
-        "--quiet",
-        "--record",
-        rec.to_str().unwrap(),
-        "--db",
-        db.to_str().unwrap(),
-        "--vehicle",
-        "JA3AP00TEST000001",
-    ]);
+        dir.path(),
+        &["--vehicle", "JA3AP00TEST000001"],
+    );
     let stdout = text(&output.stdout);
     assert!(output.status.success(), "{output:?}");
     assert!(stdout.contains("stored trip(s) 1"), "{stdout}");
@@ -139,33 +166,9 @@ fn the_live_gateway_records_the_bus_and_stores_the_trip() {
 #[test]
 fn replay_stores_the_same_trip_as_the_live_gateway() {
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("trips.db");
-    let rec = dir.path().join("rec");
-    let live = autoplug(&[
-        "gateway",
-        "--bus",
-        "virtual:scenarios/drive-cycle.toml",
-        "--fast",
-        "--quiet",
-        "--record",
-        rec.to_str().unwrap(),
-        "--db",
-        db.to_str().unwrap(),
-    ]);
+    let (live, rec, db) = record_fast("virtual:scenarios/drive-cycle.toml", dir.path(), &[]);
     assert!(live.status.success(), "{live:?}");
-    let file = std::fs::read_dir(&rec)
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
-    let replay = autoplug(&[
-        "replay",
-        file.to_str().unwrap(),
-        "--db",
-        db.to_str().unwrap(),
-    ]);
-    assert!(replay.status.success(), "{replay:?}");
+    replay_recording(&rec, &db);
     let store = SqliteStore::open(&db).unwrap();
     let trips = store.trips(None).unwrap();
     assert_eq!(trips.len(), 2);
@@ -244,23 +247,8 @@ fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_fin
          [factory]\ncruise = \"1.1.0\"\n[[at]]\nt_s = 3.0\nfault = { silence = \"Console\" }\n",
     )
     .unwrap();
-    let db = dir.path().join("trips.db");
-    let rec = dir.path().join("rec");
     let bus = format!("virtual:{}", scenario.display());
-    let live = autoplug(&[
-        "gateway",
-        "--bus",
-        &bus,
-        "--fast",
-        "--quiet",
-        "--transmit",
-        "--dtc-interval",
-        "5",
-        "--record",
-        rec.to_str().unwrap(),
-        "--db",
-        db.to_str().unwrap(),
-    ]);
+    let (live, rec, db) = record_fast(&bus, dir.path(), &["--transmit", "--dtc-interval", "5"]);
     let stdout = text(&live.stdout);
     assert!(live.status.success(), "{live:?}");
     assert!(stdout.contains("AP-CRUISE-0001"), "{stdout}");
@@ -299,19 +287,7 @@ fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_fin
     assert_eq!(console.verdict, "no data", "{console:?}");
 
     // The recording holds the requests and answers: its replay stores the same codes.
-    let file = std::fs::read_dir(&rec)
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
-    let replay = autoplug(&[
-        "replay",
-        file.to_str().unwrap(),
-        "--db",
-        db.to_str().unwrap(),
-    ]);
-    assert!(replay.status.success(), "{replay:?}");
+    replay_recording(&rec, &db);
     let trips = store.trips(None).unwrap();
     let replayed = store.trip(trips[0].id).unwrap().unwrap();
     assert_eq!(replayed.dtcs, detail.dtcs);

@@ -4,7 +4,7 @@
 
 use autoplug_can::Node;
 
-use super::job::{EachEcu, Requests};
+use super::job::{EachEcu, EveryEcu, OneRequest};
 use super::{Response, TesterConfig, UdsError};
 
 /// The request: clear the codes of all groups.
@@ -21,37 +21,25 @@ pub struct EcuClearReport {
 
 /// Clears the codes of the given ECUs; never fails as a whole: each report says what
 /// happened.
-pub type ClearDtcsJob = EachEcu<Clearing>;
+pub type ClearDtcsJob = EachEcu<EveryEcu<Clearing>>;
 
 impl ClearDtcsJob {
     /// A job clearing `ecus` in that order.
     pub fn new(ecus: &[Node], config: TesterConfig) -> Self {
-        EachEcu::with(
-            Clearing {
-                ecus: ecus.to_vec(),
-                reports: Vec::new(),
-            },
-            config,
-        )
+        EachEcu::with(EveryEcu::new(ecus), config)
     }
 }
 
-/// The requests of a [`ClearDtcsJob`]: `14 FF FF FF` to each ECU.
+/// The request of a [`ClearDtcsJob`]: `14 FF FF FF`, answered `54`.
 #[derive(Debug)]
-pub struct Clearing {
-    ecus: Vec<Node>,
-    reports: Vec<EcuClearReport>,
-}
+pub struct Clearing;
 
-impl Requests for Clearing {
-    type Output = Vec<EcuClearReport>;
+impl OneRequest for Clearing {
+    type Report = EcuClearReport;
+    const REQUEST: &'static [u8] = &CLEAR_ALL_DTCS;
+    const ECHO: usize = 0;
 
-    fn next_request(&self) -> Option<(Node, Vec<u8>, usize)> {
-        let ecu = *self.ecus.get(self.reports.len())?;
-        Some((ecu, CLEAR_ALL_DTCS.to_vec(), 0))
-    }
-
-    fn answered(&mut self, outcome: Result<Response, UdsError>) {
+    fn report(ecu: Node, outcome: Result<Response, UdsError>) -> EcuClearReport {
         let outcome = match outcome {
             Ok(Response::Positive(response)) if response.first() == Some(&0x54) => Ok(()),
             Ok(Response::Positive(response)) => Err(UdsError::UnexpectedResponse {
@@ -62,11 +50,6 @@ impl Requests for Clearing {
             Ok(Response::Functional(_)) => Err(UdsError::Busy),
             Err(error) => Err(error),
         };
-        let ecu = self.ecus[self.reports.len()];
-        self.reports.push(EcuClearReport { ecu, outcome });
-    }
-
-    fn finish(&mut self) -> Vec<EcuClearReport> {
-        std::mem::take(&mut self.reports)
+        EcuClearReport { ecu, outcome }
     }
 }

@@ -9,7 +9,7 @@ use autoplug_can::Node;
 use autoplug_diagnostics::{describe_dtc, DtcEntry};
 use autoplug_ecu::Dtc;
 
-use super::job::{EachEcu, Requests};
+use super::job::{EachEcu, EveryEcu, OneRequest};
 use super::{Response, TesterConfig, UdsError};
 use crate::names::ecu_name;
 
@@ -45,48 +45,31 @@ pub fn parse_report(response: &[u8]) -> Result<Vec<DtcEntry>, UdsError> {
 
 /// Reads the codes of the given ECUs; never fails as a whole: each report says what
 /// happened.
-pub type DtcJob = EachEcu<DtcReading>;
+pub type DtcJob = EachEcu<EveryEcu<DtcReading>>;
 
 impl DtcJob {
     /// A job reading `ecus` in that order.
     pub fn new(ecus: &[Node], config: TesterConfig) -> Self {
-        EachEcu::with(
-            DtcReading {
-                ecus: ecus.to_vec(),
-                reports: Vec::new(),
-            },
-            config,
-        )
+        EachEcu::with(EveryEcu::new(ecus), config)
     }
 }
 
-/// The requests of a [`DtcJob`]: `19 02 FF` to each ECU.
+/// The request of a [`DtcJob`]: `19 02 FF`, every code whatever its status.
 #[derive(Debug)]
-pub struct DtcReading {
-    ecus: Vec<Node>,
-    reports: Vec<EcuDtcReport>,
-}
+pub struct DtcReading;
 
-impl Requests for DtcReading {
-    type Output = Vec<EcuDtcReport>;
+impl OneRequest for DtcReading {
+    type Report = EcuDtcReport;
+    const REQUEST: &'static [u8] = &REPORT_ALL_DTCS;
+    const ECHO: usize = 1;
 
-    fn next_request(&self) -> Option<(Node, Vec<u8>, usize)> {
-        let ecu = *self.ecus.get(self.reports.len())?;
-        Some((ecu, REPORT_ALL_DTCS.to_vec(), 1))
-    }
-
-    fn answered(&mut self, outcome: Result<Response, UdsError>) {
+    fn report(ecu: Node, outcome: Result<Response, UdsError>) -> EcuDtcReport {
         let entries = match outcome {
             Ok(Response::Positive(response)) => parse_report(&response),
             Ok(Response::Functional(_)) => Err(UdsError::Busy),
             Err(error) => Err(error),
         };
-        let ecu = self.ecus[self.reports.len()];
-        self.reports.push(EcuDtcReport { ecu, entries });
-    }
-
-    fn finish(&mut self) -> Vec<EcuDtcReport> {
-        std::mem::take(&mut self.reports)
+        EcuDtcReport { ecu, entries }
     }
 }
 

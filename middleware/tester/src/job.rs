@@ -166,3 +166,52 @@ impl<R: Requests> Job for EachEcu<R> {
         self.result.take().map(Ok)
     }
 }
+
+/// The one request a job sends to each ECU and what the answer means (reading the trouble
+/// codes, clearing them): with [`EveryEcu`], all such a job has to say.
+pub trait OneRequest {
+    /// What the job reports for one ECU.
+    type Report;
+    /// The request.
+    const REQUEST: &'static [u8];
+    /// How many bytes after the service identifier the positive response echoes.
+    const ECHO: usize;
+    /// The ECU's report from its answer (or from why there is none).
+    fn report(ecu: Node, outcome: Result<Response, UdsError>) -> Self::Report;
+}
+
+/// The same request to each ECU of a list, in order: the [`Requests`] of a
+/// [`OneRequest`] job.
+#[derive(Debug)]
+pub struct EveryEcu<O: OneRequest> {
+    ecus: Vec<Node>,
+    reports: Vec<O::Report>,
+}
+
+impl<O: OneRequest> EveryEcu<O> {
+    /// Asks `ecus` in that order.
+    pub fn new(ecus: &[Node]) -> Self {
+        Self {
+            ecus: ecus.to_vec(),
+            reports: Vec::new(),
+        }
+    }
+}
+
+impl<O: OneRequest> Requests for EveryEcu<O> {
+    type Output = Vec<O::Report>;
+
+    fn next_request(&self) -> Option<(Node, Vec<u8>, usize)> {
+        let ecu = *self.ecus.get(self.reports.len())?;
+        Some((ecu, O::REQUEST.to_vec(), O::ECHO))
+    }
+
+    fn answered(&mut self, outcome: Result<Response, UdsError>) {
+        let ecu = self.ecus[self.reports.len()];
+        self.reports.push(O::report(ecu, outcome));
+    }
+
+    fn finish(&mut self) -> Vec<O::Report> {
+        std::mem::take(&mut self.reports)
+    }
+}

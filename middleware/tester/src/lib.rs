@@ -107,7 +107,7 @@ pub use ident::{
     boot_slot_text, identification_table, value_text, vehicle_vin, vin_line, EcuIdentification,
     IdentJob, Identifying, IDENTIFICATION_DIDS,
 };
-pub use job::{EachEcu, Job, Requests};
+pub use job::{EachEcu, EveryEcu, Job, OneRequest, Requests};
 
 use std::collections::VecDeque;
 use std::fmt;
