@@ -302,7 +302,10 @@ fn serve_car(
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
 ) {
     use std::sync::atomic::Ordering;
-    autoplug_tester::testing::wait_for_raw_client(&server);
+    assert!(
+        server.wait_for_raw_client(Duration::from_secs(5)),
+        "no client in raw mode"
+    );
     let mut car = VirtualCar::new(&scenario);
     let wall = Instant::now();
     let mut from_client = std::collections::VecDeque::new();

@@ -538,18 +538,6 @@ pub fn image_for_slot(node: Node, slot: ImageSlot, payload_len: usize, seed: [u8
         .expect("a valid image")
 }
 
-/// Waits until the server has a client in raw mode.
-pub fn wait_for_raw_client(server: &SocketcandServer) {
-    let give_up = WallInstant::now() + Duration::from_secs(5);
-    while server.raw_clients() == 0 {
-        assert!(
-            WallInstant::now() < give_up,
-            "the client never reached raw mode"
-        );
-        thread::sleep(Duration::from_millis(5));
-    }
-}
-
 /// The nine ECUs' diagnostic stacks behind the virtual car's socketcand server, in real
 /// time, on a thread: what the virtual car does, without the car.
 pub struct EcuServer {

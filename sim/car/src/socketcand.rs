@@ -242,6 +242,18 @@ impl SocketcandServer {
         self.address
     }
 
+    /// Waits up to `timeout` for a client in raw mode: whether there is one.
+    pub fn wait_for_raw_client(&self, timeout: std::time::Duration) -> bool {
+        let give_up = std::time::Instant::now() + timeout;
+        while self.raw_clients() == 0 {
+            if std::time::Instant::now() >= give_up {
+                return false;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        true
+    }
+
     /// Clients in raw mode, receiving frames.
     pub fn raw_clients(&self) -> usize {
         self.state
