@@ -10,13 +10,13 @@ use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use autoplug_can::Node;
+use autoplug_image::elf::loadable_segments;
 use autoplug_image::{
     parse_public_key, verify, ImageBuilder, ImageError, ImageHeader, ImageSet, ImageSlot,
     KeyFileError, KeyGenError, KeyKind, PartNumber, SigningKey, SoftwareVariant, Version,
     BUILD_ID_LEN, HEADER_LEN, OVERHEAD_LEN, PUBLIC_KEY_LEN, SIGNATURE_LEN,
 };
 use object::elf;
-use object::read::elf::{FileHeader, ProgramHeader};
 use sha2::{Digest, Sha256};
 
 use autoplug_tester::names::ecu_label;
@@ -316,44 +316,6 @@ pub fn extract_payload(
     Ok((payload, kind))
 }
 
-/// The loadable segments with data of an ELF file for the STM32F446, by address (the
-/// physical address: where the bytes sit in flash; .data's initial values sit in flash even
-/// though the section runs in RAM).
-fn elf_segments(bytes: &[u8]) -> Result<Vec<(u64, &[u8])>, String> {
-    // e_ident[EI_CLASS], the fifth byte: 1 for 32-bit files.
-    if bytes.get(4) != Some(&elf::ELFCLASS32) {
-        return Err("a 64-bit ELF file: the STM32F446 runs 32-bit Arm code".into());
-    }
-    let header = elf::FileHeader32::<object::Endianness>::parse(bytes)
-        .map_err(|e| format!("not a readable ELF file: {e}"))?;
-    let endian = header
-        .endian()
-        .map_err(|e| format!("not a readable ELF file: {e}"))?;
-    if header.e_machine(endian) != elf::EM_ARM {
-        return Err(format!(
-            "an ELF file for machine {} (Arm is {}): not firmware for the STM32F446",
-            header.e_machine(endian),
-            elf::EM_ARM
-        ));
-    }
-    let program_headers = header
-        .program_headers(endian, bytes)
-        .map_err(|e| format!("unreadable program headers: {e}"))?;
-    let mut segments: Vec<(u64, &[u8])> = Vec::new();
-    for (index, ph) in program_headers.iter().enumerate() {
-        if ph.p_type(endian) != elf::PT_LOAD || ph.p_filesz(endian) == 0 {
-            continue;
-        }
-        let start = u64::from(ph.p_paddr(endian));
-        let data = ph
-            .data(endian, bytes)
-            .map_err(|()| format!("segment {index} lies outside the ELF file"))?;
-        segments.push((start, data));
-    }
-    segments.sort_by_key(|(start, _)| *start);
-    Ok(segments)
-}
-
 /// The slot a payload is for: an ELF file's from where it is linked (its first loadable
 /// segment is the vector table, at a slot's start + 512), a raw binary's as `given`
 /// (default A). A `given` slot an ELF file is not linked for is refused.
@@ -361,7 +323,7 @@ pub fn payload_slot(bytes: &[u8], given: Option<ImageSlot>) -> Result<ImageSlot,
     if !bytes.starts_with(&elf::ELFMAG) {
         return Ok(given.unwrap_or(ImageSlot::A));
     }
-    let segments = elf_segments(bytes)?;
+    let segments = loadable_segments(bytes)?;
     let Some(&(first, _)) = segments.first() else {
         return Err("the ELF file has no loadable segment with data".into());
     };
@@ -390,7 +352,7 @@ fn elf_payload(
     load_address: u32,
     max_len: usize,
 ) -> Result<(Vec<u8>, usize), String> {
-    let segments = elf_segments(bytes)?;
+    let segments = loadable_segments(bytes)?;
     let slot_end = u64::from(load_address) + max_len as u64;
     for &(start, data) in &segments {
         let end = start + data.len() as u64;
@@ -737,6 +699,7 @@ impl fmt::Display for Inspection {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use autoplug_image::elf::minimal_elf;
 
     #[test]
     fn key_file_names() {
@@ -783,57 +746,10 @@ mod tests {
         );
     }
 
-    /// A little-endian ELF32 for Arm with the given loadable segments (physical address,
-    /// data) and one segment without file data (.bss).
-    pub(crate) fn elf_with(segments: &[(u32, &[u8])], machine: u16) -> Vec<u8> {
-        let count = segments.len() + 1;
-        let phoff = 52u32;
-        let mut data_offset = phoff + 32 * count as u32;
-        let mut out = Vec::new();
-        out.extend_from_slice(&[0x7F, b'E', b'L', b'F', 1, 1, 1, 0]);
-        out.extend_from_slice(&[0; 8]);
-        out.extend_from_slice(&2u16.to_le_bytes()); // ET_EXEC
-        out.extend_from_slice(&machine.to_le_bytes());
-        out.extend_from_slice(&1u32.to_le_bytes()); // version
-        out.extend_from_slice(&0x0802_0201u32.to_le_bytes()); // entry
-        out.extend_from_slice(&phoff.to_le_bytes());
-        out.extend_from_slice(&0u32.to_le_bytes()); // shoff
-        out.extend_from_slice(&0x0500_0200u32.to_le_bytes()); // flags
-        out.extend_from_slice(&52u16.to_le_bytes()); // ehsize
-        out.extend_from_slice(&32u16.to_le_bytes()); // phentsize
-        out.extend_from_slice(&(count as u16).to_le_bytes());
-        out.extend_from_slice(&40u16.to_le_bytes()); // shentsize
-        out.extend_from_slice(&0u16.to_le_bytes()); // shnum
-        out.extend_from_slice(&0u16.to_le_bytes()); // shstrndx
-        let put_ph =
-            |out: &mut Vec<u8>, offset: u32, vaddr: u32, paddr: u32, filesz: u32, memsz: u32| {
-                for word in [1, offset, vaddr, paddr, filesz, memsz, 5, 4] {
-                    out.extend_from_slice(&u32::to_le_bytes(word));
-                }
-            };
-        for (address, data) in segments {
-            put_ph(
-                &mut out,
-                data_offset,
-                *address,
-                *address,
-                data.len() as u32,
-                data.len() as u32,
-            );
-            data_offset += data.len() as u32;
-        }
-        // .bss in RAM: no file data, not part of the payload.
-        put_ph(&mut out, data_offset, 0x2000_0000, 0x2000_0000, 0, 0x400);
-        for (_, data) in segments {
-            out.extend_from_slice(data);
-        }
-        out
-    }
-
     #[test]
     fn elf_segments_are_laid_out_from_the_load_address() {
         let load = ImageSlot::A.vector_table();
-        let file = elf_with(&[(load, &[1, 2, 3, 4]), (load + 8, &[9, 9])], elf::EM_ARM);
+        let file = minimal_elf(&[(load, &[1, 2, 3, 4]), (load + 8, &[9, 9])], elf::EM_ARM);
         let (payload, kind) = extract_payload(&file, load, MAX_PAYLOAD_LEN).unwrap();
         assert_eq!(payload, [1, 2, 3, 4, 0xFF, 0xFF, 0xFF, 0xFF, 9, 9]);
         assert_eq!(kind, PayloadKind::Elf { segments: 2 });
@@ -842,13 +758,13 @@ mod tests {
     #[test]
     fn elf_segments_outside_the_slot_are_refused() {
         let load = ImageSlot::A.vector_table();
-        let bootloader = elf_with(&[(0x0800_0000, &[1, 2, 3, 4])], elf::EM_ARM);
+        let bootloader = minimal_elf(&[(0x0800_0000, &[1, 2, 3, 4])], elf::EM_ARM);
         let error = extract_payload(&bootloader, load, MAX_PAYLOAD_LEN).unwrap_err();
         assert!(
             error.contains("0x08000000..0x08000004 lies outside the slot"),
             "{error}"
         );
-        let past_end = elf_with(
+        let past_end = minimal_elf(
             &[
                 (load, &[0; 4]),
                 (load + MAX_PAYLOAD_LEN as u32 - 2, &[0; 4]),
@@ -857,13 +773,13 @@ mod tests {
         );
         let error = extract_payload(&past_end, load, MAX_PAYLOAD_LEN).unwrap_err();
         assert!(error.contains("outside the slot"), "{error}");
-        let late_start = elf_with(&[(load + 0x100, &[0; 4])], elf::EM_ARM);
+        let late_start = minimal_elf(&[(load + 0x100, &[0; 4])], elf::EM_ARM);
         let error = extract_payload(&late_start, load, MAX_PAYLOAD_LEN).unwrap_err();
         assert!(error.contains("not at the load address"), "{error}");
-        let overlapping = elf_with(&[(load, &[0; 8]), (load + 4, &[0; 8])], elf::EM_ARM);
+        let overlapping = minimal_elf(&[(load, &[0; 8]), (load + 4, &[0; 8])], elf::EM_ARM);
         let error = extract_payload(&overlapping, load, MAX_PAYLOAD_LEN).unwrap_err();
         assert!(error.contains("overlap"), "{error}");
-        let x86 = elf_with(&[(load, &[0; 4])], elf::EM_386);
+        let x86 = minimal_elf(&[(load, &[0; 4])], elf::EM_386);
         let error = extract_payload(&x86, load, MAX_PAYLOAD_LEN).unwrap_err();
         assert!(error.contains("not firmware for the STM32F446"), "{error}");
         let error =
@@ -892,14 +808,14 @@ mod tests {
 
     #[test]
     fn the_slot_of_a_payload_is_where_its_elf_is_linked() {
-        let a = elf_with(&[(ImageSlot::A.vector_table(), &[0; 8])], elf::EM_ARM);
-        let b = elf_with(&[(ImageSlot::B.vector_table(), &[0; 8])], elf::EM_ARM);
+        let a = minimal_elf(&[(ImageSlot::A.vector_table(), &[0; 8])], elf::EM_ARM);
+        let b = minimal_elf(&[(ImageSlot::B.vector_table(), &[0; 8])], elf::EM_ARM);
         assert_eq!(payload_slot(&a, None), Ok(ImageSlot::A));
         assert_eq!(payload_slot(&b, None), Ok(ImageSlot::B));
         assert_eq!(payload_slot(&b, Some(ImageSlot::B)), Ok(ImageSlot::B));
         let error = payload_slot(&b, Some(ImageSlot::A)).unwrap_err();
         assert!(error.contains("linked for slot B"), "{error}");
-        let elsewhere = elf_with(&[(0x0801_0000, &[0; 8])], elf::EM_ARM);
+        let elsewhere = minimal_elf(&[(0x0801_0000, &[0; 8])], elf::EM_ARM);
         let error = payload_slot(&elsewhere, None).unwrap_err();
         assert!(error.contains("not for slot A"), "{error}");
         assert_eq!(payload_slot(&[1, 2, 3], None), Ok(ImageSlot::A));

@@ -66,6 +66,8 @@ pub mod floor;
 mod set;
 pub use set::{ImageSet, SetError, SetImage, MAX_SET_IMAGES};
 #[cfg(feature = "std")]
+pub mod elf;
+#[cfg(feature = "std")]
 mod host;
 #[cfg(feature = "std")]
 pub use host::{
