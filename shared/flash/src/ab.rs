@@ -452,11 +452,18 @@ pub fn choose<F: NorFlash>(
 /// application linked for `slot`: the stack pointer in the F446's SRAM and word aligned, the
 /// reset handler a Thumb address inside the slot. An erased or half-written slot fails.
 pub const fn plausible_vector_table(slot: ImageSlot, initial_sp: u32, reset: u32) -> bool {
-    let region = slot.region();
+    plausible_start(slot.vector_table(), slot.region().end(), initial_sp, reset)
+}
+
+/// Whether a vector table at `table` (`initial_sp`, `reset`) can start a Cortex-M core on the
+/// F446 running code linked between `table` and `end`: the stack pointer in SRAM (or at its
+/// end) and word aligned, the reset handler a Thumb address in that range. The rule of
+/// [`plausible_vector_table`], for any code in flash (the bootloader's too).
+pub const fn plausible_start(table: u32, end: u32, initial_sp: u32, reset: u32) -> bool {
     let sp_ok =
         initial_sp > SRAM_START && initial_sp <= SRAM_START + SRAM_SIZE && initial_sp % 4 == 0;
     let code = reset & !1;
-    let reset_ok = reset & 1 == 1 && code >= slot.vector_table() && code < region.end();
+    let reset_ok = reset & 1 == 1 && code >= table && code < end;
     sp_ok && reset_ok
 }
 

@@ -5,7 +5,8 @@
 
 use std::fmt;
 
-use autoplug_flash::ERASE_VALUE;
+use autoplug_flash::ab::plausible_start;
+use autoplug_flash::{ERASE_VALUE, PARTITIONS};
 
 use crate::map::{FLASH, FLASH_BASE, FLASH_SIZE, SRAM};
 
@@ -206,8 +207,9 @@ impl FlashContents {
     }
 
     /// The vector table at `address`: its initial stack pointer and reset vector, if they
-    /// are what a Cortex-M core can start from (the stack pointer in SRAM or at its end and
-    /// word-aligned, the reset vector in the flash with the Thumb bit set). `Err` says why not.
+    /// can start a Cortex-M core (the bootloader's own rule,
+    /// `autoplug_flash::ab::plausible_start`: the stack pointer a word in SRAM, the reset
+    /// vector Thumb code in the partition that holds the table). `Err` says why not.
     pub fn vector_table(&self, address: u32) -> Result<(u32, u32), String> {
         let (Some(sp), Some(reset)) = (self.word(address), self.word(address.wrapping_add(4)))
         else {
@@ -215,18 +217,18 @@ impl FlashContents {
                 "no vector table at 0x{address:08X}: not in the flash"
             ));
         };
-        if sp % 4 != 0 || sp <= SRAM.start || sp > SRAM.end {
-            return Err(format!(
-                "the vector table at 0x{address:08X} gives the initial stack pointer 0x{sp:08X}, not a word in SRAM (0x{:08X}..=0x{:08X})",
-                SRAM.start, SRAM.end
-            ));
+        let end = PARTITIONS
+            .iter()
+            .map(|(_, region)| region)
+            .find(|region| region.contains(address))
+            .map_or(FLASH.end, |region| region.end());
+        if plausible_start(address, end, sp, reset) {
+            return Ok((sp, reset));
         }
-        if reset & 1 == 0 || !FLASH.contains(&(reset & !1)) {
-            return Err(format!(
-                "the vector table at 0x{address:08X} gives the reset vector 0x{reset:08X}, not Thumb code in the flash"
-            ));
-        }
-        Ok((sp, reset))
+        Err(format!(
+            "the vector table at 0x{address:08X} cannot start the core: initial stack pointer 0x{sp:08X} (a word in SRAM 0x{:08X}..=0x{:08X} expected), reset vector 0x{reset:08X} (Thumb code in 0x{address:08X}..0x{end:08X} expected)",
+            SRAM.start, SRAM.end
+        ))
     }
 }
 
@@ -337,13 +339,18 @@ mod tests {
         assert!(flash
             .vector_table(BOOT)
             .unwrap_err()
-            .contains("stack pointer 0xFFFFFFFF"));
+            .contains("initial stack pointer 0xFFFFFFFF"));
         let arm_mode = minimal_elf(&[(BOOT, &table(0x2002_0000, BOOT + 0x200))], EM_ARM);
         flash.program_elf("boot.elf", &arm_mode).unwrap();
         assert!(flash
             .vector_table(BOOT)
             .unwrap_err()
-            .contains("not Thumb code"));
+            .contains("reset vector 0x08000200 (Thumb code in 0x08000000..0x08008000"));
+        // Thumb code, but in another partition: the bootloader's table may not start slot A.
+        let mut flash = FlashContents::erased();
+        let elsewhere = minimal_elf(&[(BOOT, &table(0x2002_0000, SLOT_A + 0x401))], EM_ARM);
+        flash.program_elf("boot.elf", &elsewhere).unwrap();
+        assert!(flash.vector_table(BOOT).is_err());
         assert!(flash
             .vector_table(0x2000_0000)
             .unwrap_err()
