@@ -372,6 +372,17 @@ impl SimFlash {
         Ok(())
     }
 
+    /// The word at `address` (word-aligned), all ones outside the flash: the emulated
+    /// core's fetches and loads, which must not allocate or check a slice per access.
+    #[inline]
+    pub fn read_word(&self, address: u32) -> u32 {
+        let start = address.wrapping_sub(FLASH_BASE) as usize;
+        match self.inverted.get(start..start + 4) {
+            Some(bytes) => !u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]),
+            None => u32::MAX,
+        }
+    }
+
     /// A copy of the contents of `region`. Works with the power off.
     pub fn contents(&self, region: Region) -> Result<Vec<u8>, FlashError> {
         let mut bytes = vec![0; region.size as usize];
