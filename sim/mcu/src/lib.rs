@@ -1,11 +1,25 @@
-//! An emulated STM32F446 that runs AutoPlug's unmodified firmware images (issue 31).
+//! An emulated STM32F446 that runs AutoPlug's unmodified firmware images (issue 31): the
+//! bootloader and an ECU's release ELF files, as `cargo fw-<ecu>` would flash them, boot on
+//! it and run their Embassy executors, timers, watchdog, flash writes and CAN.
 //!
-//! Built in steps; this is the first: the chip's memory map ([`map`]) and its flash as a
-//! programmer leaves it, the bootloader's and an ECU's release ELF files written where they
-//! are linked ([`programming`]). The Cortex-M4F core, its exception model and the
-//! peripherals the images use come next.
+//! - [`cpu`]: the Cortex-M4F core (ARMv7E-M Thumb-2 with DSP and FPv4-SP), its exception
+//!   model and its private peripherals;
+//! - [`chip`]: flash, SRAM, the device signature and the peripherals the images use
+//!   (RCC/PWR, FLASH, GPIO, ADC1, TIM3, TIM12, IWDG, CAN1), modelled from RM0390;
+//! - [`mcu`]: the two together, run event to event in simulated time;
+//! - [`map`] and [`programming`]: the memory map, and the flash as a programmer leaves it;
+//! - [`rtt`]: the firmware's defmt log from its RTT buffer;
+//! - [`oracle`]: QEMU as an independent core for differential tests of [`cpu`].
+//!
+//! Still to come (issue 31): the CAN controller joined to the virtual car's bit-timed bus
+//! and the ECUs' pins to the vehicle model.
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod chip;
+pub mod cpu;
 pub mod map;
+pub mod mcu;
+pub mod oracle;
 pub mod programming;
+pub mod rtt;

@@ -186,6 +186,20 @@ impl FlashContents {
         Ok(self.written.last().expect("just pushed"))
     }
 
+    /// The simulated NOR flash with these contents, as the MCU finds it at power-on: each
+    /// written range programmed in whole words (`seed` decides what power cuts leave).
+    pub fn to_sim_flash(&self, seed: u64) -> autoplug_flash::sim::SimFlash {
+        let mut flash = autoplug_flash::sim::SimFlash::new(seed);
+        for written in &self.written {
+            let start = written.start & !3;
+            let end = (written.end + 3) & !3;
+            let bytes = &self.bytes[(start - FLASH_BASE) as usize..(end - FLASH_BASE) as usize];
+            // Programming an erased flash in words inside it cannot fail.
+            let _ = flash.program(start, bytes);
+        }
+        flash
+    }
+
     /// The flash's bytes, from [`FLASH_BASE`].
     pub fn bytes(&self) -> &[u8] {
         &self.bytes

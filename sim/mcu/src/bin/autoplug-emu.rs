@@ -1,0 +1,210 @@
+//! Runs a firmware ELF on the emulated STM32F446 with a debugger attached, as `probe-rs
+//! run` runs it on a Nucleo-F446RE: the defmt log streamed as it is written (RTT, or
+//! semihosting), semihosting exit ending the run with its status, a HardFault reported
+//! with its registers and the last log lines. An ECU firmware (linked for slot A) starts
+//! through the bootloader, found beside it or given with `--boot`.
+//!
+//! ```text
+//! autoplug-emu ELF [--boot BOOT_ELF] [--for SECONDS | --until-exit SECONDS]
+//! ```
+//!
+//! Without `--for` or `--until-exit` it runs until stopped, at the pace of real time.
+//!
+//! Exit status: the program's own (semihosting exit), 0 after `--for SECONDS`, 1 on a
+//! HardFault, lockup or unmodelled access, 124 if `--until-exit SECONDS` passed without an
+//! exit, 2 on a usage error.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use autoplug_mcu::map::FLASH_BASE;
+use autoplug_mcu::mcu::{Mcu, Stop};
+use autoplug_mcu::programming::FlashContents;
+use autoplug_mcu::rtt::{LogLine, RttLog};
+
+const USAGE: &str =
+    "usage: autoplug-emu ELF [--boot BOOT_ELF] [--for SECONDS | --until-exit SECONDS]";
+
+struct Args {
+    elf: PathBuf,
+    boot: Option<PathBuf>,
+    seconds: f64,
+    expect_exit: bool,
+}
+
+fn parse(args: &[String]) -> Result<Args, String> {
+    let mut elf = None;
+    let mut boot = None;
+    let mut seconds = f64::INFINITY;
+    let mut expect_exit = false;
+    let mut it = args.iter();
+    while let Some(arg) = it.next() {
+        match arg.as_str() {
+            "--boot" => boot = Some(PathBuf::from(it.next().ok_or("--boot needs a file")?)),
+            "--for" | "--until-exit" => {
+                let value = it
+                    .next()
+                    .ok_or_else(|| format!("{arg} needs a number of seconds"))?;
+                seconds = value
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|s| *s > 0.0)
+                    .ok_or_else(|| format!("{arg} {value}: not a positive number of seconds"))?;
+                expect_exit = arg == "--until-exit";
+            }
+            other if other.starts_with("--") => return Err(format!("unknown option {other}")),
+            // A cargo runner is given the test binary and then the test harness's arguments.
+            other if elf.is_none() => elf = Some(PathBuf::from(other)),
+            _ => {}
+        }
+    }
+    Ok(Args {
+        elf: elf.ok_or("no ELF file given")?,
+        boot,
+        seconds,
+        expect_exit,
+    })
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let args = match parse(&args) {
+        Ok(args) => args,
+        Err(e) => {
+            eprintln!("autoplug-emu: {e}\n{USAGE}");
+            return ExitCode::from(2);
+        }
+    };
+    match run(&args) {
+        Ok(status) => ExitCode::from(status),
+        Err(e) => {
+            eprintln!("autoplug-emu: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn load(file: &Path, flash: &mut FlashContents, logs: &mut Vec<RttLog>) -> Result<u32, String> {
+    let name = file.display().to_string();
+    let bytes = std::fs::read(file).map_err(|e| format!("{name}: {e}"))?;
+    let written = flash
+        .program_elf(&name, &bytes)
+        .map_err(|e| e.to_string())?
+        .start;
+    if let Some(log) = RttLog::for_elf(&name, &bytes)? {
+        logs.push(log);
+    }
+    Ok(written)
+}
+
+fn run(args: &Args) -> Result<u8, String> {
+    let mut flash = FlashContents::erased();
+    let mut logs = Vec::new();
+    let bytes = std::fs::read(&args.elf).map_err(|e| format!("{}: {e}", args.elf.display()))?;
+    let start = autoplug_image::elf::loadable_segments(&bytes)
+        .map_err(|e| format!("{}: {e}", args.elf.display()))?
+        .iter()
+        .map(|(address, _)| *address as u32)
+        .min()
+        .unwrap_or(FLASH_BASE);
+    if start != FLASH_BASE {
+        // An application behind the bootloader: the bootloader goes first.
+        let boot = match &args.boot {
+            Some(boot) => boot.clone(),
+            None => {
+                let beside = args.elf.with_file_name("boot");
+                if !beside.exists() {
+                    return Err(format!(
+                        "{} starts at {start:#010x}, behind the bootloader, and there is no {} (build it: cargo build --release --target thumbv7em-none-eabihf -p autoplug-boot, or give --boot)",
+                        args.elf.display(),
+                        beside.display()
+                    ));
+                }
+                beside
+            }
+        };
+        load(&boot, &mut flash, &mut logs)?;
+    }
+    load(&args.elf, &mut flash, &mut logs)?;
+    let mut mcu = Mcu::power_on(
+        flash.to_sim_flash(1),
+        [0x0031_0042, 0x3433_5107, 0x3236_3731],
+    )
+    .map_err(|e| e.to_string())?;
+    mcu.cpu.debugger_attached = true;
+    let mut recent: Vec<LogLine> = Vec::new();
+    let print = |lines: Vec<LogLine>, recent: &mut Vec<LogLine>| {
+        for line in lines {
+            println!("{line}");
+            recent.push(line);
+            if recent.len() > 10 {
+                recent.remove(0);
+            }
+        }
+    };
+    let step_ns = 1_000_000;
+    let limit_ns = if args.seconds.is_finite() {
+        (args.seconds * 1e9) as u64
+    } else {
+        u64::MAX
+    };
+    let mut at = 0u64;
+    // Run for ever (no --for/--until-exit): a person is watching, so keep to real time, as
+    // a board would; otherwise as fast as the machine goes.
+    let paced = !args.seconds.is_finite();
+    let wall = std::time::Instant::now();
+    let outcome = loop {
+        at = at.saturating_add(step_ns).min(limit_ns);
+        if paced {
+            let ahead =
+                std::time::Duration::from_nanos(mcu.now_ns()).saturating_sub(wall.elapsed());
+            if !ahead.is_zero() {
+                std::thread::sleep(ahead);
+            }
+        }
+        let result = mcu.run_until(at);
+        for log in &mut logs {
+            let lines = log.poll(&mut mcu.chip);
+            print(lines, &mut recent);
+        }
+        if !mcu.semihosting_output.is_empty() {
+            let bytes = std::mem::take(&mut mcu.semihosting_output);
+            if let Some(log) = logs.last_mut() {
+                let lines = log.decode(&bytes);
+                print(lines, &mut recent);
+            }
+        }
+        if let Some(fault) = mcu.faults.first().cloned() {
+            eprintln!(
+                "autoplug-emu: HardFault ({:?}) at pc {:#010x}, lr {:#010x}, CFSR {:#010x}, HFSR {:#010x}, BFAR {:#010x}",
+                fault.fault, fault.pc, fault.lr, fault.cfsr, fault.hfsr, fault.bfar
+            );
+            break 1;
+        }
+        match result {
+            Ok(()) if at >= limit_ns => {
+                if args.expect_exit {
+                    eprintln!(
+                        "autoplug-emu: no exit after {} s of simulated time (a hung test?)",
+                        args.seconds
+                    );
+                    break 124;
+                }
+                break 0;
+            }
+            Ok(()) => {}
+            Err(Stop::Exited(status)) => break status.min(255) as u8,
+            Err(stop) => {
+                eprintln!("autoplug-emu: {stop}");
+                break 1;
+            }
+        }
+    };
+    if outcome != 0 && !recent.is_empty() {
+        eprintln!("autoplug-emu: the last log lines:");
+        for line in &recent {
+            eprintln!("  {}", line.text);
+        }
+    }
+    Ok(outcome)
+}

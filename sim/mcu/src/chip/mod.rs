@@ -1,0 +1,694 @@
+//! The STM32F446RE around the core: flash (the project's simulated NOR flash), SRAM, the
+//! device signature, and the peripherals the images use, behind the core's [`Bus`].
+//!
+//! Peripherals are modelled from RM0390. An access to a peripheral or register no model
+//! covers, or to a feature of a modelled peripheral that is not modelled, stops the
+//! emulation with a report naming the peripheral, the register offset and the instruction's
+//! address: never a silent zero.
+
+pub mod adc;
+pub mod can;
+pub mod flash_if;
+pub mod gpio;
+pub mod iwdg;
+pub mod rcc;
+pub mod timer;
+
+use core::time::Duration;
+
+use autoplug_flash::sim::{FlashError, SimFlash};
+
+use crate::cpu::{Bus, BusError, Size};
+use crate::map::{FLASH, FLASH_BASE, FLASH_SIZE, SRAM_SIZE, SRAM_START};
+
+use adc::Adc;
+use can::Can;
+use flash_if::{FlashEffect, FlashInterface};
+use gpio::Port;
+use iwdg::Iwdg;
+use rcc::{Clocks, Rcc, ResetCause, APB1, APB2};
+use timer::Timer;
+
+/// An access a model does not cover: what, for the report.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Unmodelled(String);
+
+impl Unmodelled {
+    /// A register offset the peripheral's model does not have.
+    pub fn register(offset: u32) -> Self {
+        Unmodelled(format!("register at offset {offset:#05x}"))
+    }
+
+    /// A feature of the peripheral that is not modelled.
+    pub fn feature(what: &str) -> Self {
+        Unmodelled(format!("{what} is not modelled"))
+    }
+}
+
+/// Merges a narrow write into a register: the bytes in `mask` from `value`.
+pub fn merge(old: u32, value: u32, mask: u32) -> u32 {
+    (old & !mask) | (value & mask)
+}
+
+/// The peripherals by base address (RM0390 table 1), for the reports of unmodelled ones.
+const PERIPHERAL_NAMES: &[(u32, &str)] = &[
+    (0x4000_0000, "TIM2"),
+    (0x4000_0400, "TIM3"),
+    (0x4000_0800, "TIM4"),
+    (0x4000_0C00, "TIM5"),
+    (0x4000_1000, "TIM6"),
+    (0x4000_1400, "TIM7"),
+    (0x4000_1800, "TIM12"),
+    (0x4000_1C00, "TIM13"),
+    (0x4000_2000, "TIM14"),
+    (0x4000_2800, "RTC"),
+    (0x4000_2C00, "WWDG"),
+    (0x4000_3000, "IWDG"),
+    (0x4000_3800, "SPI2"),
+    (0x4000_3C00, "SPI3"),
+    (0x4000_4000, "SPDIFRX"),
+    (0x4000_4400, "USART2"),
+    (0x4000_4800, "USART3"),
+    (0x4000_4C00, "UART4"),
+    (0x4000_5000, "UART5"),
+    (0x4000_5400, "I2C1"),
+    (0x4000_5800, "I2C2"),
+    (0x4000_5C00, "I2C3"),
+    (0x4000_6000, "FMPI2C1"),
+    (0x4000_6400, "CAN1"),
+    (0x4000_6800, "CAN2"),
+    (0x4000_6C00, "HDMI-CEC"),
+    (0x4000_7000, "PWR"),
+    (0x4000_7400, "DAC"),
+    (0x4001_0000, "TIM1"),
+    (0x4001_0400, "TIM8"),
+    (0x4001_1000, "USART1"),
+    (0x4001_1400, "USART6"),
+    (0x4001_2000, "ADC1/2/3"),
+    (0x4001_2C00, "SDIO"),
+    (0x4001_3000, "SPI1"),
+    (0x4001_3400, "SPI4"),
+    (0x4001_3800, "SYSCFG"),
+    (0x4001_3C00, "EXTI"),
+    (0x4001_4000, "TIM9"),
+    (0x4001_4400, "TIM10"),
+    (0x4001_4800, "TIM11"),
+    (0x4001_5800, "SAI1"),
+    (0x4001_5C00, "SAI2"),
+    (0x4002_0000, "GPIOA"),
+    (0x4002_0400, "GPIOB"),
+    (0x4002_0800, "GPIOC"),
+    (0x4002_0C00, "GPIOD"),
+    (0x4002_1000, "GPIOE"),
+    (0x4002_1400, "GPIOF"),
+    (0x4002_1800, "GPIOG"),
+    (0x4002_1C00, "GPIOH"),
+    (0x4002_3000, "CRC"),
+    (0x4002_3800, "RCC"),
+    (0x4002_3C00, "FLASH"),
+    (0x4002_4000, "BKPSRAM"),
+    (0x4002_6000, "DMA1"),
+    (0x4002_6400, "DMA2"),
+    (0x4004_0000, "USB OTG HS"),
+    (0x5000_0000, "USB OTG FS"),
+    (0x5005_0000, "DCMI"),
+];
+
+/// The name of the peripheral at `address`.
+pub fn peripheral_name(address: u32) -> &'static str {
+    PERIPHERAL_NAMES
+        .iter()
+        .rev()
+        .find(|(base, _)| address >= *base)
+        .filter(|(base, _)| address - base < 0x400)
+        .map_or("no peripheral", |(_, name)| name)
+}
+
+/// The interrupt numbers (RM0390 table 38) of the modelled peripherals.
+pub mod irq {
+    /// FLASH global interrupt.
+    pub const FLASH: usize = 4;
+    /// ADC1, ADC2, ADC3.
+    pub const ADC: usize = 18;
+    /// CAN1 TX.
+    pub const CAN1_TX: usize = 19;
+    /// CAN1 RX0.
+    pub const CAN1_RX0: usize = 20;
+    /// CAN1 RX1.
+    pub const CAN1_RX1: usize = 21;
+    /// CAN1 SCE.
+    pub const CAN1_SCE: usize = 22;
+    /// TIM3.
+    pub const TIM3: usize = 29;
+    /// TIM8 break and TIM12.
+    pub const TIM8_BRK_TIM12: usize = 43;
+}
+
+/// What happened during an access that the MCU loop must act on.
+#[derive(Debug, Default)]
+pub struct Pending {
+    /// Core cycles to stall (the flash was busy).
+    pub stall: Duration,
+    /// Decoded instructions to forget.
+    pub code_changed: Option<core::ops::Range<u32>>,
+    /// The simulated flash refused an operation (a power cut).
+    pub flash_failed: Option<FlashError>,
+}
+
+/// The chip around the core.
+pub struct Chip {
+    /// The main flash.
+    pub flash: SimFlash,
+    sram: Vec<u8>,
+    /// The 96-bit unique ID.
+    uid: [u32; 3],
+    /// RCC and PWR.
+    pub rcc: Rcc,
+    /// The flash interface.
+    pub flash_if: FlashInterface,
+    /// GPIO ports A–H.
+    pub gpio: [Port; 8],
+    /// ADC1.
+    pub adc: Adc,
+    /// TIM3.
+    pub tim3: Timer,
+    /// TIM12.
+    pub tim12: Timer,
+    /// The independent watchdog.
+    pub iwdg: Iwdg,
+    /// CAN1.
+    pub can1: Can,
+    /// Effects for the MCU loop.
+    pub pending: Pending,
+    /// A peripheral was written: the MCU loop re-reads interrupt lines and event times.
+    touched: bool,
+    /// The clock rates after the last RCC write.
+    clocks: Clocks,
+    /// Simulated time at `epoch_cycle` (ns), for LSI-clocked and wall-clock peripherals.
+    epoch_ns: u64,
+    epoch_cycle: u64,
+}
+
+impl Chip {
+    /// A chip after a power-on reset, with this flash and unique ID.
+    pub fn new(flash: SimFlash, uid: [u32; 3]) -> Self {
+        let rcc = Rcc::new(ResetCause::PowerOn, None);
+        let clocks = rcc.clocks();
+        Chip {
+            flash,
+            sram: vec![0; SRAM_SIZE as usize],
+            uid,
+            rcc,
+            flash_if: FlashInterface::default(),
+            gpio: core::array::from_fn(Port::new),
+            adc: Adc::default(),
+            tim3: Timer::new(4, false),
+            tim12: Timer::new(2, false),
+            iwdg: Iwdg::default(),
+            can1: Can::default(),
+            pending: Pending::default(),
+            touched: false,
+            clocks,
+            epoch_ns: 0,
+            epoch_cycle: 0,
+        }
+    }
+
+    /// The chip after a system reset of `cause` at simulated time `now_ns`: every
+    /// peripheral at its reset value, RCC_CSR's flags kept and the cause's added; SRAM keeps
+    /// its contents (a reset does not clear it); the world's inputs (pins, ADC volts) stay.
+    pub fn reset(&mut self, cause: ResetCause, now_ns: u64) {
+        self.rcc = Rcc::new(cause, Some(&self.rcc));
+        self.clocks = self.rcc.clocks();
+        self.flash_if = FlashInterface::default();
+        let inputs = self.adc.inputs();
+        self.adc = Adc::default();
+        for (channel, volts) in inputs.iter().enumerate() {
+            self.adc.set_input(channel, *volts);
+        }
+        for (i, port) in self.gpio.iter_mut().enumerate() {
+            *port = Port::new(i).with_inputs_of(port);
+        }
+        self.tim3 = Timer::new(4, false);
+        self.tim12 = Timer::new(2, false);
+        self.iwdg = Iwdg::default();
+        self.can1 = Can::default();
+        self.pending = Pending::default();
+        self.epoch_ns = now_ns;
+        self.epoch_cycle = 0;
+    }
+
+    /// The clock rates now.
+    pub fn clocks(&self) -> Clocks {
+        self.clocks
+    }
+
+    /// Simulated nanoseconds at core cycle `cycle`.
+    pub fn ns_at(&self, cycle: u64) -> u64 {
+        self.epoch_ns
+            + ((cycle.saturating_sub(self.epoch_cycle)) as u128 * 1_000_000_000
+                / self.clocks.hclk as u128) as u64
+    }
+
+    /// The core cycle at simulated nanosecond `ns` (rounded up).
+    pub fn cycle_at(&self, ns: u64) -> u64 {
+        let delta = ns.saturating_sub(self.epoch_ns) as u128 * self.clocks.hclk as u128;
+        self.epoch_cycle + delta.div_ceil(1_000_000_000) as u64
+    }
+
+    /// Reads SRAM bytes (for a debugger's view: RTT), if all are in SRAM.
+    pub fn sram_read(&self, address: u32, buf: &mut [u8]) -> Option<()> {
+        let start = address.checked_sub(SRAM_START)? as usize;
+        buf.copy_from_slice(self.sram.get(start..start + buf.len())?);
+        Some(())
+    }
+
+    /// The SRAM word at `address`.
+    pub fn sram_word(&self, address: u32) -> Option<u32> {
+        let mut bytes = [0u8; 4];
+        self.sram_read(address, &mut bytes)?;
+        Some(u32::from_le_bytes(bytes))
+    }
+
+    /// Writes an SRAM word as a debugger does (RTT's read offset).
+    pub fn sram_set_word(&mut self, address: u32, value: u32) {
+        if let Some(start) = address.checked_sub(SRAM_START) {
+            if let Some(slot) = self.sram.get_mut(start as usize..start as usize + 4) {
+                slot.copy_from_slice(&value.to_le_bytes());
+            }
+        }
+    }
+
+    /// Whether a peripheral was written since the last call.
+    pub fn take_touched(&mut self) -> bool {
+        std::mem::take(&mut self.touched)
+    }
+
+    /// The clock tree changed at `now`: re-base time and the timers' clocks.
+    fn clocks_changed(&mut self, now: u64) {
+        let clocks = self.rcc.clocks();
+        if clocks == self.clocks {
+            return;
+        }
+        self.epoch_ns = self.ns_at(now);
+        self.epoch_cycle = now;
+        self.clocks = clocks;
+        let divisor = |timer_hz: u64| (clocks.hclk / timer_hz.max(1)).max(1);
+        self.tim3
+            .set_clock_divisor(divisor(clocks.apb1_timers()), now);
+        self.tim12
+            .set_clock_divisor(divisor(clocks.apb1_timers()), now);
+    }
+
+    /// The interrupt lines of the modelled peripherals that are high.
+    pub fn irq_lines(&self) -> impl Iterator<Item = usize> {
+        let can = self.can1.irqs();
+        [
+            (irq::FLASH, self.flash_if.irq()),
+            (irq::ADC, self.adc.irq()),
+            (irq::CAN1_TX, can[0]),
+            (irq::CAN1_RX0, can[1]),
+            (irq::CAN1_RX1, can[2]),
+            (irq::CAN1_SCE, can[3]),
+            (irq::TIM3, self.tim3.irq()),
+            (irq::TIM8_BRK_TIM12, self.tim12.irq()),
+        ]
+        .into_iter()
+        .filter_map(|(n, high)| high.then_some(n))
+    }
+
+    /// The next core cycle at which a peripheral sets a flag on its own, if any.
+    pub fn next_event(&self) -> Option<u64> {
+        let iwdg = self.iwdg.expires().map(|ns| self.cycle_at(ns));
+        [
+            self.tim3.next_event(),
+            self.tim12.next_event(),
+            self.adc.next_event(),
+            iwdg,
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    /// Brings the timers' flags up to `now`.
+    pub fn sync(&mut self, now: u64) {
+        self.tim3.sync(now);
+        self.tim12.sync(now);
+    }
+
+    fn system_memory(&self, address: u32, size: Size) -> Result<u32, BusError> {
+        let offset = address.wrapping_sub(crate::map::UID_BASE);
+        let mut bytes = [0u8; 0x14];
+        for (i, word) in self.uid.iter().enumerate() {
+            bytes[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
+        }
+        // The flash size word (0x1FFF_7A22): 512 KiB.
+        bytes[0x12..0x14].copy_from_slice(&((FLASH_SIZE / 1024) as u16).to_le_bytes());
+        if offset as usize + size as usize <= 0x14 {
+            let mut value = [0u8; 4];
+            value[..size as usize]
+                .copy_from_slice(&bytes[offset as usize..offset as usize + size as usize]);
+            return Ok(u32::from_le_bytes(value));
+        }
+        Err(BusError::Unmodelled(format!(
+            "system memory at {address:#010x} (only the unique ID and flash size are modelled)"
+        )))
+    }
+
+    fn peripheral_read(&mut self, address: u32, now: u64) -> Result<u32, Unmodelled> {
+        let base = address & !0x3FF;
+        let offset = address & 0x3FF;
+        match base {
+            0x4000_0400 => self
+                .clock_gate(APB1, 1, "TIM3")
+                .and_then(|()| self.tim3.read(offset, now)),
+            0x4000_1800 => self
+                .clock_gate(APB1, 6, "TIM12")
+                .and_then(|()| self.tim12.read(offset, now)),
+            0x4000_3000 => {
+                let ns = self.ns_at(now);
+                self.iwdg.read(offset, ns)
+            }
+            0x4000_6400 => self
+                .clock_gate(APB1, 25, "CAN1")
+                .and_then(|()| self.can1.read(offset)),
+            0x4000_7000 => self
+                .clock_gate(APB1, 28, "PWR")
+                .and_then(|()| self.rcc.pwr_read(offset)),
+            0x4001_2000 => {
+                self.clock_gate(APB2, 8, "ADC1")?;
+                if (0x100..0x300).contains(&offset) {
+                    return Err(Unmodelled::feature("ADC2 and ADC3"));
+                }
+                self.adc.read(offset, now)
+            }
+            0x4002_0000..=0x4002_1C00 => {
+                let port = ((base - 0x4002_0000) / 0x400) as usize;
+                self.clock_gate(rcc::AHB1, port as u32, "GPIO")?;
+                self.gpio[port].read(offset)
+            }
+            0x4002_3800 => self.rcc.read(offset),
+            0x4002_3C00 => self.flash_if.read(offset),
+            _ => Err(Unmodelled(String::from("the peripheral is not modelled"))),
+        }
+    }
+
+    fn peripheral_write(
+        &mut self,
+        address: u32,
+        value: u32,
+        mask: u32,
+        now: u64,
+    ) -> Result<Result<(), BusError>, Unmodelled> {
+        let base = address & !0x3FF;
+        let offset = address & 0x3FF;
+        self.touched = true;
+        match base {
+            0x4000_0400 => self
+                .clock_gate(APB1, 1, "TIM3")
+                .and_then(|()| self.tim3.write(offset, value, mask, now))?,
+            0x4000_1800 => self
+                .clock_gate(APB1, 6, "TIM12")
+                .and_then(|()| self.tim12.write(offset, value, mask, now))?,
+            0x4000_3000 => {
+                let ns = self.ns_at(now);
+                self.iwdg.write(offset, value, mask, ns)?
+            }
+            0x4000_6400 => self
+                .clock_gate(APB1, 25, "CAN1")
+                .and_then(|()| self.can1.write(offset, value, mask))?,
+            0x4000_7000 => self
+                .clock_gate(APB1, 28, "PWR")
+                .and_then(|()| self.rcc.pwr_write(offset, value, mask))?,
+            0x4001_2000 => {
+                self.clock_gate(APB2, 8, "ADC1")?;
+                if (0x100..0x300).contains(&offset) {
+                    return Err(Unmodelled::feature("ADC2 and ADC3"));
+                }
+                let divisor = (self.clocks.hclk / self.clocks.pclk2.max(1)).max(1);
+                self.adc.write(offset, value, mask, now, divisor)?
+            }
+            0x4002_0000..=0x4002_1C00 => {
+                let port = ((base - 0x4002_0000) / 0x400) as usize;
+                self.clock_gate(rcc::AHB1, port as u32, "GPIO")?;
+                self.gpio[port].write(offset, value, mask)?
+            }
+            0x4002_3800 => {
+                if let Some((bus, bits)) = self.rcc.write(offset, value, mask)? {
+                    self.reset_peripherals(bus, bits);
+                }
+                self.rcc.settle();
+                self.clocks_changed(now);
+            }
+            0x4002_3C00 => match self.flash_if.write(offset, value, mask, &mut self.flash)? {
+                FlashEffect::BusFault => return Ok(Err(BusError::Fault)),
+                effect => self.flash_effect(effect),
+            },
+            _ => return Err(Unmodelled(String::from("the peripheral is not modelled"))),
+        }
+        Ok(Ok(()))
+    }
+
+    fn flash_effect(&mut self, effect: FlashEffect) {
+        match effect {
+            FlashEffect::None | FlashEffect::BusFault => {}
+            FlashEffect::Changed { range, busy } => {
+                self.pending.stall += busy;
+                let code = self.pending.code_changed.take();
+                self.pending.code_changed = Some(match code {
+                    Some(old) => old.start.min(range.start)..old.end.max(range.end),
+                    None => range,
+                });
+            }
+            FlashEffect::Failed(error) => self.pending.flash_failed = Some(error),
+        }
+    }
+
+    /// Peripherals put in reset through RCC_xxxRSTR return to their reset values.
+    fn reset_peripherals(&mut self, bus: usize, bits: u32) {
+        let divisor = (self.clocks.hclk / self.clocks.apb1_timers().max(1)).max(1);
+        if bus == APB1 {
+            if bits & (1 << 1) != 0 {
+                self.tim3 = Timer::new(4, false);
+                self.tim3.set_clock_divisor(divisor, 0);
+            }
+            if bits & (1 << 6) != 0 {
+                self.tim12 = Timer::new(2, false);
+                self.tim12.set_clock_divisor(divisor, 0);
+            }
+            if bits & (1 << 25) != 0 {
+                self.can1 = Can::default();
+            }
+        }
+        if bus == APB2 && bits & (1 << 8) != 0 {
+            let inputs = self.adc.inputs();
+            self.adc = Adc::default();
+            for (channel, volts) in inputs.iter().enumerate() {
+                self.adc.set_input(channel, *volts);
+            }
+        }
+        if bus == rcc::AHB1 {
+            for (i, port) in self.gpio.iter_mut().enumerate() {
+                if bits & (1 << i) != 0 {
+                    *port = Port::new(i).with_inputs_of(port);
+                }
+            }
+        }
+    }
+
+    /// A peripheral whose clock is off in RCC ignores writes and reads 0 on the chip: a
+    /// firmware that does this has a bug, so it is reported rather than ignored.
+    fn clock_gate(&self, bus: usize, bit: u32, name: &str) -> Result<(), Unmodelled> {
+        if self.rcc.enabled(bus, bit) {
+            Ok(())
+        } else {
+            Err(Unmodelled(format!(
+                "{name} is accessed with its clock disabled in RCC (the chip would ignore it)"
+            )))
+        }
+    }
+
+    fn unmodelled(address: u32, what: Unmodelled) -> BusError {
+        let name = peripheral_name(address);
+        BusError::Unmodelled(format!("{name} at {address:#010x}: {}", what.0))
+    }
+
+    #[inline]
+    fn flash_word(&self, address: u32) -> u32 {
+        self.flash.read_word(address)
+    }
+}
+
+impl Port {
+    /// This port's reset state with the externally driven levels of `other` kept.
+    pub fn with_inputs_of(self, other: &Port) -> Port {
+        let mut port = self;
+        port.copy_inputs(other);
+        port
+    }
+}
+
+impl Bus for Chip {
+    #[inline]
+    fn read(&mut self, address: u32, size: Size, now: u64) -> Result<u32, BusError> {
+        let len = size as u32;
+        if address >= SRAM_START && address - SRAM_START + len <= SRAM_SIZE {
+            let i = (address - SRAM_START) as usize;
+            return Ok(match size {
+                Size::Word => u32::from_le_bytes([
+                    self.sram[i],
+                    self.sram[i + 1],
+                    self.sram[i + 2],
+                    self.sram[i + 3],
+                ]),
+                Size::Half => u16::from_le_bytes([self.sram[i], self.sram[i + 1]]) as u32,
+                Size::Byte => self.sram[i] as u32,
+            });
+        }
+        let flash_address = if address < FLASH_SIZE {
+            address + FLASH_BASE
+        } else {
+            address
+        };
+        if FLASH.contains(&flash_address) && flash_address - FLASH_BASE + len <= FLASH_SIZE {
+            let word = self.flash_word(flash_address & !3);
+            let shift = 8 * (flash_address & 3);
+            return Ok(match size {
+                Size::Word => word,
+                Size::Half => (word >> shift) & 0xFFFF,
+                Size::Byte => (word >> shift) & 0xFF,
+            });
+        }
+        match address {
+            0x4000_0000..=0x5FFF_FFFF => {
+                let word_address = address & !3;
+                let shift = 8 * (address & 3);
+                let word = self
+                    .peripheral_read(word_address, now)
+                    .map_err(|e| Self::unmodelled(address, e))?;
+                Ok(match size {
+                    Size::Word => word,
+                    Size::Half => (word >> shift) & 0xFFFF,
+                    Size::Byte => (word >> shift) & 0xFF,
+                })
+            }
+            0x1FFF_0000..=0x1FFF_FFFF => self.system_memory(address, size),
+            _ => Err(BusError::Fault),
+        }
+    }
+
+    #[inline]
+    fn write(&mut self, address: u32, size: Size, value: u32, now: u64) -> Result<(), BusError> {
+        let len = size as u32;
+        if address >= SRAM_START && address - SRAM_START + len <= SRAM_SIZE {
+            let i = (address - SRAM_START) as usize;
+            match size {
+                Size::Word => self.sram[i..i + 4].copy_from_slice(&value.to_le_bytes()),
+                Size::Half => self.sram[i..i + 2].copy_from_slice(&(value as u16).to_le_bytes()),
+                Size::Byte => self.sram[i] = value as u8,
+            }
+            return Ok(());
+        }
+        let flash_address = if address < FLASH_SIZE {
+            address + FLASH_BASE
+        } else {
+            address
+        };
+        if FLASH.contains(&flash_address) {
+            let bytes = value.to_le_bytes();
+            let effect =
+                self.flash_if
+                    .program(flash_address, &bytes[..len as usize], &mut self.flash);
+            self.touched = true;
+            self.flash_effect(effect);
+            return Ok(());
+        }
+        match address {
+            0x4000_0000..=0x5FFF_FFFF => {
+                let shift = 8 * (address & 3);
+                let mask = match size {
+                    Size::Word => u32::MAX,
+                    Size::Half => 0xFFFF,
+                    Size::Byte => 0xFF,
+                } << shift;
+                self.peripheral_write(address & !3, value << shift, mask, now)
+                    .map_err(|e| Self::unmodelled(address, e))?
+            }
+            _ => Err(BusError::Fault),
+        }
+    }
+
+    fn yield_requested(&mut self) -> bool {
+        self.touched
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn peripherals_are_named_by_their_base() {
+        assert_eq!(peripheral_name(0x4000_6404), "CAN1");
+        assert_eq!(peripheral_name(0x4001_2304), "ADC1/2/3");
+        assert_eq!(peripheral_name(0x4000_2400), "no peripheral");
+    }
+
+    #[test]
+    fn the_unique_id_and_flash_size_read_from_system_memory() {
+        let mut chip = Chip::new(SimFlash::new(1), [0x11, 0x22, 0x33]);
+        assert_eq!(chip.read(0x1FFF_7A10, Size::Word, 0), Ok(0x11));
+        assert_eq!(chip.read(0x1FFF_7A18, Size::Word, 0), Ok(0x33));
+        assert_eq!(chip.read(0x1FFF_7A22, Size::Half, 0), Ok(512));
+        assert!(matches!(
+            chip.read(0x1FFF_0000, Size::Word, 0),
+            Err(BusError::Unmodelled(_))
+        ));
+    }
+
+    #[test]
+    fn an_unmodelled_peripheral_is_reported_by_name() {
+        let mut chip = Chip::new(SimFlash::new(1), [0; 3]);
+        match chip.read(0x4001_1004, Size::Word, 0) {
+            Err(BusError::Unmodelled(what)) => {
+                assert!(what.starts_with("USART1 at 0x40011004"), "{what}")
+            }
+            other => panic!("{other:?}"),
+        }
+        match chip.read(0x4000_6400, Size::Word, 0) {
+            Err(BusError::Unmodelled(what)) => assert!(what.contains("clock disabled"), "{what}"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_flash_is_programmed_through_the_interface_and_stalls_the_core() {
+        let mut chip = Chip::new(SimFlash::new(1), [0; 3]);
+        let target = 0x0800_8000;
+        chip.write(target, Size::Word, 0x1234_5678, 0).unwrap();
+        assert_eq!(
+            chip.read(target, Size::Word, 0),
+            Ok(0xFFFF_FFFF),
+            "locked: nothing written"
+        );
+        assert_ne!(
+            chip.read(0x4002_3C0C, Size::Word, 0).unwrap() & (1 << 7),
+            0,
+            "PGSERR"
+        );
+        chip.write(0x4002_3C04, Size::Word, 0x4567_0123, 0).unwrap();
+        chip.write(0x4002_3C04, Size::Word, 0xCDEF_89AB, 0).unwrap();
+        chip.write(0x4002_3C10, Size::Word, 0x201, 0).unwrap(); // PG, PSIZE x32
+        chip.write(target, Size::Word, 0x1234_5678, 0).unwrap();
+        assert_eq!(chip.read(target, Size::Word, 0), Ok(0x1234_5678));
+        assert_eq!(chip.pending.stall, Duration::from_micros(16));
+        assert_eq!(chip.pending.code_changed, Some(target..target + 4));
+        // A wrong key: a bus error, and locked until reset.
+        chip.write(0x4002_3C10, Size::Word, 1 << 31, 0).unwrap();
+        assert_eq!(
+            chip.write(0x4002_3C04, Size::Word, 0x1111, 0),
+            Err(BusError::Fault)
+        );
+    }
+}

@@ -1,0 +1,314 @@
+//! The emulated STM32F446 as a whole: the core, the chip, and the loop that runs them in
+//! simulated time, event to event: the core runs until the next peripheral event (a timer
+//! match, a finished conversion, the watchdog, the end of a CAN frame); a sleeping core
+//! skips straight to it.
+
+use core::time::Duration;
+
+use autoplug_flash::sim::{FlashError, SimFlash};
+
+use crate::chip::can::CanFrame;
+use crate::chip::rcc::ResetCause;
+use crate::chip::Chip;
+use crate::cpu::{Cpu, ExceptionReport, Exit, Halt};
+use crate::map::{BOOT_ALIAS, FLASH};
+
+/// Why an emulated MCU stopped.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// The core halted (an unmodelled access, a lockup).
+    Halted(Halt),
+    /// The simulated flash refused an operation: the power was cut during it, or the
+    /// firmware programmed a word that needed an erase first.
+    Flash(FlashError),
+    /// The program ended through semihosting (with a debugger attached), with this exit
+    /// status: 0 for ADP_Stopped_ApplicationExit with status 0.
+    Exited(u32),
+    /// A breakpoint with a debugger attached, or a semihosting call the emulator does
+    /// not offer.
+    Breakpoint {
+        /// The BKPT's immediate.
+        imm: u8,
+        /// Its address.
+        pc: u32,
+        /// What was asked, for a semihosting call.
+        what: String,
+    },
+}
+
+impl core::fmt::Display for Stop {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Stop::Halted(Halt::Unmodelled {
+                what,
+                address,
+                pc,
+                write,
+            }) => {
+                let access = if *write { "write to" } else { "read of" };
+                write!(f, "{access} {what} (address {address:#010x}) by the instruction at {pc:#010x}: no model covers it")
+            }
+            Stop::Halted(Halt::Lockup { pc, reason }) => {
+                write!(f, "the core locked up at {pc:#010x}: {reason}")
+            }
+            Stop::Halted(Halt::Breakpoint { imm, pc }) => {
+                write!(f, "breakpoint (BKPT {imm:#04x}) at {pc:#010x}")
+            }
+            Stop::Flash(error) => write!(f, "the flash refused an operation: {error}"),
+            Stop::Exited(status) => write!(f, "the program exited with status {status}"),
+            Stop::Breakpoint { imm, pc, what } => {
+                write!(f, "BKPT {imm:#04x} at {pc:#010x}: {what}")
+            }
+        }
+    }
+}
+
+/// A CAN frame the MCU sent, with the simulated time its transmission ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Sent {
+    /// Nanoseconds since power-on.
+    pub at_ns: u64,
+    /// The frame.
+    pub frame: CanFrame,
+}
+
+/// One emulated MCU.
+pub struct Mcu {
+    /// The core.
+    pub cpu: Cpu,
+    /// Flash, SRAM and peripherals.
+    pub chip: Chip,
+    /// The frame on the wire and the cycle its transmission ends, on the standalone bus.
+    on_wire: Option<(CanFrame, u64)>,
+    /// Frames sent on the standalone bus (every frame is acknowledged by a listener).
+    pub sent: Vec<Sent>,
+    /// System resets so far, by cause.
+    pub resets: Vec<(u64, ResetCause)>,
+    /// The HardFaults taken, as they were reported.
+    pub faults: Vec<ExceptionReport>,
+    /// What the program wrote to the console through semihosting.
+    pub semihosting_output: Vec<u8>,
+}
+
+impl Mcu {
+    /// An MCU with this flash, powered on: the core starts from the vector table at the
+    /// flash's base (BOOT0 low), as the chip does.
+    pub fn power_on(flash: SimFlash, uid: [u32; 3]) -> Result<Self, Stop> {
+        let mut mcu = Mcu {
+            cpu: Cpu::new(FLASH),
+            chip: Chip::new(flash, uid),
+            on_wire: None,
+            sent: Vec::new(),
+            resets: Vec::new(),
+            faults: Vec::new(),
+            semihosting_output: Vec::new(),
+        };
+        mcu.cpu
+            .reset(&mut mcu.chip, BOOT_ALIAS)
+            .map_err(Stop::Halted)?;
+        Ok(mcu)
+    }
+
+    /// Simulated nanoseconds since power-on.
+    pub fn now_ns(&self) -> u64 {
+        self.chip.ns_at(self.cpu.cycles())
+    }
+
+    fn system_reset(&mut self, cause: ResetCause) -> Result<(), Stop> {
+        let now = self.now_ns();
+        self.resets.push((now, cause));
+        self.chip.reset(cause, now);
+        self.on_wire = None;
+        self.cpu
+            .reset(&mut self.chip, BOOT_ALIAS)
+            .map_err(Stop::Halted)
+    }
+
+    /// Runs until simulated time `until_ns` (nanoseconds since power-on).
+    pub fn run_until(&mut self, until_ns: u64) -> Result<(), Stop> {
+        loop {
+            let now = self.cpu.cycles();
+            let now_ns = self.chip.ns_at(now);
+            if now_ns >= until_ns {
+                return Ok(());
+            }
+            self.chip.sync(now);
+            if let Some(expiry) = self.chip.iwdg.expires() {
+                if expiry <= now_ns {
+                    self.system_reset(ResetCause::Watchdog)?;
+                    continue;
+                }
+            }
+            self.standalone_can(now);
+            for irq in self.chip.irq_lines() {
+                self.cpu.raise_irq(irq);
+            }
+            let deadline = self.chip.cycle_at(until_ns);
+            let next = [
+                self.chip.next_event(),
+                self.on_wire.map(|(_, at)| at),
+                Some(deadline),
+            ]
+            .into_iter()
+            .flatten()
+            .filter(|&at| at > now)
+            .min()
+            .unwrap_or(now + 1);
+            let exit = self.cpu.run(&mut self.chip, next);
+            if let Some(report) = self.cpu.scs.last_fault.take() {
+                if report.exception == crate::cpu::system::exception::HARD_FAULT {
+                    self.faults.push(report);
+                }
+            }
+            match exit {
+                Exit::Budget => {}
+                Exit::Sleeping => {
+                    let now = self.cpu.cycles();
+                    if next > now {
+                        self.cpu.add_cycles(next - now);
+                    }
+                }
+                Exit::Yield => self.after_yield()?,
+                Exit::Halted(Halt::Breakpoint { imm: 0xAB, pc }) => self.semihosting(pc)?,
+                Exit::Halted(halt) => return Err(Stop::Halted(halt)),
+            }
+        }
+    }
+
+    fn debug_word(&mut self, address: u32) -> u32 {
+        use crate::cpu::{Bus, Size};
+        self.chip
+            .read(address, Size::Word, self.cpu.cycles())
+            .unwrap_or(0)
+    }
+
+    fn debug_bytes(&mut self, address: u32, len: u32) -> Vec<u8> {
+        use crate::cpu::{Bus, Size};
+        let now = self.cpu.cycles();
+        (0..len.min(1 << 20))
+            .map(|i| {
+                self.chip
+                    .read(address.wrapping_add(i), Size::Byte, now)
+                    .unwrap_or(0) as u8
+            })
+            .collect()
+    }
+
+    /// A semihosting call (ARM's semihosting specification, version 2), served as a
+    /// debugger serves it: console output and the program's exit. Files on the host are
+    /// not offered.
+    fn semihosting(&mut self, pc: u32) -> Result<(), Stop> {
+        const APPLICATION_EXIT: u32 = 0x2_0026;
+        let (op, arg) = (self.cpu.reg(0), self.cpu.reg(1));
+        let result = match op {
+            // SYS_OPEN: only the console, ":tt" (stdin, stdout, stderr by mode).
+            0x01 => {
+                let (name, mode, len) = (
+                    self.debug_word(arg),
+                    self.debug_word(arg + 4),
+                    self.debug_word(arg + 8),
+                );
+                if self.debug_bytes(name, len) == b":tt" {
+                    1 + mode / 4
+                } else {
+                    u32::MAX
+                }
+            }
+            // SYS_CLOSE.
+            0x02 => 0,
+            // SYS_WRITEC.
+            0x03 => {
+                let byte = self.debug_bytes(arg, 1);
+                self.semihosting_output.extend_from_slice(&byte);
+                0
+            }
+            // SYS_WRITE0.
+            0x04 => {
+                let mut at = arg;
+                loop {
+                    let byte = self.debug_bytes(at, 1)[0];
+                    if byte == 0 || at.wrapping_sub(arg) > 1 << 16 {
+                        break;
+                    }
+                    self.semihosting_output.push(byte);
+                    at = at.wrapping_add(1);
+                }
+                0
+            }
+            // SYS_WRITE: [handle, buffer, length]; returns the bytes not written.
+            0x05 => {
+                let (buffer, len) = (self.debug_word(arg + 4), self.debug_word(arg + 8));
+                let bytes = self.debug_bytes(buffer, len);
+                self.semihosting_output.extend_from_slice(&bytes);
+                0
+            }
+            // SYS_EXIT: the reason in r1 (32-bit form).
+            0x18 => return Err(Stop::Exited(if arg == APPLICATION_EXIT { 0 } else { 1 })),
+            // SYS_EXIT_EXTENDED: [reason, subcode].
+            0x20 => {
+                let (reason, code) = (self.debug_word(arg), self.debug_word(arg + 4));
+                return Err(Stop::Exited(if reason == APPLICATION_EXIT {
+                    code
+                } else {
+                    1
+                }));
+            }
+            _ => {
+                return Err(Stop::Breakpoint {
+                    imm: 0xAB,
+                    pc,
+                    what: format!("semihosting operation {op:#04x} is not offered"),
+                })
+            }
+        };
+        self.cpu.set_reg(0, result);
+        self.cpu.step_over_breakpoint();
+        Ok(())
+    }
+
+    /// Applies what a peripheral access left for the loop: the flash's stall and changed
+    /// code, a flash failure, a reset request.
+    fn after_yield(&mut self) -> Result<(), Stop> {
+        self.chip.take_touched();
+        let pending = std::mem::take(&mut self.chip.pending);
+        if let Some(range) = pending.code_changed {
+            self.cpu.invalidate_code(range.clone());
+            self.cpu
+                .invalidate_code(range.start - FLASH.start..range.end - FLASH.start);
+        }
+        if pending.stall > Duration::ZERO {
+            let hz = self.chip.clocks().hclk as u128;
+            let cycles = (pending.stall.as_nanos() * hz).div_ceil(1_000_000_000) as u64;
+            self.cpu.add_cycles(cycles);
+        }
+        if let Some(error) = pending.flash_failed {
+            return Err(Stop::Flash(error));
+        }
+        if std::mem::take(&mut self.cpu.scs.reset_requested) {
+            self.system_reset(ResetCause::Software)?;
+        }
+        Ok(())
+    }
+
+    /// The standalone bus: a frame takes its bit time on the wire and is acknowledged.
+    fn standalone_can(&mut self, now: u64) {
+        if let Some((frame, at)) = self.on_wire {
+            if at > now {
+                return;
+            }
+            self.chip.can1.transmitted(true, false);
+            self.sent.push(Sent {
+                at_ns: self.chip.ns_at(at),
+                frame,
+            });
+            self.on_wire = None;
+        }
+        if let Some(frame) = self.chip.can1.next_transmit() {
+            let clocks = self.chip.clocks();
+            let bit_rate = self.chip.can1.bit_rate(clocks.pclk1).max(1);
+            let bits = 47 + 8 * frame.dlc as u64 + 24;
+            let cycles = (bits * clocks.hclk).div_ceil(bit_rate);
+            self.on_wire = Some((frame, now + cycles));
+        }
+    }
+}
