@@ -29,6 +29,8 @@ const ERROR_DELIMITER_BITS: u64 = 8;
 const INTERMISSION_BITS: u64 = crate::timing::INTERMISSION_BITS as u64;
 /// Extra wait of an error-passive transmitter before its next frame.
 const SUSPEND_TRANSMISSION_BITS: u64 = 8;
+/// Transmission records kept per reporting node until read.
+const TRANSMITTED_KEPT: usize = 256;
 /// Bus-off recovery: 128 sequences of 11 recessive bits.
 const RECOVERY_SEQUENCES: u64 = 128;
 const RECOVERY_SEQUENCE_BITS: u64 = 11;
@@ -101,6 +103,20 @@ pub struct BusEvent {
     pub senders: NodeSet,
     /// What became of it.
     pub outcome: Outcome,
+}
+
+/// How one of a node's frames went on the wire (for nodes with
+/// [`NodeConfig::report_transmissions`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Transmitted {
+    /// The frame.
+    pub frame: Frame,
+    /// End of its EOF (or of the error delimiter after an error), ns.
+    pub end_ns: u64,
+    /// Acknowledged (delivered or dropped by a fault) rather than ended by an error frame.
+    pub ok: bool,
+    /// After an error: the frame is queued again for an automatic retransmission.
+    pub retrying: bool,
 }
 
 /// Why [`VirtualBus::send`] refused a frame.
@@ -202,6 +218,8 @@ struct NodeSlot {
     /// First bit at which the node may start a frame (suspend transmission, recovery).
     eligible_from_bits: u64,
     rx: VecDeque<Delivered>,
+    /// How the node's frames went, when it asked ([`NodeConfig::report_transmissions`]).
+    transmitted: VecDeque<Transmitted>,
     counters: ErrorCounters,
     bus_off: Option<BusOff>,
     silenced: bool,
@@ -345,6 +363,7 @@ impl VirtualBus {
             ready_bits: 0,
             eligible_from_bits: 0,
             rx: VecDeque::with_capacity(config.rx_queue_capacity),
+            transmitted: VecDeque::new(),
             counters: ErrorCounters::default(),
             bus_off: None,
             silenced: false,
@@ -425,6 +444,36 @@ impl VirtualBus {
     /// The next frame `node`'s software receives, oldest first.
     pub fn recv(&mut self, node: NodeId) -> Option<Delivered> {
         self.nodes[node.index()].rx.pop_front()
+    }
+
+    /// How the next of `node`'s frames went on the wire, oldest first (nodes attached with
+    /// [`NodeConfig::report_transmissions`]; empty for the others).
+    pub fn transmitted(&mut self, node: NodeId) -> Option<Transmitted> {
+        self.nodes[node.index()].transmitted.pop_front()
+    }
+
+    /// Takes back a frame `node` queued and the bus has not started: a CAN controller's
+    /// abort request (bxCAN ABRQ). Returns whether it was still waiting; a frame on the
+    /// wire cannot be taken back (its transmission decides).
+    pub fn cancel(&mut self, node: NodeId, frame: Frame) -> bool {
+        let slot = &mut self.nodes[node.index()];
+        let Some(seq) = slot
+            .tx
+            .iter()
+            .filter(|p| p.frame == frame)
+            .map(|p| p.seq)
+            .min()
+        else {
+            return false;
+        };
+        slot.tx.retain(|p| p.seq != seq);
+        true
+    }
+
+    /// When the frame on the wire ends (its EOF, or its error delimiter), if there is one:
+    /// the next moment a receiver gets a frame or a sender learns how its frame went.
+    pub fn wire_busy_until_ns(&self) -> Option<u64> {
+        self.on_wire.map(|tx| self.timing.bits_to_ns(tx.end_bits))
     }
 
     /// Frames waiting in `node`'s receive queue.
@@ -749,6 +798,19 @@ impl VirtualBus {
             }
             if slot.bus_off.is_none() && slot.counters.is_passive() {
                 slot.eligible_from_bits = free_at_bits + SUSPEND_TRANSMISSION_BITS;
+            }
+            if slot.config.report_transmissions {
+                let retrying = !success && slot.tx.iter().any(|p| p.seq == pending.seq);
+                // Bounded: a caller that never reads the record loses its oldest entries.
+                if slot.transmitted.len() == TRANSMITTED_KEPT {
+                    slot.transmitted.pop_front();
+                }
+                slot.transmitted.push_back(Transmitted {
+                    frame: tx.frame,
+                    end_ns,
+                    ok: success,
+                    retrying,
+                });
             }
         }
 

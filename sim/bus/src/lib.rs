@@ -70,7 +70,7 @@ mod node;
 mod stats;
 mod timing;
 
-pub use bus::{BusConfig, BusEvent, Delivered, Outcome, TxError, VirtualBus};
+pub use bus::{BusConfig, BusEvent, Delivered, Outcome, Transmitted, TxError, VirtualBus};
 pub use fault::{FaultAction, FaultId, FaultRule, Trigger};
 pub use node::{
     AcceptanceFilter, BusOffRecovery, ErrorState, MaskFilter, NodeConfig, NodeId, NodeSet,

@@ -175,6 +175,10 @@ pub struct NodeConfig {
     pub auto_retransmit: bool,
     /// How the node leaves bus-off.
     pub bus_off_recovery: BusOffRecovery,
+    /// Keep a record of how each of the node's frames went on the wire, for
+    /// [`crate::VirtualBus::transmitted`]: a CAN controller model needs it to set its
+    /// mailboxes' status (an emulated bxCAN's TXOK, TERR).
+    pub report_transmissions: bool,
 }
 
 impl Default for NodeConfig {
@@ -185,6 +189,7 @@ impl Default for NodeConfig {
             loopback: false,
             auto_retransmit: true,
             bus_off_recovery: BusOffRecovery::Automatic,
+            report_transmissions: false,
         }
     }
 }

@@ -708,3 +708,52 @@ fn the_report_lists_ids_and_nodes() {
         "{report}"
     );
 }
+
+#[test]
+fn a_controller_node_learns_how_its_frames_went_and_can_take_one_back() {
+    let mut bus = VirtualBus::new(BusConfig::default());
+    let reporting = NodeConfig {
+        report_transmissions: true,
+        ..NodeConfig::default()
+    };
+    let ecu = bus.attach_with("emulated", AcceptanceFilter::All, reporting);
+    let _listener = bus.attach("listener", AcceptanceFilter::All);
+    let first = frame(0x100, &[1, 2]);
+    let second = frame(0x200, &[3]);
+    let third = frame(0x300, &[4]);
+    bus.send(ecu, first, 0).unwrap();
+    bus.send(ecu, second, 0).unwrap();
+    bus.send(ecu, third, 0).unwrap();
+    // The first starts at once; the others wait. Taking one back works until it starts.
+    bus.run_until(BIT_NS);
+    assert_eq!(bus.wire_busy_until_ns(), Some(len(&first) * BIT_NS));
+    assert!(!bus.cancel(ecu, first), "on the wire: too late");
+    assert!(bus.cancel(ecu, third));
+    assert!(!bus.cancel(ecu, third), "taken back once");
+    bus.run_until(MS);
+    let outcomes: Vec<_> = std::iter::from_fn(|| bus.transmitted(ecu)).collect();
+    assert_eq!(outcomes.len(), 2);
+    assert_eq!(
+        (outcomes[0].frame, outcomes[0].ok, outcomes[0].retrying),
+        (first, true, false)
+    );
+    assert_eq!(outcomes[0].end_ns, len(&first) * BIT_NS);
+    assert_eq!((outcomes[1].frame, outcomes[1].ok), (second, true));
+    assert_eq!(bus.wire_busy_until_ns(), None);
+}
+
+#[test]
+fn a_failed_transmission_is_reported_as_retrying() {
+    let mut bus = VirtualBus::new(BusConfig::default());
+    let reporting = NodeConfig {
+        report_transmissions: true,
+        ..NodeConfig::default()
+    };
+    // Alone on the bus: no acknowledgement, an ACK error, and the retransmission queued.
+    let ecu = bus.attach_with("emulated", AcceptanceFilter::All, reporting);
+    bus.send(ecu, frame(0x123, &[9]), 0).unwrap();
+    bus.run_until(MS);
+    let outcomes: Vec<_> = std::iter::from_fn(|| bus.transmitted(ecu)).collect();
+    assert!(outcomes.len() > 1, "retried");
+    assert!(outcomes.iter().all(|o| !o.ok && o.retrying));
+}

@@ -7,12 +7,13 @@
 //! - [`chip`]: flash, SRAM, the device signature and the peripherals the images use
 //!   (RCC/PWR, FLASH, GPIO, ADC1, TIM3, TIM12, IWDG, CAN1), modelled from RM0390;
 //! - [`mcu`]: the two together, run event to event in simulated time;
+//! - [`node`]: emulated MCUs as nodes of the virtual car's bit-timed bus;
 //! - [`map`] and [`programming`]: the memory map, and the flash as a programmer leaves it;
 //! - [`rtt`]: the firmware's defmt log from its RTT buffer;
 //! - [`oracle`]: QEMU as an independent core for differential tests of [`cpu`].
 //!
-//! Still to come (issue 31): the CAN controller joined to the virtual car's bit-timed bus
-//! and the ECUs' pins to the vehicle model.
+//! Still to come (issue 31): the ECUs' pins joined to the vehicle model, and the virtual
+//! car running emulated ECUs.
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -20,6 +21,7 @@ pub mod chip;
 pub mod cpu;
 pub mod map;
 pub mod mcu;
+pub mod node;
 pub mod oracle;
 pub mod programming;
 pub mod rtt;

@@ -24,6 +24,9 @@ pub enum Stop {
     /// The program ended through semihosting (with a debugger attached), with this exit
     /// status: 0 for ADP_Stopped_ApplicationExit with status 0.
     Exited(u32),
+    /// The firmware used something the emulated car cannot carry (an extended CAN frame
+    /// on the AutoPlug bus, say).
+    Unsupported(String),
     /// A breakpoint with a debugger attached, or a semihosting call the emulator does
     /// not offer.
     Breakpoint {
@@ -56,6 +59,7 @@ impl core::fmt::Display for Stop {
             }
             Stop::Flash(error) => write!(f, "the flash refused an operation: {error}"),
             Stop::Exited(status) => write!(f, "the program exited with status {status}"),
+            Stop::Unsupported(what) => write!(f, "not supported: {what}"),
             Stop::Breakpoint { imm, pc, what } => {
                 write!(f, "BKPT {imm:#04x} at {pc:#010x}: {what}")
             }
@@ -88,6 +92,9 @@ pub struct Mcu {
     pub faults: Vec<ExceptionReport>,
     /// What the program wrote to the console through semihosting.
     pub semihosting_output: Vec<u8>,
+    /// CAN1 on a bus of its own where every frame is acknowledged (true), or attached to
+    /// the virtual car's bus ([`crate::node::BusNode`]).
+    pub standalone_can: bool,
 }
 
 impl Mcu {
@@ -102,6 +109,7 @@ impl Mcu {
             resets: Vec::new(),
             faults: Vec::new(),
             semihosting_output: Vec::new(),
+            standalone_can: true,
         };
         mcu.cpu
             .reset(&mut mcu.chip, BOOT_ALIAS)
@@ -139,7 +147,9 @@ impl Mcu {
                     continue;
                 }
             }
-            self.standalone_can(now);
+            if self.standalone_can {
+                self.standalone_can(now);
+            }
             for irq in self.chip.irq_lines() {
                 self.cpu.raise_irq(irq);
             }

@@ -56,6 +56,8 @@ struct Mailbox {
     tdhr: u32,
     /// Order of the transmit request (for TXFP).
     sequence: u64,
+    /// The core cycle of the transmit request.
+    requested_at: u64,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -323,6 +325,69 @@ impl Can {
         [tx, rx(0), rx(1), sce]
     }
 
+    /// The mailboxes with a transmit request pending: mailbox, frame, the core cycle of the
+    /// request. What a bus arbitrates among (by identifier, TXFP clear).
+    pub fn requests(&self) -> impl Iterator<Item = (usize, CanFrame, u64)> + '_ {
+        (0..3)
+            .filter(|&i| self.tsr & (TME0 << i) == 0 && self.mailboxes[i].tir & 1 != 0)
+            .map(|i| {
+                let m = &self.mailboxes[i];
+                (
+                    i,
+                    CanFrame::from_registers(m.tir, m.tdtr, m.tdlr, m.tdhr),
+                    m.requested_at,
+                )
+            })
+    }
+
+    /// Whether transmit requests go in request order (MCR.TXFP) rather than by identifier.
+    pub fn fifo_priority(&self) -> bool {
+        self.mcr & (1 << 2) != 0
+    }
+
+    /// A mailbox's frame went on the wire: acknowledged (`ok`), or ended by an error, after
+    /// which the bus retransmits it (`retrying`, NART clear) or gives it up.
+    pub fn complete(&mut self, mailbox: usize, ok: bool, retrying: bool) {
+        if mailbox >= 3 || self.tsr & (TME0 << mailbox) != 0 {
+            return;
+        }
+        let shift = 8 * mailbox as u32;
+        if ok {
+            self.tsr = (self.tsr & !(0xF << shift)) | (0b011 << shift) | (TME0 << mailbox);
+            self.mailboxes[mailbox].tir &= !1;
+        } else if retrying {
+            self.tsr |= 0b1000 << shift;
+        } else {
+            self.tsr = (self.tsr & !(0xF << shift)) | (0b1001 << shift) | (TME0 << mailbox);
+            self.mailboxes[mailbox].tir &= !1;
+        }
+        if self.sending == Some(mailbox) {
+            self.sending = None;
+        }
+    }
+
+    /// The error counters and bus-off state as the bus keeps them for this node: ESR's
+    /// TEC, REC, EWGF, EPVF, BOFF, and the error interrupt's status (MSR.ERRI) when one
+    /// of the flags rises.
+    pub fn set_error_state(&mut self, tec: u16, rec: u16, bus_off: bool) {
+        let old = self.esr & 0b111;
+        let mut esr = (self.esr & 0x70) | (tec.min(255) as u32) << 16 | (rec.min(255) as u32) << 24;
+        if tec >= 96 || rec >= 96 {
+            esr |= 1;
+        }
+        if tec > 127 || rec > 127 {
+            esr |= 2;
+        }
+        if bus_off {
+            esr |= 4;
+        }
+        // ERRI: a flag went up whose interrupt is enabled (EWGIE, EPVIE, BOFIE).
+        if (esr & 0b111) & !old & (self.ier >> 8) & 0b111 != 0 {
+            self.msr |= 1 << 2;
+        }
+        self.esr = esr;
+    }
+
     /// Reads a register.
     pub fn read(&self, offset: u32) -> Result<u32, Unmodelled> {
         Ok(match offset {
@@ -377,8 +442,14 @@ impl Can {
         })
     }
 
-    /// Writes a register.
-    pub fn write(&mut self, offset: u32, value: u32, mask: u32) -> Result<(), Unmodelled> {
+    /// Writes a register at core cycle `now`.
+    pub fn write(
+        &mut self,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        now: u64,
+    ) -> Result<(), Unmodelled> {
         match offset {
             0x000 => {
                 let mcr = merge(self.mcr, value, mask) & 0x0001_80FF;
@@ -460,6 +531,7 @@ impl Can {
                         if m.tir & 1 != 0 {
                             self.requests += 1;
                             m.sequence = self.requests;
+                            m.requested_at = now;
                             self.tsr &= !(TME0 << i);
                         }
                     }
@@ -507,8 +579,8 @@ mod tests {
 
     fn on_bus() -> Can {
         let mut can = Can::default();
-        can.write(0x000, 1, u32::MAX).unwrap(); // INRQ, leave sleep
-        can.write(0x000, 0, u32::MAX).unwrap(); // normal mode
+        can.write(0x000, 1, u32::MAX, 0).unwrap(); // INRQ, leave sleep
+        can.write(0x000, 0, u32::MAX, 0).unwrap(); // normal mode
         assert!(can.on_bus());
         can
     }
@@ -516,18 +588,18 @@ mod tests {
     #[test]
     fn sixteen_bit_list_filters_accept_only_their_ids_with_the_match_index() {
         let mut can = on_bus();
-        can.write(0x200, 0x0E01, u32::MAX).unwrap(); // FINIT, CAN2SB kept at 14
-        can.write(0x204, 0b10, u32::MAX).unwrap(); // bank 1 list mode (bank 0 mask)
-        can.write(0x214, 0, u32::MAX).unwrap();
+        can.write(0x200, 0x0E01, u32::MAX, 0).unwrap(); // FINIT, CAN2SB kept at 14
+        can.write(0x204, 0b10, u32::MAX, 0).unwrap(); // bank 1 list mode (bank 0 mask)
+        can.write(0x214, 0, u32::MAX, 0).unwrap();
         // Bank 0, 16-bit mask: id 0x7FF exact (both halves); bank 1 list: 0x100, 0x101, 0x102, 0x103.
-        can.write(0x240, 0xFFE0_FFE0, u32::MAX).unwrap();
-        can.write(0x244, 0xFFE0_FFE0, u32::MAX).unwrap();
-        can.write(0x248, (0x101 << 5) << 16 | 0x100 << 5, u32::MAX)
+        can.write(0x240, 0xFFE0_FFE0, u32::MAX, 0).unwrap();
+        can.write(0x244, 0xFFE0_FFE0, u32::MAX, 0).unwrap();
+        can.write(0x248, (0x101 << 5) << 16 | 0x100 << 5, u32::MAX, 0)
             .unwrap();
-        can.write(0x24C, (0x103 << 5) << 16 | 0x102 << 5, u32::MAX)
+        can.write(0x24C, (0x103 << 5) << 16 | 0x102 << 5, u32::MAX, 0)
             .unwrap();
-        can.write(0x21C, 0b11, u32::MAX).unwrap();
-        can.write(0x200, 0x0E00, u32::MAX).unwrap();
+        can.write(0x21C, 0b11, u32::MAX, 0).unwrap();
+        can.write(0x200, 0x0E00, u32::MAX, 0).unwrap();
         assert!(can.receive(&frame(0x102)));
         assert!(!can.receive(&frame(0x104)));
         assert!(can.receive(&frame(0x7FF)));
@@ -536,7 +608,7 @@ mod tests {
         // bank 0 has two (0, 1), bank 1 four (2..=5): 0x102 is index 4.
         assert_eq!(can.read(0x1B4).unwrap() >> 8 & 0xFF, 4);
         assert_eq!(can.read(0x1B0).unwrap() >> 21, 0x102);
-        can.write(0x00C, 1 << 5, u32::MAX).unwrap();
+        can.write(0x00C, 1 << 5, u32::MAX, 0).unwrap();
         assert_eq!(can.read(0x1B0).unwrap() >> 21, 0x7FF);
     }
 
@@ -545,12 +617,12 @@ mod tests {
         let mut can = on_bus();
         for (mailbox, id) in [(0u32, 0x300), (1, 0x100), (2, 0x200)] {
             let base = 0x180 + 0x10 * mailbox;
-            can.write(base + 4, 2, u32::MAX).unwrap();
-            can.write(base, id << 21 | 1, u32::MAX).unwrap();
+            can.write(base + 4, 2, u32::MAX, 0).unwrap();
+            can.write(base, id << 21 | 1, u32::MAX, 0).unwrap();
         }
         assert_eq!(can.next_transmit().map(|f| f.id), Some(0x100));
         // Abort mailbox 0 (pending) and mailbox 1 (on the wire: not aborted).
-        can.write(0x008, 0x80 | 0x8000, u32::MAX).unwrap();
+        can.write(0x008, 0x80 | 0x8000, u32::MAX, 0).unwrap();
         let tsr = can.read(0x008).unwrap();
         assert_ne!(tsr & (1 << 26), 0, "mailbox 0 empty after the abort");
         assert_eq!(tsr & 0b10, 0, "aborted: no TXOK");
@@ -562,6 +634,31 @@ mod tests {
             "RQCP1 and TXOK1"
         );
         assert_eq!(can.next_transmit().map(|f| f.id), Some(0x200));
+    }
+
+    #[test]
+    fn a_bus_reports_completions_and_error_counters_into_the_mailboxes_and_esr() {
+        let mut can = on_bus();
+        can.write(0x014, 1 << 15 | 1 << 10, u32::MAX, 0).unwrap(); // ERRIE, BOFIE
+        can.write(0x184, 1, u32::MAX, 0).unwrap();
+        can.write(0x180, 0x123 << 21 | 1, u32::MAX, 500).unwrap();
+        let requests: Vec<_> = can.requests().collect();
+        assert_eq!(requests.len(), 1);
+        assert_eq!(
+            (requests[0].0, requests[0].1.id, requests[0].2),
+            (0, 0x123, 500)
+        );
+        can.complete(0, false, true);
+        assert_ne!(can.read(0x008).unwrap() & 0b1000, 0, "TERR0");
+        assert_eq!(can.requests().count(), 1, "still pending: the bus retries");
+        can.complete(0, true, false);
+        assert_eq!(can.read(0x008).unwrap() & 0b11, 0b11, "RQCP0, TXOK0");
+        assert_eq!(can.requests().count(), 0);
+        can.set_error_state(256, 3, true);
+        let esr = can.read(0x018).unwrap();
+        assert_eq!(esr & 0b111, 0b111, "EWGF, EPVF, BOFF");
+        assert_eq!((esr >> 16 & 0xFF, esr >> 24), (255, 3));
+        assert!(can.irqs()[3], "the SCE line: bus-off with BOFIE and ERRIE");
     }
 
     #[test]

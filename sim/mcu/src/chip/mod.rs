@@ -417,7 +417,7 @@ impl Chip {
             }
             0x4000_6400 => self
                 .clock_gate(APB1, 25, "CAN1")
-                .and_then(|()| self.can1.write(offset, value, mask))?,
+                .and_then(|()| self.can1.write(offset, value, mask, now))?,
             0x4000_7000 => self
                 .clock_gate(APB1, 28, "PWR")
                 .and_then(|()| self.rcc.pwr_write(offset, value, mask))?,

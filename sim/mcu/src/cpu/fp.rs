@@ -301,11 +301,7 @@ fn zero_sum(env: &Env) -> u32 {
 type Unpacked = (Class, bool, f64);
 
 /// FPUnpack of two operands and FPProcessNaNs: the unpacked operands, or the NaN result.
-fn operands(
-    a: u32,
-    b: u32,
-    env: &mut Env,
-) -> Result<(Unpacked, Unpacked), u32> {
+fn operands(a: u32, b: u32, env: &mut Env) -> Result<(Unpacked, Unpacked), u32> {
     let first = unpack(a, env);
     let second = unpack(b, env);
     match process_nans(&[(first.0, a), (second.0, b)], env) {

@@ -1,0 +1,177 @@
+//! Emulated MCUs as nodes of the virtual car's bit-timed bus (`autoplug-virtual-bus`):
+//! each bxCAN's pending mailboxes are its node's transmit queue, an abort takes a frame
+//! back, the bus's deliveries go through the bxCAN's own filters into its FIFOs, and the
+//! node's error counters are the bxCAN's.
+//!
+//! [`run_together`] advances the bus and the MCUs in lockstep. The MCUs run to the next
+//! moment the bus hands something over (the end of the frame on the wire) or at most
+//! [`WINDOW_NS`] ahead; their transmit requests then reach the bus at the simulated time
+//! they were made, in time order across the MCUs, before the bus decides its next
+//! arbitration. A window is shorter than the shortest frame (47 bits, 94 µs at 500
+//! kbit/s), so a frame started inside a window ends in a later one: every delivery and
+//! every transmit confirmation reaches an MCU at the very time the bus completes it.
+
+use autoplug_can::Frame;
+use autoplug_virtual_bus::{
+    AcceptanceFilter, BusOffRecovery, ErrorState, NodeConfig, NodeId, VirtualBus,
+};
+
+use crate::chip::can::CanFrame;
+use crate::mcu::{Mcu, Stop};
+
+/// The longest step the MCUs run ahead of the bus: 40 µs, under the shortest frame.
+pub const WINDOW_NS: u64 = 40_000;
+
+/// An emulated MCU on the bus.
+pub struct BusNode {
+    /// The MCU.
+    pub mcu: Mcu,
+    /// Its node on the bus.
+    pub node: NodeId,
+    /// The frame each mailbox has handed to the bus and not yet seen through.
+    offered: [Option<Frame>; 3],
+}
+
+impl BusNode {
+    /// Attaches `mcu` to `bus` as `name`. The node hears every frame (the bxCAN filters),
+    /// holds the three mailboxes' frames, and leaves bus-off by itself (bxCAN ABOM).
+    pub fn attach(bus: &mut VirtualBus, name: &str, mut mcu: Mcu) -> Self {
+        mcu.standalone_can = false;
+        let node = bus.attach_with(
+            name,
+            AcceptanceFilter::All,
+            NodeConfig {
+                tx_queue_capacity: 3,
+                rx_queue_capacity: 64,
+                report_transmissions: true,
+                bus_off_recovery: BusOffRecovery::Automatic,
+                ..NodeConfig::default()
+            },
+        );
+        BusNode {
+            mcu,
+            node,
+            offered: [None; 3],
+        }
+    }
+
+    /// Transmit requests the bus has not been given yet: (simulated ns of the request,
+    /// mailbox, frame).
+    fn new_requests(&self) -> Result<Vec<(u64, usize, Frame)>, Stop> {
+        let can = &self.mcu.chip.can1;
+        if can.fifo_priority() {
+            return Err(Stop::Unsupported("transmit priority by request order (CAN_MCR.TXFP) on the virtual bus, whose nodes send their lowest identifier first".into()));
+        }
+        let mut requests = Vec::new();
+        for (mailbox, frame, cycle) in can.requests() {
+            if self.offered[mailbox].is_some() {
+                continue;
+            }
+            if frame.extended || frame.remote {
+                return Err(Stop::Unsupported(format!(
+                    "{} frame {:#x}: the AutoPlug bus carries classic data frames with 11-bit identifiers",
+                    if frame.extended { "an extended" } else { "a remote" },
+                    frame.id
+                )));
+            }
+            let len = usize::from(frame.dlc.min(8));
+            let Ok(bus_frame) = Frame::new(frame.id, &frame.data[..len]) else {
+                return Err(Stop::Unsupported(format!(
+                    "frame {:#x} does not fit the bus",
+                    frame.id
+                )));
+            };
+            requests.push((self.mcu.chip.ns_at(cycle), mailbox, bus_frame));
+        }
+        Ok(requests)
+    }
+
+    /// Takes back from the bus the frames of mailboxes the firmware aborted.
+    fn withdraw_aborted(&mut self, bus: &mut VirtualBus) {
+        let pending: Vec<usize> = self
+            .mcu
+            .chip
+            .can1
+            .requests()
+            .map(|(mailbox, _, _)| mailbox)
+            .collect();
+        for mailbox in 0..3 {
+            if let Some(frame) = self.offered[mailbox] {
+                if !pending.contains(&mailbox) {
+                    // On the wire already, the frame goes out anyway; the mailbox stays
+                    // aborted (a simplification: bxCAN would report TXOK).
+                    bus.cancel(self.node, frame);
+                    self.offered[mailbox] = None;
+                }
+            }
+        }
+    }
+
+    /// What the bus did for this node: its frames' outcomes, the frames it received, its
+    /// error counters.
+    fn collect(&mut self, bus: &mut VirtualBus) {
+        let can = &mut self.mcu.chip.can1;
+        while let Some(done) = bus.transmitted(self.node) {
+            if let Some(mailbox) = self.offered.iter().position(|f| *f == Some(done.frame)) {
+                if !done.retrying {
+                    self.offered[mailbox] = None;
+                }
+                can.complete(mailbox, done.ok, done.retrying);
+            }
+        }
+        while let Some(delivered) = bus.recv(self.node) {
+            let frame = delivered.frame;
+            let mut data = [0u8; 8];
+            data[..frame.len()].copy_from_slice(frame.data());
+            can.receive(&CanFrame {
+                id: u32::from(frame.id()),
+                extended: false,
+                remote: false,
+                dlc: frame.len() as u8,
+                data,
+            });
+        }
+        let status = bus.node_status(self.node);
+        can.set_error_state(status.tec, status.rec, status.state == ErrorState::BusOff);
+    }
+}
+
+/// Runs `bus` and the emulated `nodes` together up to `until_ns`. On a stop, the index of
+/// the node that stopped and why.
+pub fn run_together(
+    bus: &mut VirtualBus,
+    nodes: &mut [BusNode],
+    until_ns: u64,
+) -> Result<(), (usize, Stop)> {
+    loop {
+        let now = bus.now_ns();
+        if now >= until_ns {
+            return Ok(());
+        }
+        let window_end = until_ns.min(now + WINDOW_NS);
+        let next = match bus.wire_busy_until_ns() {
+            Some(end) if end > now => window_end.min(end),
+            _ => window_end,
+        };
+        let mut requests = Vec::new();
+        for (i, node) in nodes.iter_mut().enumerate() {
+            node.mcu.run_until(next).map_err(|stop| (i, stop))?;
+            for (at, mailbox, frame) in node.new_requests().map_err(|stop| (i, stop))? {
+                requests.push((at.max(now), i, mailbox, frame));
+            }
+            node.withdraw_aborted(bus);
+        }
+        requests.sort_by_key(|&(at, i, mailbox, _)| (at, i, mailbox));
+        for (at, i, mailbox, frame) in requests {
+            let node = &mut nodes[i];
+            // A mailbox is one frame: the node's queue (three) cannot overflow.
+            if bus.send(node.node, frame, at).is_ok() {
+                node.offered[mailbox] = Some(frame);
+            }
+        }
+        bus.run_until(next);
+        for node in nodes.iter_mut() {
+            node.collect(bus);
+        }
+    }
+}
