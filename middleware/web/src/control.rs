@@ -60,9 +60,13 @@ pub enum Action {
     },
 }
 
-/// What a replay does next.
-#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
-#[serde(tag = "action", rename_all = "snake_case", deny_unknown_fields)]
+/// What a replay does next: `{"action":"play"}`, `"pause"`, `{"action":"speed","speed":X}`,
+/// `{"action":"seek","t":S}`.
+///
+/// Parsed through a plain struct rather than serde's internally tagged enums: those
+/// buffer numbers through `deserialize_any`, which breaks when a crate in the same build
+/// turns on serde_json's `arbitrary_precision` (defmt-decoder does).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ReplayAction {
     /// Go on at the set speed.
     Play,
@@ -78,6 +82,54 @@ pub enum ReplayAction {
         /// Seconds from the start.
         t: f64,
     },
+}
+
+impl<'de> Deserialize<'de> for ReplayAction {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Raw {
+            action: String,
+            speed: Option<f64>,
+            t: Option<f64>,
+        }
+        let raw = Raw::deserialize(deserializer)?;
+        let extra = |field: &'static str| D::Error::unknown_field(field, &[]);
+        match raw.action.as_str() {
+            "play" | "pause" => {
+                if raw.speed.is_some() {
+                    return Err(extra("speed"));
+                }
+                if raw.t.is_some() {
+                    return Err(extra("t"));
+                }
+                Ok(if raw.action == "play" {
+                    ReplayAction::Play
+                } else {
+                    ReplayAction::Pause
+                })
+            }
+            "speed" => {
+                if raw.t.is_some() {
+                    return Err(D::Error::unknown_field("t", &["speed"]));
+                }
+                let speed = raw.speed.ok_or_else(|| D::Error::missing_field("speed"))?;
+                Ok(ReplayAction::Speed { speed })
+            }
+            "seek" => {
+                if raw.speed.is_some() {
+                    return Err(D::Error::unknown_field("speed", &["t"]));
+                }
+                let t = raw.t.ok_or_else(|| D::Error::missing_field("t"))?;
+                Ok(ReplayAction::Seek { t })
+            }
+            other => Err(D::Error::unknown_variant(
+                other,
+                &["play", "pause", "speed", "seek"],
+            )),
+        }
+    }
 }
 
 /// What a person at the wheel holds (the Drive view sends it while it drives) and the
@@ -147,5 +199,39 @@ impl Commands {
     pub fn next(&self) -> Option<Command> {
         // Empty or disconnected: nothing to do either way.
         self.receiver.try_recv().ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ReplayAction;
+
+    fn parse(text: &str) -> Result<ReplayAction, String> {
+        serde_json::from_str(text).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn replay_actions_parse_with_their_numbers_and_refuse_what_does_not_fit() {
+        assert_eq!(parse(r#"{"action":"play"}"#), Ok(ReplayAction::Play));
+        assert_eq!(
+            parse(r#"{"action":"seek","t":2.5}"#),
+            Ok(ReplayAction::Seek { t: 2.5 })
+        );
+        assert_eq!(
+            parse(r#"{"action":"speed","speed":4}"#),
+            Ok(ReplayAction::Speed { speed: 4.0 })
+        );
+        assert!(parse(r#"{"action":"rewind"}"#)
+            .unwrap_err()
+            .contains("unknown variant `rewind`"));
+        assert!(parse(r#"{"action":"seek"}"#)
+            .unwrap_err()
+            .contains("missing field `t`"));
+        assert!(parse(r#"{"action":"pause","t":1}"#)
+            .unwrap_err()
+            .contains("unknown field `t`"));
+        assert!(parse(r#"{"action":"play","volume":1}"#)
+            .unwrap_err()
+            .contains("unknown field `volume`"));
     }
 }

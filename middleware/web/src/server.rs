@@ -360,9 +360,14 @@ async fn stream(
         .on_upgrade(move |socket| serve_stream(socket, slot))
 }
 
-/// What a client may send.
-#[derive(Deserialize)]
-#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+/// What a client may send: `{"type":"ping"}`, `{"type":"auth","token":T}`,
+/// `{"type":"drive", …the held controls…}`, `{"type":"press","button":B}`.
+///
+/// Parsed by its `type` first, then the rest as a plain struct, rather than as a serde
+/// internally tagged enum: those buffer numbers through `deserialize_any`, which breaks
+/// when a crate in the same build turns on serde_json's `arbitrary_precision`
+/// (defmt-decoder does).
+#[derive(Debug)]
 enum ClientMessage {
     /// Answered with `{"type":"pong"}`.
     Ping,
@@ -372,6 +377,51 @@ enum ClientMessage {
     Drive(HeldControls),
     /// A steering-wheel button (after `auth`).
     Press { button: Button },
+}
+
+impl ClientMessage {
+    fn parse(text: &str) -> Result<ClientMessage, serde_json::Error> {
+        use serde::de::Error;
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Empty {}
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Auth {
+            token: String,
+        }
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Press {
+            button: Button,
+        }
+        let mut fields = serde_json::from_str::<serde_json::Map<String, serde_json::Value>>(text)?;
+        let kind = match fields.remove("type") {
+            Some(serde_json::Value::String(kind)) => kind,
+            Some(_) => return Err(serde_json::Error::custom("`type` is not a string")),
+            None => return Err(serde_json::Error::missing_field("type")),
+        };
+        let rest = serde_json::Value::Object(fields);
+        Ok(match kind.as_str() {
+            "ping" => {
+                serde_json::from_value::<Empty>(rest)?;
+                ClientMessage::Ping
+            }
+            "auth" => ClientMessage::Auth {
+                token: serde_json::from_value::<Auth>(rest)?.token,
+            },
+            "drive" => ClientMessage::Drive(serde_json::from_value::<HeldControls>(rest)?),
+            "press" => ClientMessage::Press {
+                button: serde_json::from_value::<Press>(rest)?.button,
+            },
+            other => {
+                return Err(serde_json::Error::unknown_variant(
+                    other,
+                    &["ping", "auth", "drive", "press"],
+                ))
+            }
+        })
+    }
 }
 
 /// A stream's client, as far as driving goes.
@@ -390,7 +440,7 @@ struct Driver {
 impl Driver {
     /// What to answer to a client's message (`None`: nothing).
     fn on_message(&mut self, text: &str, shared: &Shared) -> Option<serde_json::Value> {
-        let message = match serde_json::from_str::<ClientMessage>(text) {
+        let message = match ClientMessage::parse(text) {
             Ok(message) => message,
             Err(e) => {
                 return Some(serde_json::json!({
@@ -594,4 +644,30 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
 
 fn cut(text: &str, max: usize) -> String {
     text.chars().take(max).collect()
+}
+
+#[cfg(test)]
+mod client_message_tests {
+    use super::ClientMessage;
+
+    #[test]
+    fn client_messages_parse_by_type_and_refuse_what_does_not_fit() {
+        assert!(matches!(
+            ClientMessage::parse(r#"{"type":"ping"}"#),
+            Ok(ClientMessage::Ping)
+        ));
+        assert!(
+            matches!(ClientMessage::parse(r#"{"type":"auth","token":"t"}"#), Ok(ClientMessage::Auth { token }) if token == "t")
+        );
+        assert!(ClientMessage::parse(r#"{"type":"ping","extra":1}"#).is_err());
+        assert!(ClientMessage::parse(r#"{"type":"fly"}"#)
+            .unwrap_err()
+            .to_string()
+            .contains("unknown variant `fly`"));
+        assert!(ClientMessage::parse(r#"{"token":"t"}"#)
+            .unwrap_err()
+            .to_string()
+            .contains("missing field `type`"));
+        assert!(ClientMessage::parse("[1]").is_err());
+    }
 }
