@@ -316,7 +316,16 @@ impl Mcu {
         if let Some(frame) = self.chip.can1.next_transmit() {
             let clocks = self.chip.clocks();
             let bit_rate = self.chip.can1.bit_rate(clocks.pclk1).max(1);
-            let bits = 47 + 8 * frame.dlc as u64 + 24;
+            // The exact bit count (stuffing included) for a classic base-format data frame,
+            // as the virtual bus counts it; an extended or remote frame, which the AutoPlug
+            // bus never carries, takes its unstuffed worst case (67 + 8n bits with IFS).
+            let len = usize::from(frame.dlc.min(8));
+            let bits = match autoplug_can::Frame::new(frame.id, &frame.data[..len]) {
+                Ok(f) if !frame.extended && !frame.remote => {
+                    u64::from(autoplug_virtual_bus::frame_bits(&f).total_with_ifs)
+                }
+                _ => 67 + 8 * len as u64 + (54 + 8 * len as u64) / 4,
+            };
             let cycles = (bits * clocks.hclk).div_ceil(bit_rate);
             self.on_wire = Some((frame, now + cycles));
         }
