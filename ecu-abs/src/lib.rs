@@ -142,6 +142,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{AbsMsg, Frame, Node, PedalBrake, TracMsg, VehicleSpeedMsg, WheelSpeedMsg};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_pid::{Pid, PidConfig};

@@ -23,6 +23,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{FanMsg, Frame, Node, TempMsg, TempRefMsg};
 use autoplug_ecu::{Dtcs, EcuLogic, Instant, PeriodicTx};
 use autoplug_pid::{Pid, PidConfig};

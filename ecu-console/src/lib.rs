@@ -22,6 +22,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{AccMsg, EngineMode, Frame, Node, PedalBrake, ShiftMode};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 

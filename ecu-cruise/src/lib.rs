@@ -18,6 +18,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{CruiseAccelMsg, CruiseMode, CruiseModeMsg, Frame, Node, VehicleSpeedMsg};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_pid::{Pid, PidConfig};

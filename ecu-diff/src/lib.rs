@@ -32,6 +32,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{AbsMsg, DiffMsg, Frame, Node, SteeringMsg, VehicleSpeedMsg, YawErrorMsg};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_pid::{Pid, PidConfig};

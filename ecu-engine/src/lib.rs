@@ -27,6 +27,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{AccMsg, EngineMode, EngineMsg, Frame, Node};
 use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 use autoplug_scaling::clamp_finite;

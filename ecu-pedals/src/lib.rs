@@ -35,6 +35,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{
     CanMessage, CruiseAccelMsg, CruiseMode, CruiseModeMsg, Frame, Node, PedalAccel, PedalBrake,
     TracMsg,

@@ -33,6 +33,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{CruiseMode, CruiseModeMsg, Frame, Node, ShiftMsg, ShiftRequest, SteeringMsg};
 use autoplug_ecu::{invalid_data, receive_from, Dtc, Dtcs, EcuLogic, Input, Instant, PeriodicTx};
 

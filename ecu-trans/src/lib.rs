@@ -46,6 +46,8 @@
 #![no_std]
 #![deny(missing_docs)]
 
+pub mod pins;
+
 use autoplug_can::{
     AccMsg, EngineMode, EngineMsg, Frame, Gear, Node, ShiftMode, ShiftMsg, ShiftRequest, TransMsg,
     VehicleSpeedMsg,

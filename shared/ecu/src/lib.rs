@@ -15,6 +15,7 @@
 
 mod dtc;
 mod input;
+pub mod pins;
 mod time;
 mod tx;
 

@@ -1,11 +1,15 @@
 //! The pin maps of the nine boards (`ecu-*/src/bin/*-fw/board.rs`): each board's table
 //! names exactly the pins its code takes, every header position agrees with the
 //! Nucleo-F446RE's connectors, no pin serves two signals, the pins the Nucleo reserves are
-//! left alone, and the README's bench tables are the boards' tables.
+//! left alone, the README's bench tables are the boards' tables, and each table is its ECU
+//! crate's `pins` declaration (which the firmware's scales and the virtual car's wiring
+//! come from), with the F446's ADC and TIM3 channels for those pins.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
 use std::path::{Path, PathBuf};
+
+use autoplug_ecu::pins::{Pull, Signal};
 
 /// Nucleo-F446RE header positions (ST UM1724): MCU pin, Arduino name ("—" for none),
 /// Morpho position.
@@ -195,5 +199,122 @@ fn the_readme_bench_tables_are_the_boards_tables() {
             "README, {heading}: the wiring table differs from ecu-{ecu}/src/bin/{ecu}-fw/board.rs; \
              copy the board's table:\n{block}"
         );
+    }
+}
+
+/// Each ECU's declared signals (its crate's `pins::SIGNALS`).
+fn declared(ecu: &str) -> &'static [Signal] {
+    match ecu {
+        "engine" => ecu_engine::pins::SIGNALS,
+        "pedals" => ecu_pedals::pins::SIGNALS,
+        "steering" => ecu_steering::pins::SIGNALS,
+        "trans" => ecu_trans::pins::SIGNALS,
+        "cabin" => ecu_cabin::pins::SIGNALS,
+        "console" => ecu_console::pins::SIGNALS,
+        "diff" => ecu_diff::pins::SIGNALS,
+        "cruise" => ecu_cruise::pins::SIGNALS,
+        "abs" => ecu_abs::pins::SIGNALS,
+        other => panic!("no ECU {other}"),
+    }
+}
+
+/// ADC1's input channel of an F446 pin (RM0390 / DS10693 pin table), for the Nucleo's
+/// analog header pins.
+fn adc1_channel(pin: &str) -> Option<u8> {
+    Some(match pin {
+        "PA0" => 0,
+        "PA1" => 1,
+        "PA4" => 4,
+        "PB0" => 8,
+        "PC1" => 11,
+        "PC0" => 10,
+        _ => return None,
+    })
+}
+
+/// TIM3's channel on an F446 pin (alternate function 2, DS10693 table 11).
+fn tim3_channel(pin: &str) -> Option<u8> {
+    Some(match pin {
+        "PA6" | "PB4" | "PC6" => 1,
+        "PA7" | "PB5" | "PC7" => 2,
+        "PB0" | "PC8" => 3,
+        "PB1" | "PC9" => 4,
+        _ => return None,
+    })
+}
+
+#[test]
+fn every_board_table_is_its_crates_pin_declaration() {
+    for ecu in ECUS {
+        let source = board_source(ecu);
+        let mut documented = BTreeMap::new();
+        for row in table_rows(&source) {
+            let cells = cells(&row);
+            if matches!(cells[2], "PB8" | "PB9") {
+                continue; // CAN1, the same on every board (checked above)
+            }
+            documented.insert(
+                cells[2].to_string(),
+                (cells[3].to_string(), cells[4] == "in"),
+            );
+        }
+        let signals = declared(ecu);
+        let pins: BTreeSet<String> = signals.iter().map(|s| s.pin().to_string()).collect();
+        assert_eq!(
+            pins,
+            documented.keys().cloned().collect(),
+            "{ecu}: the table and ecu-{ecu}/src/pins.rs name different pins"
+        );
+        assert_eq!(pins.len(), signals.len(), "{ecu}: a pin declared twice");
+        for signal in signals {
+            let pin = signal.pin().to_string();
+            let (text, input) = &documented[&pin];
+            assert_eq!(*input, signal.is_input(), "{ecu}: {pin}'s direction");
+            match signal {
+                Signal::Analog(a) => {
+                    assert_eq!(
+                        adc1_channel(&pin),
+                        Some(a.adc_channel),
+                        "{ecu}: {pin}'s ADC channel"
+                    );
+                    assert!(
+                        text.contains(&format!("(ADC1_IN{})", a.adc_channel)),
+                        "{ecu}: {pin}'s row names another channel: {text}"
+                    );
+                }
+                Signal::Pwm(p) => {
+                    assert_eq!(
+                        tim3_channel(&pin),
+                        Some(p.tim3_channel),
+                        "{ecu}: {pin}'s TIM3 channel"
+                    );
+                    assert!(
+                        text.contains(&format!("(TIM3_CH{} PWM)", p.tim3_channel)),
+                        "{ecu}: {pin}'s row names another channel: {text}"
+                    );
+                }
+                Signal::Input(d) => {
+                    let pull = match d.pull {
+                        Pull::Up => "Pull::Up",
+                        Pull::Down => "Pull::Down",
+                    };
+                    assert!(
+                        source.contains(&format!("Input::new(p.{pin}, {pull})")),
+                        "{ecu}: the code does not take {pin} as an input with {pull}"
+                    );
+                }
+                Signal::Output(_) => assert!(
+                    source.contains(&format!("Output::new(p.{pin}, Level::Low")),
+                    "{ecu}: the code does not take {pin} as an output, low at power-up"
+                ),
+            }
+        }
+        // The scales come from the declaration: a board states none of its own.
+        for literal in ["LinearInput::new(", "LinearOutput::new("] {
+            assert!(
+                !source.contains(literal),
+                "{ecu}: board.rs builds a scale ({literal}...); take it from ecu-{ecu}/src/pins.rs"
+            );
+        }
     }
 }

@@ -1,5 +1,5 @@
-//! The ABS ECU's board: a Nucleo-F446RE wired to the bench. The one place that names its
-//! pins.
+//! The ABS ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_abs::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|
@@ -23,7 +23,7 @@ use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_abs::{AbsEcu, Actuators, Sensors};
+use ecu_abs::{pins, AbsEcu, Actuators, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
@@ -33,9 +33,9 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// A wheel speed: 0–3.3 V is 0–255 km/h (VehicleSpeedMsg's range).
-const WHEEL_SPEED: LinearInput = LinearInput::new(0.0, 255.0);
+const WHEEL_SPEED: LinearInput = pins::WHEEL_SPEEDS[0].scale;
 /// A brake: 0–100 % duty is 0–100 % of full brake torque.
-const BRAKE: LinearOutput = LinearOutput::new(0.0, 100.0);
+const BRAKE: LinearOutput = pins::BRAKES[0].scale;
 
 /// The ABS ECU's wheel-speed inputs and brake outputs, FL, FR, RL, RR.
 pub struct Board {

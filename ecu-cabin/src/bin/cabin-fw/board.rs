@@ -1,5 +1,5 @@
-//! The cabin comfort ECU's board: a Nucleo-F446RE wired to the bench. The one place that
-//! names its pins.
+//! The cabin comfort ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_cabin::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|
@@ -18,7 +18,7 @@ use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_cabin::{Actuators, CabinEcu, Sensors, SET_TEMP_MAX_F, SET_TEMP_MIN_F};
+use ecu_cabin::{pins, Actuators, CabinEcu, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
@@ -28,11 +28,11 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// The cabin temperature sensor: 0–3.3 V is −50–170 °F.
-const CABIN_TEMP: LinearInput = LinearInput::new(-50.0, 170.0);
+const CABIN_TEMP: LinearInput = pins::CABIN_TEMP.scale;
 /// The set-temperature knob: end to end is the logic's set range.
-const SET_TEMP: LinearInput = LinearInput::new(SET_TEMP_MIN_F, SET_TEMP_MAX_F);
+const SET_TEMP: LinearInput = pins::SET_TEMP.scale;
 /// The fan: 0–100 % duty is 0–100 % power.
-const FAN: LinearOutput = LinearOutput::new(0.0, 100.0);
+const FAN: LinearOutput = pins::FAN.scale;
 
 /// The cabin ECU's sensors and fan.
 pub struct Board {

@@ -1,5 +1,5 @@
-//! The console ECU's board: a Nucleo-F446RE wired to the bench. The one place that names
-//! its pins.
+//! The console ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_console::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|

@@ -1,5 +1,5 @@
-//! The cruise control ECU's board: a Nucleo-F446RE wired to the bench. The one place that
-//! names its pins.
+//! The cruise control ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_cruise::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|
@@ -15,14 +15,14 @@ use autoplug_firmware::analog::LinearInput;
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin};
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_cruise::{CruiseEcu, Sensors, Status};
+use ecu_cruise::{pins, CruiseEcu, Sensors, Status};
 use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::peripherals::ADC1;
 
 /// The speed signal: 0–3.3 V is 0–255 km/h (VehicleSpeedMsg's range).
-const VEHICLE_SPEED: LinearInput = LinearInput::new(0.0, 255.0);
+const VEHICLE_SPEED: LinearInput = pins::VEHICLE_SPEED.scale;
 
 /// The cruise ECU's sensor and lamp.
 pub struct Board {

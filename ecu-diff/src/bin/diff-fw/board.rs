@@ -1,5 +1,5 @@
-//! The differential ECU's board: a Nucleo-F446RE wired to the bench. The one place that
-//! names its pins.
+//! The differential ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_diff::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|
@@ -14,7 +14,7 @@ use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_diff::{Actuators, DiffEcu, Sensors, SPLIT_LIMIT_NM};
+use ecu_diff::{pins, Actuators, DiffEcu, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
@@ -24,9 +24,9 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// The yaw-rate error signal: 0–3.3 V is −2.5–+2.5 rad/s (YawErrorMsg's range).
-const YAW_RATE_ERROR: LinearInput = LinearInput::new(-2.5, 2.5);
+const YAW_RATE_ERROR: LinearInput = pins::YAW_RATE_ERROR.scale;
 /// The torque split: 0–100 % duty spans the logic's split limits.
-const TORQUE_SPLIT: LinearOutput = LinearOutput::new(-SPLIT_LIMIT_NM, SPLIT_LIMIT_NM);
+const TORQUE_SPLIT: LinearOutput = pins::TORQUE_SPLIT.scale;
 
 /// The differential ECU's sensor and actuator.
 pub struct Board {

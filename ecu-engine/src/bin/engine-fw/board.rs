@@ -1,5 +1,5 @@
-//! The engine ECU's board: a Nucleo-F446RE wired to the bench. The one place that names
-//! its pins.
+//! The engine ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_engine::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|
@@ -15,19 +15,17 @@ use autoplug_firmware::analog::LinearInput;
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin};
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_engine::{
-    EngineEcu, Sensors, Status, ENGINE_RPM_MAX, FUEL_FLOW_MAX_L_PER_H, FUEL_LEVEL_MAX_L,
-};
+use ecu_engine::{pins, EngineEcu, Sensors, Status};
 use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::peripherals::ADC1;
 
 /// Engine speed: 0–3.3 V is 0–9000 rpm.
-const ENGINE_SPEED: LinearInput = LinearInput::new(0.0, ENGINE_RPM_MAX);
+const ENGINE_SPEED: LinearInput = pins::ENGINE_SPEED.scale;
 /// Fuel level: 0–3.3 V is an empty to a full tank.
-const FUEL_LEVEL: LinearInput = LinearInput::new(0.0, FUEL_LEVEL_MAX_L);
+const FUEL_LEVEL: LinearInput = pins::FUEL_LEVEL.scale;
 /// Fuel flow: 0–3.3 V is no flow to the input's maximum (a flow meter's analog output).
-const FUEL_FLOW: LinearInput = LinearInput::new(0.0, FUEL_FLOW_MAX_L_PER_H);
+const FUEL_FLOW: LinearInput = pins::FUEL_FLOW.scale;
 
 /// The engine ECU's sensors.
 pub struct Board {

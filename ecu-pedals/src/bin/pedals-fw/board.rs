@@ -1,5 +1,5 @@
-//! The pedals ECU's board: a Nucleo-F446RE wired to the bench. The one place that names
-//! its pins.
+//! The pedals ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_pedals::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|
@@ -17,7 +17,7 @@ use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_pedals::{Actuators, PedalsEcu, Sensors, PEDAL_FULL};
+use ecu_pedals::{pins, Actuators, PedalsEcu, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
@@ -27,9 +27,9 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// A pedal: 0–3.3 V is 0–100 pedal units.
-const PEDAL: LinearInput = LinearInput::new(0.0, PEDAL_FULL);
+const PEDAL: LinearInput = pins::ACCELERATOR_PEDAL.scale;
 /// A pedal command: 0–100 % duty is 0–100 pedal units.
-const COMMAND: LinearOutput = LinearOutput::new(0.0, PEDAL_FULL);
+const COMMAND: LinearOutput = pins::ACCELERATOR_CMD.scale;
 
 /// The pedals ECU's sensors and actuators.
 pub struct Board {

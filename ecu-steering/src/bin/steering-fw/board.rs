@@ -1,5 +1,5 @@
-//! The steering ECU's board: a Nucleo-F446RE wired to the bench. The one place that names
-//! its pins.
+//! The steering ECU's board: a Nucleo-F446RE wired to the bench, its pins and scales (declared in
+//! `ecu_steering::pins`, which the virtual car drives too) taken from the HAL.
 //!
 //! | Arduino | Morpho | MCU pin | signal | direction | electrical range |
 //! |---|---|---|---|---|---|
@@ -23,7 +23,7 @@ use autoplug_firmware::analog::{LinearInput, LinearOutput};
 use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
-use ecu_steering::{Actuators, Sensors, SteeringEcu, STEERING_LIMIT_DEG};
+use ecu_steering::{pins, Actuators, Sensors, SteeringEcu};
 use embassy_stm32::adc::{Adc, AdcChannel};
 use embassy_stm32::can::Can;
 use embassy_stm32::gpio::{Input, OutputType, Pull};
@@ -33,9 +33,9 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// The wheel angle: 0–3.3 V is the full lock-to-lock range, positive (left) at 3.3 V.
-const WHEEL_ANGLE: LinearInput = LinearInput::new(-STEERING_LIMIT_DEG, STEERING_LIMIT_DEG);
+const WHEEL_ANGLE: LinearInput = pins::WHEEL_ANGLE.scale;
 /// The steering command: 0–100 % duty is the same range.
-const STEERING_CMD: LinearOutput = LinearOutput::new(-STEERING_LIMIT_DEG, STEERING_LIMIT_DEG);
+const STEERING_CMD: LinearOutput = pins::STEERING_CMD.scale;
 
 /// The steering ECU's wheel, buttons and steering command.
 pub struct Board {
