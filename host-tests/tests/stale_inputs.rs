@@ -136,13 +136,13 @@ fn safe_states_on_the_car() {
     while car.time_us() < SILENCE_AT_US {
         car.tick();
     }
-    assert!(car.cruise_status().engaged);
+    assert!(car.cruise_status().expect("host logic").engaged);
     car.set_silenced(Node::Steering, true);
     while car.time_us() < SILENCE_AT_US + 70_000 {
         car.tick();
     }
     assert!(
-        !car.cruise_status().engaged,
+        !car.cruise_status().expect("host logic").engaged,
         "cruise still engaged after CruiseModeMsg stopped"
     );
 
@@ -151,17 +151,21 @@ fn safe_states_on_the_car() {
     while car.time_us() < SILENCE_AT_US {
         car.tick();
     }
-    let gear = car.trans_status().engaged;
+    let gear = car.trans_status().expect("host logic").engaged;
     car.set_silenced(Node::Cruise, true);
     while car.time_us() < SILENCE_AT_US + 200_000 {
         car.tick();
     }
     assert_eq!(
-        car.abs_status().availability,
+        car.abs_status().expect("host logic").availability,
         ecu_abs::Availability::NoSpeedReference
     );
-    assert_eq!(car.trans_status().engaged, gear, "gear held");
-    assert_eq!(car.diff_status().torque_split_nm, 0.0);
+    assert_eq!(
+        car.trans_status().expect("host logic").engaged,
+        gear,
+        "gear held"
+    );
+    assert_eq!(car.diff_status().expect("host logic").torque_split_nm, 0.0);
 
     // Pedals ECU silent: brake lights on (fail-safe).
     let mut car = VirtualCar::new(&cruising());

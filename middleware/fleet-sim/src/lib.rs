@@ -479,7 +479,7 @@ impl SimVehicle {
             self.run_for(SLICE_US / 10, |car| {
                 let t = car.time_us();
                 let speed = f64::from(car.vehicle().speed_kmh());
-                if car.cruise_status().engaged {
+                if car.cruise_status().is_some_and(|c| c.engaged) {
                     engaged_us += t - last_t;
                 }
                 last_t = t;

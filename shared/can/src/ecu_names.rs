@@ -53,6 +53,16 @@ pub fn ecu_name(node: Node) -> &'static str {
         .map_or_else(|| node.name(), |(name, _)| *name)
 }
 
+/// The name of an ECU's crate and firmware (`ecu-trans`, `trans-fw`): the short name, or
+/// its alias where the crate took one.
+pub fn firmware_name(node: Node) -> &'static str {
+    match node {
+        Node::Transmission => "trans",
+        Node::Differential => "diff",
+        other => ecu_name(other),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

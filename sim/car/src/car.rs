@@ -8,9 +8,10 @@
 
 use crate::diag::VirtualDiag;
 use crate::driver::{DriverControls, ManualDriver, Timeline};
+use crate::firmware::{self, Bench, FirmwareChoice, FirmwareLogLine, FirmwareStop, Wiring};
 use crate::scenario::FRICTION_RANGE;
 use crate::scenario::{Activation, Event, GearName, Scenario, Software};
-use autoplug_can::{Frame, Gear as CanGear, Node};
+use autoplug_can::{AbsMsg, CanMessage, CruiseAccelMsg, Frame, Gear as CanGear, Node, TracMsg};
 use autoplug_ecu::{Dtcs, EcuLogic, Instant, Variant};
 use autoplug_image::SoftwareVariant;
 use autoplug_scaling::units::{celsius_to_fahrenheit, fahrenheit_to_celsius};
@@ -38,8 +39,12 @@ pub struct LoggedFrame {
     pub sender: &'static str,
 }
 
-/// One ECU on the bus: its logic, and its diagnostic half (UDS, flash, bootloader).
+/// One ECU on the bus: its logic, and its diagnostic half (UDS, flash, bootloader); or,
+/// when it runs as firmware on an emulated MCU, the outputs its board's pins show.
 struct Slot<E: EcuLogic> {
+    /// Runs as its firmware (the logic and diagnostic half here are then unused: the MCU
+    /// has its own, and its bus node is the MCU's).
+    emulated: bool,
     ecu: E,
     diag: VirtualDiag,
     /// Builds the logic for the software variant the installed image names.
@@ -54,22 +59,27 @@ struct Slot<E: EcuLogic> {
     resets: u32,
 }
 
-impl<E: EcuLogic> Slot<E>
+impl<E: Wiring> Slot<E>
 where
     E::Actuators: Copy,
 {
+    /// The ECU on host logic, attached to the bus; or, with `emulated_node`, the slot of
+    /// an ECU whose MCU is attached as that node.
     fn new(
         make: fn(SoftwareVariant, Instant) -> E,
         variant: SoftwareVariant,
         scenario: &Scenario,
         bus: &mut VirtualBus,
         phase_us: u64,
+        emulated_node: Option<NodeId>,
     ) -> Self {
-        let mut ids = E::NODE.received_ids().to_vec();
-        ids.extend(VirtualDiag::received_ids(E::NODE));
-        ids.sort_unstable();
-        ids.dedup();
-        let node = bus.attach(E::NODE.name(), AcceptanceFilter::ids(&ids));
+        let node = emulated_node.unwrap_or_else(|| {
+            let mut ids = E::NODE.received_ids().to_vec();
+            ids.extend(VirtualDiag::received_ids(E::NODE));
+            ids.sort_unstable();
+            ids.dedup();
+            bus.attach(E::NODE.name(), AcceptanceFilter::ids(&ids))
+        });
         let diag = VirtualDiag::new(
             E::NODE,
             variant,
@@ -79,6 +89,7 @@ where
         );
         let ecu = make(diag.installed().variant, Instant::ZERO);
         Self {
+            emulated: emulated_node.is_some(),
             ecu,
             diag,
             make,
@@ -93,6 +104,9 @@ where
     }
 
     fn deliver(&mut self, bus: &mut VirtualBus) {
+        if self.emulated {
+            return; // through its bxCAN, as the bus runs
+        }
         while let Some(delivered) = bus.recv(self.node) {
             let t_us = delivered.t_ns / 1000;
             // A stalled core (flash busy) loses what its receive FIFO cannot hold.
@@ -110,7 +124,19 @@ where
         }
     }
 
-    fn step_if_due(&mut self, t_us: u64, sensors: impl FnOnce() -> E::Sensors) {
+    fn step_if_due(
+        &mut self,
+        t_us: u64,
+        sensors: impl FnOnce() -> E::Sensors,
+        firmware: &mut firmware::Firmware,
+    ) {
+        if self.emulated {
+            // The board's inputs follow the model; the firmware samples them when it will.
+            if let Some(chip) = firmware.chip(E::NODE) {
+                E::drive(&sensors(), &mut Bench::new(chip));
+            }
+            return;
+        }
         // A stalled core runs no step; the ticker catches up afterwards, one step per tick.
         // A step the logic asks for at once (a frame it got) restarts the period from now,
         // as the firmware's loop resets its ticker.
@@ -128,8 +154,17 @@ where
         }
     }
 
+    /// An emulated ECU's outputs, as its pins show them now (at rest once its MCU stopped).
+    fn read_pins(&mut self, firmware: &mut firmware::Firmware) {
+        if self.emulated {
+            self.outputs = firmware
+                .chip(E::NODE)
+                .and_then(|chip| E::read(&Bench::new(chip)));
+        }
+    }
+
     fn transmit(&mut self, bus: &mut VirtualBus, t_us: u64) {
-        if self.diag.stalled(t_us) {
+        if self.emulated || self.diag.stalled(t_us) {
             return;
         }
         let now = Instant::from_micros(t_us);
@@ -317,13 +352,69 @@ pub struct VirtualCar {
     /// A person driving instead of the timeline, once one took the wheel.
     manual: Option<ManualDriver>,
     controls: DriverControls,
+    /// The bus's time (the emulated MCUs' too), µs: the scenario's time plus `start_us`.
     t_us: u64,
+    /// When the scenario began on the bus's clock: after the warm-up of a car with
+    /// emulated ECUs (0 for a car on host logic).
+    start_us: u64,
     log: Vec<LoggedFrame>,
     node_names: Vec<&'static str>,
     /// Frames the external node (a tester in the process) received, when captured.
     external_rx: Option<Vec<Frame>>,
     /// Every moment the brake pedal went down, to the tick.
     brake_presses: Vec<BrakePress>,
+    /// The ECUs that run as firmware on emulated MCUs.
+    firmware: firmware::Firmware,
+    /// What the bus last said of the emulated ECUs' internal state (what their pins do
+    /// not show), for the trace.
+    bus_view: BusView,
+}
+
+/// The last cruise command, ABS message and traction cut seen on the bus.
+#[derive(Clone, Copy, Debug, Default)]
+struct BusView {
+    cruise_accel: f32,
+    abs: AbsMsg,
+    traction_cut: f32,
+}
+
+impl BusView {
+    fn see(&mut self, frame: &Frame) {
+        // A malformed frame leaves the last good value.
+        match frame.id() {
+            CruiseAccelMsg::ID => {
+                if let Ok(m) = CruiseAccelMsg::decode_data(frame.data()) {
+                    self.cruise_accel = m.cruise_accel;
+                }
+            }
+            AbsMsg::ID => {
+                let _ = self.abs.update_from_data(frame.data());
+            }
+            TracMsg::ID => {
+                if let Ok(m) = TracMsg::decode_data(frame.data()) {
+                    self.traction_cut = m.traction_cut;
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+/// Attaches `node`'s board to the bus when it runs as firmware.
+fn emulate(
+    firmware: &mut firmware::Firmware,
+    choice: Option<&FirmwareChoice>,
+    node: Node,
+    bus: &mut VirtualBus,
+    seed: u64,
+) -> Result<Option<NodeId>, String> {
+    match choice {
+        Some(choice) if choice.runs(node) => {
+            let (mcu, logs) = firmware::load(node, &choice.dir, seed)?;
+            Ok(Some(firmware.attach(bus, node, mcu, logs)))
+        }
+        _ => Ok(None),
+    }
 }
 
 /// The car at the tick the driver pressed the brake pedal (from released): where a stop
@@ -407,12 +498,47 @@ fn environment_of(scenario: &Scenario) -> Environment {
     }
 }
 
+/// How long the ignition is on before the scenario begins when ECUs run as firmware: the
+/// bootloader (about 40 ms on a board that has run before, reading its A/B record at the
+/// reset clock of 16 MHz), the application's start (CAN1 on the bus about 25 ms later)
+/// and the first steps of the 10 and 20 ms control loops. The car is held meanwhile, so
+/// the longer this is, the longer a command (a gear) waits for a car that does not move.
+pub const WARM_UP_US: u64 = 100_000;
+
 /// Phase of each ECU's control step, µs: spread over the first 5 ms.
 const PHASES_US: [u64; 9] = [0, 600, 1200, 1800, 2400, 3000, 3600, 4200, 4800];
 
 impl VirtualCar {
-    /// The car at the start of a scenario.
+    /// The car at the start of a scenario, every ECU on host logic.
     pub fn new(scenario: &Scenario) -> Self {
+        match Self::build(scenario, None) {
+            Ok(car) => car,
+            // Only loading firmware can fail.
+            Err(e) => unreachable!("{e}"),
+        }
+    }
+
+    /// The car at the start of a scenario, the chosen ECUs running as their firmware on
+    /// emulated STM32F446s. Fails, saying why, when an image cannot be loaded.
+    pub fn with_firmware(scenario: &Scenario, choice: &FirmwareChoice) -> Result<Self, String> {
+        for (node, software) in [
+            (Node::Cruise, scenario.ecus.cruise),
+            (Node::ABS, scenario.ecus.abs),
+        ] {
+            if choice.runs(node) && software == Software::Faulty {
+                return Err(format!(
+                    "{}: the scenario runs the faulty {} software, and an emulated ECU runs the image it is given: run it on host logic, or flash the faulty build over UDS",
+                    scenario.name,
+                    autoplug_can::ecu_name(node)
+                ));
+            }
+        }
+        let mut car = Self::build(scenario, Some(choice))?;
+        car.warm_up(WARM_UP_US);
+        Ok(car)
+    }
+
+    fn build(scenario: &Scenario, choice: Option<&FirmwareChoice>) -> Result<Self, String> {
         let environment = environment_of(scenario);
         let initial = InitialState {
             speed_kmh: scenario.initial.speed_kmh,
@@ -435,28 +561,38 @@ impl VirtualCar {
             Software::Faulty => SoftwareVariant::Faulty,
         };
         let standard = SoftwareVariant::Standard;
+        let mut fw = firmware::Firmware::new();
+        let seed = scenario.seed;
+        let n = emulate(&mut fw, choice, Node::Pedals, &mut bus, seed)?;
+        let pedals = Slot::new(make_pedals, standard, scenario, &mut bus, PHASES_US[0], n);
+        let n = emulate(&mut fw, choice, Node::Steering, &mut bus, seed)?;
+        let steering = Slot::new(make_steering, standard, scenario, &mut bus, PHASES_US[1], n);
+        let n = emulate(&mut fw, choice, Node::Console, &mut bus, seed)?;
+        let console = Slot::new(make_console, standard, scenario, &mut bus, PHASES_US[2], n);
+        let n = emulate(&mut fw, choice, Node::Engine, &mut bus, seed)?;
+        let engine = Slot::new(make_engine, standard, scenario, &mut bus, PHASES_US[3], n);
+        let n = emulate(&mut fw, choice, Node::Transmission, &mut bus, seed)?;
+        let trans = Slot::new(make_trans, standard, scenario, &mut bus, PHASES_US[4], n);
+        let n = emulate(&mut fw, choice, Node::Cabin, &mut bus, seed)?;
+        let cabin = Slot::new(make_cabin, standard, scenario, &mut bus, PHASES_US[5], n);
+        let n = emulate(&mut fw, choice, Node::Differential, &mut bus, seed)?;
+        let diff = Slot::new(make_diff, standard, scenario, &mut bus, PHASES_US[6], n);
+        let n = emulate(&mut fw, choice, Node::Cruise, &mut bus, seed)?;
+        let cruise_sw = software(scenario.ecus.cruise);
+        let cruise = Slot::new(make_cruise, cruise_sw, scenario, &mut bus, PHASES_US[7], n);
+        let n = emulate(&mut fw, choice, Node::ABS, &mut bus, seed)?;
+        let abs_sw = software(scenario.ecus.abs);
+        let abs = Slot::new(make_abs, abs_sw, scenario, &mut bus, PHASES_US[8], n);
         let ecus = Ecus {
-            pedals: Slot::new(make_pedals, standard, scenario, &mut bus, PHASES_US[0]),
-            steering: Slot::new(make_steering, standard, scenario, &mut bus, PHASES_US[1]),
-            console: Slot::new(make_console, standard, scenario, &mut bus, PHASES_US[2]),
-            engine: Slot::new(make_engine, standard, scenario, &mut bus, PHASES_US[3]),
-            trans: Slot::new(make_trans, standard, scenario, &mut bus, PHASES_US[4]),
-            cabin: Slot::new(make_cabin, standard, scenario, &mut bus, PHASES_US[5]),
-            diff: Slot::new(make_diff, standard, scenario, &mut bus, PHASES_US[6]),
-            cruise: Slot::new(
-                make_cruise,
-                software(scenario.ecus.cruise),
-                scenario,
-                &mut bus,
-                PHASES_US[7],
-            ),
-            abs: Slot::new(
-                make_abs,
-                software(scenario.ecus.abs),
-                scenario,
-                &mut bus,
-                PHASES_US[8],
-            ),
+            pedals,
+            steering,
+            console,
+            engine,
+            trans,
+            cabin,
+            diff,
+            cruise,
+            abs,
         };
         // The gateway listens to everything (and acknowledges), like the middleware on
         // the bench; tools attached over socketcand send through this node too.
@@ -474,10 +610,13 @@ impl VirtualCar {
             timeline,
             manual: None,
             t_us: 0,
+            start_us: 0,
             log: Vec::with_capacity(1 << 16),
             node_names,
             external_rx: None,
             brake_presses: Vec::new(),
+            firmware: fw,
+            bus_view: BusView::default(),
         };
         // Road and fault changes at t = 0 take effect from the first tick, like any other.
         let mut at_start = Vec::new();
@@ -487,7 +626,7 @@ impl VirtualCar {
         for event in at_start {
             car.apply_event(&event);
         }
-        car
+        Ok(car)
     }
 
     /// The car the virtual car simulates: the Lancer Evolution VI of the 2011 report.
@@ -507,9 +646,9 @@ impl VirtualCar {
         std::mem::take(&mut self.brake_presses)
     }
 
-    /// Simulated time, µs.
+    /// Simulated time since the scenario began, µs.
     pub fn time_us(&self) -> u64 {
-        self.t_us
+        self.t_us.saturating_sub(self.start_us)
     }
 
     /// The scenario being run.
@@ -589,40 +728,87 @@ impl VirtualCar {
         std::mem::swap(&mut self.log, frames);
     }
 
-    /// The cruise ECU's last decision.
-    pub fn cruise_status(&self) -> ecu_cruise::Status {
-        self.ecus.cruise.ecu.status()
+    /// The cruise ECU's last decision (host logic only: an emulated ECU's state is in its
+    /// MCU, and reaches the world through its pins, the bus and UDS).
+    pub fn cruise_status(&self) -> Option<ecu_cruise::Status> {
+        let slot = &self.ecus.cruise;
+        (!slot.emulated).then(|| slot.ecu.status())
     }
 
-    /// The ABS ECU's last decision.
-    pub fn abs_status(&self) -> ecu_abs::Status {
-        self.ecus.abs.ecu.status()
+    /// The ABS ECU's last decision (host logic only).
+    pub fn abs_status(&self) -> Option<ecu_abs::Status> {
+        let slot = &self.ecus.abs;
+        (!slot.emulated).then(|| slot.ecu.status())
     }
 
-    /// The transmission ECU's state.
-    pub fn trans_status(&self) -> ecu_trans::Status {
-        self.ecus.trans.ecu.status()
+    /// The transmission ECU's state (host logic only).
+    pub fn trans_status(&self) -> Option<ecu_trans::Status> {
+        let slot = &self.ecus.trans;
+        (!slot.emulated).then(|| slot.ecu.status())
     }
 
-    /// The differential ECU's state.
-    pub fn diff_status(&self) -> ecu_diff::Status {
-        self.ecus.diff.ecu.status()
+    /// The differential ECU's state (host logic only).
+    pub fn diff_status(&self) -> Option<ecu_diff::Status> {
+        let slot = &self.ecus.diff;
+        (!slot.emulated).then(|| slot.ecu.status())
     }
 
-    /// Every ECU's DTCs, by node.
-    pub fn dtcs(&self) -> [(Node, &Dtcs); 9] {
+    /// The DTCs of the ECUs on host logic, by node (an emulated ECU keeps its own, read
+    /// over UDS).
+    pub fn dtcs(&self) -> Vec<(Node, &Dtcs)> {
         let e = &self.ecus;
         [
-            (Node::Engine, e.engine.ecu.dtcs()),
-            (Node::Pedals, e.pedals.ecu.dtcs()),
-            (Node::Steering, e.steering.ecu.dtcs()),
-            (Node::Transmission, e.trans.ecu.dtcs()),
-            (Node::Cabin, e.cabin.ecu.dtcs()),
-            (Node::Console, e.console.ecu.dtcs()),
-            (Node::Differential, e.diff.ecu.dtcs()),
-            (Node::Cruise, e.cruise.ecu.dtcs()),
-            (Node::ABS, e.abs.ecu.dtcs()),
+            (Node::Engine, e.engine.emulated, e.engine.ecu.dtcs()),
+            (Node::Pedals, e.pedals.emulated, e.pedals.ecu.dtcs()),
+            (Node::Steering, e.steering.emulated, e.steering.ecu.dtcs()),
+            (Node::Transmission, e.trans.emulated, e.trans.ecu.dtcs()),
+            (Node::Cabin, e.cabin.emulated, e.cabin.ecu.dtcs()),
+            (Node::Console, e.console.emulated, e.console.ecu.dtcs()),
+            (Node::Differential, e.diff.emulated, e.diff.ecu.dtcs()),
+            (Node::Cruise, e.cruise.emulated, e.cruise.ecu.dtcs()),
+            (Node::ABS, e.abs.emulated, e.abs.ecu.dtcs()),
         ]
+        .into_iter()
+        .filter(|(_, emulated, _)| !emulated)
+        .map(|(node, _, dtcs)| (node, dtcs))
+        .collect()
+    }
+
+    /// Whether `node` runs as its firmware on an emulated MCU.
+    pub fn emulated(&self, node: Node) -> bool {
+        let e = &self.ecus;
+        match node {
+            Node::Pedals => e.pedals.emulated,
+            Node::Steering => e.steering.emulated,
+            Node::Console => e.console.emulated,
+            Node::Engine => e.engine.emulated,
+            Node::Transmission => e.trans.emulated,
+            Node::Cabin => e.cabin.emulated,
+            Node::Differential => e.diff.emulated,
+            Node::Cruise => e.cruise.emulated,
+            Node::ABS => e.abs.emulated,
+            Node::Gateway => false,
+        }
+    }
+
+    /// The emulated ECUs' defmt log lines since the last call.
+    pub fn take_firmware_log(&mut self) -> Vec<FirmwareLogLine> {
+        self.firmware.take_log()
+    }
+
+    /// Firmware log lines dropped because nobody took them (the car keeps 100,000).
+    pub fn firmware_log_dropped(&self) -> u64 {
+        self.firmware.dropped_lines()
+    }
+
+    /// The emulated ECUs that stopped (their MCU halted or locked up), with why.
+    pub fn firmware_stops(&self) -> &[FirmwareStop] {
+        self.firmware.stops()
+    }
+
+    /// Instructions the emulated cores have run so far.
+    pub fn firmware_instructions(&self) -> u64 {
+        self.firmware.instructions()
     }
 
     /// Puts a frame from an outside tool (socketcand client, tester) on the bus; `false`
@@ -648,8 +834,12 @@ impl VirtualCar {
             .unwrap_or_default()
     }
 
-    /// The diagnostic half of an ECU: what it runs, whether it is stalled...
+    /// The diagnostic half of an ECU on host logic: what it runs, whether it is stalled...
+    /// (`None` for an emulated ECU, whose firmware has its own.)
     pub fn ecu_diag(&self, node: Node) -> Option<&VirtualDiag> {
+        if self.emulated(node) {
+            return None;
+        }
         let e = &self.ecus;
         Some(match node {
             Node::Pedals => &e.pedals.diag,
@@ -680,18 +870,40 @@ impl VirtualCar {
 
     /// Whether the scenario's time is up.
     pub fn finished(&self) -> bool {
-        self.t_us as f64 >= self.scenario.duration_s * 1e6
+        self.time_us() as f64 >= self.scenario.duration_s * 1e6
     }
 
     /// One trace row for the present moment.
     pub fn trace_row(&self) -> TraceRow {
         let s = self.vehicle.state();
-        let abs = self.ecus.abs.ecu.status();
-        let cruise = self.ecus.cruise.ecu.status();
+        let (abs_release, abs_active, traction_cut) = match self.abs_status() {
+            Some(abs) => (abs.release, abs.abs_active, abs.traction_cut),
+            None => {
+                // Emulated: what AbsMsg and TracMsg say.
+                let a = &self.bus_view.abs;
+                let release = [
+                    a.abs_release_fl,
+                    a.abs_release_fr,
+                    a.abs_release_rl,
+                    a.abs_release_rr,
+                ];
+                (
+                    release,
+                    release.iter().any(|r| *r > 0.0),
+                    self.bus_view.traction_cut,
+                )
+            }
+        };
+        let cruise = self.cruise_status().unwrap_or_else(|| ecu_cruise::Status {
+            // Emulated: the lamp, and the command CruiseAccelMsg carries.
+            engaged: self.ecus.cruise.outputs.is_some_and(|o| o.engaged),
+            set_speed_kmh: 0.0,
+            command: self.bus_view.cruise_accel,
+        });
         let pedals = self.ecus.pedals.outputs.unwrap_or_default();
         let c = &self.controls;
         TraceRow {
-            t_s: self.t_us as f64 * 1e-6,
+            t_s: self.time_us() as f64 * 1e-6,
             x_m: s.x_m,
             y_m: s.y_m,
             heading_rad: s.heading_rad,
@@ -700,7 +912,7 @@ impl VirtualCar {
             yaw_rate_ref_rad_s: s.yaw_rate_ref_rad_s,
             wheel_speed_kmh: s.wheel_speed_mps.map(|v| v * 3.6),
             brake: self.applied_brake().map(|b| b * 100.0),
-            abs_release: abs.release.map(f64::from),
+            abs_release: abs_release.map(f64::from),
             accel_pedal: c.held.accelerator,
             brake_pedal: c.held.brake,
             accel_cmd: f64::from(pedals.accelerator_cmd),
@@ -718,8 +930,8 @@ impl VirtualCar {
             torque_split_nm: s.torque_split_nm,
             headlights: s.headlights,
             brake_lights: s.brake_lights,
-            abs_active: abs.abs_active,
-            traction_cut: f64::from(abs.traction_cut),
+            abs_active,
+            traction_cut: f64::from(traction_cut),
             ax_mps2: s.ax_mps2,
             ay_mps2: s.ay_mps2,
             distance_m: s.distance_m,
@@ -742,36 +954,75 @@ impl VirtualCar {
 
     /// Advances one tick (1 ms of simulated time).
     pub fn tick(&mut self) {
+        self.advance(false);
+    }
+
+    /// The ignition on before the scenario begins, for `duration_us`: the ECUs start and
+    /// run (the emulated ones through their bootloader) on a car held in its initial
+    /// state, with the driver's initial controls; the scenario's time 0 is the end of it. A car that
+    /// starts in motion meets the scenario with its ECUs running, as the host logic does.
+    fn warm_up(&mut self, duration_us: u64) {
+        self.start_us = self.t_us + duration_us;
+        while self.t_us < self.start_us {
+            self.advance(true);
+        }
+        self.log.clear();
+        if let Some(rx) = &mut self.external_rx {
+            rx.clear();
+        }
+    }
+
+    /// One tick; `held`: the warm-up, in which neither the driver nor the model moves.
+    fn advance(&mut self, held: bool) {
         let t_us = self.t_us;
-        let t_s = t_us as f64 * 1e-6;
 
-        // The driver, and the road and fault changes of the timeline.
-        let previous_brake = self.controls.held.brake;
-        let mut road_changes = Vec::new();
-        self.controls = self
-            .timeline
-            .advance(t_s, |event| road_changes.push(event.clone()));
-        if let Some(person) = self.manual.as_mut() {
-            self.controls = person.controls_at(t_s);
-        }
-        if self.controls.held.brake > 0.0 && previous_brake <= 0.0 {
-            // The state is still the one at `t_us`: the model integrates below.
-            let s = self.vehicle.state();
-            self.brake_presses.push(BrakePress {
-                t_us,
-                distance_m: s.distance_m,
-                speed_kmh: s.speed_mps * 3.6,
-                heading_rad: s.heading_rad,
-            });
-        }
-        for event in road_changes {
-            self.apply_event(&event);
+        if !held {
+            // The driver, and the road and fault changes of the timeline.
+            let scenario_us = t_us - self.start_us;
+            let t_s = scenario_us as f64 * 1e-6;
+            let previous_brake = self.controls.held.brake;
+            let mut road_changes = Vec::new();
+            self.controls = self
+                .timeline
+                .advance(t_s, |event| road_changes.push(event.clone()));
+            if let Some(person) = self.manual.as_mut() {
+                self.controls = person.controls_at(t_s);
+            }
+            if self.controls.held.brake > 0.0 && previous_brake <= 0.0 {
+                // The state is still the one at `t_us`: the model integrates below.
+                let s = self.vehicle.state();
+                self.brake_presses.push(BrakePress {
+                    t_us: scenario_us,
+                    distance_m: s.distance_m,
+                    speed_kmh: s.speed_mps * 3.6,
+                    heading_rad: s.heading_rad,
+                });
+            }
+            for event in road_changes {
+                self.apply_event(&event);
+            }
         }
 
-        // Frames that completed by now reach their receivers.
-        self.bus.run_until(t_us * 1000);
+        // Frames that completed by now reach their receivers; the emulated MCUs run with
+        // the bus, and their pins show what they command now.
+        if self.firmware.is_empty() {
+            self.bus.run_until(t_us * 1000);
+        } else {
+            self.firmware.run(&mut self.bus, t_us * 1000, self.start_us);
+            self.firmware.poll_logs(t_us, self.start_us);
+        }
         self.collect_log();
         let e = &mut self.ecus;
+        let fw = &mut self.firmware;
+        e.pedals.read_pins(fw);
+        e.steering.read_pins(fw);
+        e.console.read_pins(fw);
+        e.engine.read_pins(fw);
+        e.trans.read_pins(fw);
+        e.cabin.read_pins(fw);
+        e.diff.read_pins(fw);
+        e.cruise.read_pins(fw);
+        e.abs.read_pins(fw);
         e.pedals.deliver(&mut self.bus);
         e.steering.deliver(&mut self.bus);
         e.console.deliver(&mut self.bus);
@@ -790,43 +1041,79 @@ impl VirtualCar {
         // Each ECU's control step, when due, on its own sensors.
         let s = self.vehicle.state();
         let c = self.controls;
-        e.pedals.step_if_due(t_us, || ecu_pedals::Sensors {
-            accelerator_pedal: c.held.accelerator as f32,
-            brake_pedal: c.held.brake as f32,
-        });
-        e.steering.step_if_due(t_us, || ecu_steering::Sensors {
-            wheel_angle_deg: c.held.steering_deg as f32,
-            shift_up_button: c.buttons.shift_up,
-            shift_down_button: c.buttons.shift_down,
-            cruise_on_button: c.buttons.cruise_on,
-            cruise_off_button: c.buttons.cruise_off,
-        });
-        e.console.step_if_due(t_us, || ecu_console::Sensors {
-            headlight_switch: c.held.headlights,
-            economy_mode_switch: c.held.economy_mode,
-            manual_mode_switch: c.held.manual_mode,
-        });
-        e.engine.step_if_due(t_us, || ecu_engine::Sensors {
-            engine_rpm: s.engine_rpm as f32,
-            fuel_level_l: s.fuel_l as f32,
-            fuel_flow_l_per_h: s.fuel_flow_l_per_h as f32,
-        });
-        e.trans.step_if_due(t_us, || ecu_trans::Sensors {
-            current_gear: can_gear(s.gear),
-        });
-        e.cabin.step_if_due(t_us, || ecu_cabin::Sensors {
-            cabin_temp_f: s.cabin_temp_sensor_f(),
-            set_temp_f: c.held.set_temp_f as f32,
-        });
-        e.diff.step_if_due(t_us, || ecu_diff::Sensors {
-            yaw_rate_error_rad_s: s.yaw_rate_error_rad_s as f32,
-        });
-        e.cruise.step_if_due(t_us, || ecu_cruise::Sensors {
-            vehicle_speed_kmh: s.speed_kmh(),
-        });
-        e.abs.step_if_due(t_us, || ecu_abs::Sensors {
-            wheel_speed_kmh: s.wheel_speeds_kmh(),
-        });
+        e.pedals.step_if_due(
+            t_us,
+            || ecu_pedals::Sensors {
+                accelerator_pedal: c.held.accelerator as f32,
+                brake_pedal: c.held.brake as f32,
+            },
+            fw,
+        );
+        e.steering.step_if_due(
+            t_us,
+            || ecu_steering::Sensors {
+                wheel_angle_deg: c.held.steering_deg as f32,
+                shift_up_button: c.buttons.shift_up,
+                shift_down_button: c.buttons.shift_down,
+                cruise_on_button: c.buttons.cruise_on,
+                cruise_off_button: c.buttons.cruise_off,
+            },
+            fw,
+        );
+        e.console.step_if_due(
+            t_us,
+            || ecu_console::Sensors {
+                headlight_switch: c.held.headlights,
+                economy_mode_switch: c.held.economy_mode,
+                manual_mode_switch: c.held.manual_mode,
+            },
+            fw,
+        );
+        e.engine.step_if_due(
+            t_us,
+            || ecu_engine::Sensors {
+                engine_rpm: s.engine_rpm as f32,
+                fuel_level_l: s.fuel_l as f32,
+                fuel_flow_l_per_h: s.fuel_flow_l_per_h as f32,
+            },
+            fw,
+        );
+        e.trans.step_if_due(
+            t_us,
+            || ecu_trans::Sensors {
+                current_gear: can_gear(s.gear),
+            },
+            fw,
+        );
+        e.cabin.step_if_due(
+            t_us,
+            || ecu_cabin::Sensors {
+                cabin_temp_f: s.cabin_temp_sensor_f(),
+                set_temp_f: c.held.set_temp_f as f32,
+            },
+            fw,
+        );
+        e.diff.step_if_due(
+            t_us,
+            || ecu_diff::Sensors {
+                yaw_rate_error_rad_s: s.yaw_rate_error_rad_s as f32,
+            },
+            fw,
+        );
+        e.cruise.step_if_due(
+            t_us,
+            || ecu_cruise::Sensors {
+                vehicle_speed_kmh: s.speed_kmh(),
+            },
+            fw,
+        );
+        e.abs.step_if_due(
+            t_us,
+            || ecu_abs::Sensors {
+                wheel_speed_kmh: s.wheel_speeds_kmh(),
+            },
+            fw,
+        );
 
         // Frames due now go to the ECUs' transmit queues.
         e.pedals.transmit(&mut self.bus, t_us);
@@ -840,8 +1127,10 @@ impl VirtualCar {
         e.abs.transmit(&mut self.bus, t_us);
 
         // The actuators drive the car for the next tick.
-        let actuators = self.actuators();
-        self.vehicle.step(&actuators, TICK_US as f64 * 1e-6);
+        if !held {
+            let actuators = self.actuators();
+            self.vehicle.step(&actuators, TICK_US as f64 * 1e-6);
+        }
         self.t_us += TICK_US;
     }
 
@@ -901,9 +1190,12 @@ impl VirtualCar {
 
     fn collect_log(&mut self) {
         for event in self.bus.drain_events() {
+            if matches!(event.outcome, Outcome::Received { .. }) {
+                self.bus_view.see(&event.frame);
+            }
             if matches!(event.outcome, Outcome::Received { .. } | Outcome::Dropped) {
                 self.log.push(LoggedFrame {
-                    t_us: event.end_ns / 1000,
+                    t_us: (event.end_ns / 1000).saturating_sub(self.start_us),
                     frame: event.frame,
                     sender: self.node_names[event.from.index()],
                 });

@@ -7,6 +7,7 @@ pub mod console;
 pub mod decimal;
 pub mod diag;
 pub mod driver;
+pub mod firmware;
 pub mod plot;
 pub mod report;
 pub mod scenario;

@@ -6,6 +6,7 @@ use crate::car::{BrakePress, LoggedFrame, TraceRow, VirtualCar};
 use crate::decimal;
 use crate::plot::{Axis, Plot, Series};
 use crate::scenario::Scenario;
+use autoplug_can::Node;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fs;
@@ -36,16 +37,21 @@ pub fn run(scenario: &Scenario) -> RunRecord {
 /// Runs a scenario, calling `each_tick` after every tick (for pacing and for serving the
 /// bus to tools), and records it.
 pub fn run_with(scenario: &Scenario, each_tick: impl FnMut(&mut VirtualCar)) -> RunRecord {
-    run_observed(scenario, each_tick, |_| {})
+    run_car(VirtualCar::new(scenario), each_tick)
+}
+
+/// [`run_with`] on a car already built (one with emulated ECUs, say).
+pub fn run_car(car: VirtualCar, each_tick: impl FnMut(&mut VirtualCar)) -> RunRecord {
+    run_observed(car, each_tick, |_| {})
 }
 
 /// [`run_with`], also handing every trace row to `each_row` as it is recorded.
 fn run_observed(
-    scenario: &Scenario,
+    mut car: VirtualCar,
     mut each_tick: impl FnMut(&mut VirtualCar),
     mut each_row: impl FnMut(&TraceRow),
 ) -> RunRecord {
-    let mut car = VirtualCar::new(scenario);
+    let scenario = &car.scenario().clone();
     let rows = (scenario.duration_s * 1e6 / TRACE_PERIOD_US as f64).ceil() as usize + 1;
     let mut trace = Vec::with_capacity(rows);
     while !car.finished() {
@@ -157,6 +163,12 @@ pub struct Summary {
     pub error_frames: u64,
     /// DTCs each ECU recorded ("U0126-87 status 0x2F").
     pub dtcs: BTreeMap<String, Vec<String>>,
+    /// The ECUs that ran as their firmware on emulated MCUs (none: all on host logic).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub firmware: Vec<String>,
+    /// Emulated ECUs that stopped, with when and why.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub firmware_stops: Vec<String>,
 }
 
 /// Shifts in a sequence of gears (-1 reverse, 0 neutral, 1..6): a change from one engaged
@@ -249,7 +261,12 @@ impl Summary {
             shifts: shifts(&gear_sequence),
             gear_sequence,
             stops: stops(trace, car.brake_presses(), mu),
-            cruise: cruise(trace),
+            // An emulated cruise ECU keeps its set speed to itself.
+            cruise: if car.emulated(Node::Cruise) {
+                None
+            } else {
+                cruise(trace)
+            },
             abs_active_s: round(trace.iter().filter(|r| r.abs_active).count() as f64 * dt, 2),
             abs_interventions: abs_interventions(trace),
             peak_yaw_rate_error_rad_s: round(
@@ -272,6 +289,23 @@ impl Summary {
             frames: stats.frames,
             error_frames: stats.error_frames,
             dtcs,
+            firmware: autoplug_can::ECUS
+                .iter()
+                .filter(|n| car.emulated(**n))
+                .map(|n| autoplug_can::ecu_name(*n).to_string())
+                .collect(),
+            firmware_stops: car
+                .firmware_stops()
+                .iter()
+                .map(|stop| {
+                    format!(
+                        "{} at {:.3} s: {}",
+                        autoplug_can::ecu_name(stop.node),
+                        stop.t_us as f64 * 1e-6,
+                        stop.reason
+                    )
+                })
+                .collect(),
         }
     }
 
@@ -296,6 +330,12 @@ impl Summary {
                 self.software["cruise"], self.software["abs"], self.software["differential"]
             ),
         );
+        if !self.firmware.is_empty() {
+            row("firmware (emulated MCUs)", self.firmware.join(", "));
+        }
+        for stop in &self.firmware_stops {
+            row("firmware stopped", stop.clone());
+        }
         row("distance", format!("{:.1} m", self.distance_m));
         row(
             "max / final speed",
@@ -730,6 +770,23 @@ pub fn run_streaming<W: Write + Send, T: Write + Send>(
     scenario: &Scenario,
     bus_log: &mut W,
     trace: &mut T,
+    each_tick: impl FnMut(&mut VirtualCar, &[LoggedFrame]),
+    after_run: impl FnOnce(&RunRecord) -> io::Result<()>,
+) -> io::Result<RunRecord> {
+    run_car_streaming(
+        VirtualCar::new(scenario),
+        bus_log,
+        trace,
+        each_tick,
+        after_run,
+    )
+}
+
+/// [`run_streaming`] on a car already built (one with emulated ECUs, say).
+pub fn run_car_streaming<W: Write + Send, T: Write + Send>(
+    car: VirtualCar,
+    bus_log: &mut W,
+    trace: &mut T,
     mut each_tick: impl FnMut(&mut VirtualCar, &[LoggedFrame]),
     after_run: impl FnOnce(&RunRecord) -> io::Result<()>,
 ) -> io::Result<RunRecord> {
@@ -754,7 +811,7 @@ pub fn run_streaming<W: Write + Send, T: Write + Send>(
         let mut rows_batch = Vec::with_capacity(WRITER_BATCH);
         let mut frames = Vec::new();
         let record = run_observed(
-            scenario,
+            car,
             |car| {
                 car.swap_log(&mut frames);
                 each_tick(car, &frames);

@@ -616,7 +616,7 @@ fn the_faulty_software_a_scenario_installs_is_what_the_ecu_reports() {
         autoplug_image::SoftwareVariant::Faulty
     );
     assert!(
-        !car.cruise_status().engaged,
+        !car.cruise_status().expect("host logic").engaged,
         "a standing car's cruise is off"
     );
 }

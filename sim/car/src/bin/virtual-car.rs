@@ -2,11 +2,14 @@
 //!
 //!     virtual-car run scenarios/drive-cycle.toml            # as fast as possible
 //!     virtual-car run scenarios/cruise-hold.toml --realtime --socketcand 127.0.0.1:29536
+//!     virtual-car run scenarios/drive-cycle.toml --firmware all   # the nine firmwares, emulated
 //!     virtual-car abs-sweep --out out                      # ABS stops over friction and speed
 //!     virtual-car list
 
 use autoplug_vin::Vin;
+use autoplug_virtual_car::car::VirtualCar;
 use autoplug_virtual_car::console::ReaderMayLeave;
+use autoplug_virtual_car::firmware::{self, FirmwareChoice};
 use autoplug_virtual_car::report::{self, RunRecord};
 use autoplug_virtual_car::scenario::Scenario;
 use autoplug_virtual_car::socketcand::{CarBridge, SocketcandServer};
@@ -80,6 +83,15 @@ enum Command {
         /// every ECU answers it as UDS DID F190.
         #[arg(long, value_parser = parse_vin)]
         vin: Option<Vin>,
+        /// ECUs that run as their firmware (the release ELF with the bootloader) on
+        /// emulated STM32F446s instead of host logic: `all`, or names separated by commas
+        /// (cruise,abs). Their defmt logs go to firmware.log (and to the terminal with
+        /// --realtime).
+        #[arg(long, value_name = "all|ECU,...")]
+        firmware: Option<String>,
+        /// Where the firmware ELF files are: `boot` and `<ecu>-fw`.
+        #[arg(long, value_name = "DIR", default_value = firmware::DEFAULT_FIRMWARE_DIR)]
+        firmware_dir: PathBuf,
     },
     /// Full braking over a grid of road friction (0.2 to 1.0) and speed (40 to 200 km/h),
     /// and on split friction: each stop against the limit v²/(2µg), as a table
@@ -122,7 +134,20 @@ fn main() -> ExitCode {
             socketcand,
             wait_for_client,
             vin,
+            firmware,
+            firmware_dir,
         } => {
+            let firmware = match firmware
+                .as_deref()
+                .map(|list| FirmwareChoice::parse(list, &firmware_dir))
+                .transpose()
+            {
+                Ok(choice) => choice,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(2);
+                }
+            };
             if out.exists() && !out.is_dir() {
                 eprintln!(
                     "error: --out '{}' is a file: it must be a folder (or not exist yet)",
@@ -157,18 +182,27 @@ fn main() -> ExitCode {
                         if let Some(vin) = vin {
                             scenario.vin_text = Some(vin.to_string());
                         }
-                        if let Err(e) = run_one(
-                            &scenario,
-                            &out,
-                            realtime || server.is_some(),
-                            server.as_ref(),
-                        ) {
-                            eprintln!(
-                                "error: --out '{}': cannot write the results of {}: {e}",
-                                out.display(),
-                                path.display()
-                            );
-                            failed = true;
+                        let car = match &firmware {
+                            None => VirtualCar::new(&scenario),
+                            Some(choice) => match VirtualCar::with_firmware(&scenario, choice) {
+                                Ok(car) => car,
+                                Err(e) => {
+                                    eprintln!("error: {e}");
+                                    failed = true;
+                                    continue;
+                                }
+                            },
+                        };
+                        match run_one(car, &out, realtime || server.is_some(), server.as_ref()) {
+                            Ok(stopped) => failed |= stopped,
+                            Err(e) => {
+                                eprintln!(
+                                    "error: --out '{}': cannot write the results of {}: {e}",
+                                    out.display(),
+                                    path.display()
+                                );
+                                failed = true;
+                            }
                         }
                     }
                     Err(e) => {
@@ -226,23 +260,53 @@ fn abs_sweep(out: &Path) -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// Runs the car's scenario and writes its results; `Ok(true)` when an emulated ECU stopped
+/// on the way (the rest of the car ran on).
 fn run_one(
-    scenario: &Scenario,
+    car: VirtualCar,
     out: &Path,
     realtime: bool,
     server: Option<&SocketcandServer>,
-) -> std::io::Result<()> {
+) -> std::io::Result<bool> {
     let wall = Instant::now();
+    let scenario = car.scenario().clone();
     let dir = out.join(&scenario.name);
     std::fs::create_dir_all(&dir)?;
     let mut bus_log = BufWriter::new(File::create(dir.join("bus.log"))?);
     let mut trace = BufWriter::new(File::create(dir.join("trace.csv"))?);
+    let firmware_log_path = dir.join("firmware.log");
+    let mut firmware_log: Option<BufWriter<File>> = None;
+    let mut firmware_log_error = None;
     let mut bridge = CarBridge::new();
-    let record: RunRecord = report::run_streaming(
-        scenario,
+    let record: RunRecord = report::run_car_streaming(
+        car,
         &mut bus_log,
         &mut trace,
         |car, frames| {
+            for line in car.take_firmware_log() {
+                let text = format!(
+                    "{:>11.6} {:<8} {}",
+                    line.t_us as f64 * 1e-6,
+                    line.ecu,
+                    line.text
+                );
+                if realtime {
+                    outln!("{text}");
+                }
+                if firmware_log_error.is_none() {
+                    use std::io::Write as _;
+                    let written = match &mut firmware_log {
+                        Some(file) => writeln!(file, "{text}"),
+                        None => File::create(&firmware_log_path).and_then(|f| {
+                            let mut f = BufWriter::new(f);
+                            let w = writeln!(f, "{text}");
+                            firmware_log = Some(f);
+                            w
+                        }),
+                    };
+                    firmware_log_error = written.err();
+                }
+            }
             if let Some(server) = server {
                 bridge.exchange(server, car, frames);
             }
@@ -256,6 +320,13 @@ fn run_one(
         // Rendered while the writer thread finishes the bus log and the trace.
         |record| report::write_summary_and_plots(&dir, record),
     )?;
+    if let Some(e) = firmware_log_error {
+        return Err(e);
+    }
+    if let Some(mut file) = firmware_log {
+        use std::io::Write as _;
+        file.flush()?;
+    }
     let elapsed = wall.elapsed().as_secs_f64();
     outln!("{}", scenario.name);
     if !scenario.description.is_empty() {
@@ -280,7 +351,10 @@ fn run_one(
         scenario.duration_s / elapsed.max(1e-9)
     );
     outln!("  {:<28} {}", "written to", dir.display());
-    Ok(())
+    for stop in &record.summary.firmware_stops {
+        eprintln!("error: firmware stopped: {stop}");
+    }
+    Ok(!record.summary.firmware_stops.is_empty())
 }
 
 fn list(dir: &Path) -> ExitCode {

@@ -163,8 +163,6 @@ impl Can {
             pending.min_by_key(|&i| (self.mailboxes[i].tir >> 1, i))
         }?;
         self.sending = Some(best);
-        // The mailbox is scheduled: CODE tells which is next.
-        self.tsr = (self.tsr & !(3 << 24)) | (best as u32) << 24;
         let m = &self.mailboxes[best];
         Some(CanFrame::from_registers(m.tir, m.tdtr, m.tdlr, m.tdhr))
     }
@@ -394,16 +392,23 @@ impl Can {
             0x000 => self.mcr,
             0x004 => self.msr,
             0x008 => {
-                // LOWx: the mailbox with the lowest priority.
-                let mut tsr = self.tsr & !(7 << 29);
+                // LOWx: the mailbox with the lowest priority. CODE: the next free mailbox,
+                // or with all three pending the lowest-priority one (RM0390 32.9.2); the
+                // HAL writes its next frame where CODE points.
+                let mut tsr = self.tsr & !(7 << 29) & !(3 << 24);
                 let pending: Vec<usize> = (0..3).filter(|&i| self.tsr & (TME0 << i) == 0).collect();
-                if let Some(&low) = pending
+                let low = pending
                     .iter()
-                    .max_by_key(|&&i| (self.mailboxes[i].tir >> 1, i))
-                {
+                    .copied()
+                    .max_by_key(|&i| (self.mailboxes[i].tir >> 1, i));
+                if let Some(low) = low {
                     tsr |= 1 << (29 + low);
                 }
-                tsr
+                let code = (0..3)
+                    .find(|&i| self.tsr & (TME0 << i) != 0)
+                    .or(low)
+                    .unwrap_or(0);
+                tsr | (code as u32) << 24
             }
             0x00C | 0x010 => {
                 let f = ((offset - 0x00C) / 4) as usize;
@@ -634,6 +639,30 @@ mod tests {
             "RQCP1 and TXOK1"
         );
         assert_eq!(can.next_transmit().map(|f| f.id), Some(0x200));
+    }
+
+    #[test]
+    fn tsr_code_points_at_the_next_free_mailbox_then_at_the_lowest_priority() {
+        // The HAL writes each frame into the mailbox CODE names: frames queued back to
+        // back must each get their own (a CODE stuck at a busy mailbox loses them, as a
+        // pending mailbox ignores writes).
+        let mut can = on_bus();
+        let code = |can: &mut Can| can.read(0x008).unwrap() >> 24 & 3;
+        for (id, expected_code) in [(0x021, 0), (0x020, 1), (0x022, 2)] {
+            let mailbox = code(&mut can);
+            assert_eq!(mailbox, expected_code);
+            let base = 0x180 + 0x10 * mailbox;
+            can.write(base + 4, 1, u32::MAX, 0).unwrap();
+            can.write(base, id << 21 | 1, u32::MAX, 0).unwrap();
+        }
+        let mut pending: Vec<u32> = can.requests().map(|(_, f, _)| f.id).collect();
+        pending.sort_unstable();
+        assert_eq!(pending, [0x020, 0x021, 0x022], "all three pending");
+        // All pending: CODE (and LOW) name the lowest priority, 0x022 in mailbox 2.
+        let tsr = can.read(0x008).unwrap();
+        assert_eq!((tsr >> 24 & 3, tsr >> 29), (2, 0b100));
+        can.complete(1, true, false);
+        assert_eq!(code(&mut can), 1, "mailbox 1 free again");
     }
 
     #[test]

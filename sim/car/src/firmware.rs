@@ -1,0 +1,532 @@
+//! ECUs that run as their firmware: the release ELF (the bytes `cargo fw-<ecu>` flashes)
+//! with the bootloader, on AutoPlug's emulated STM32F446 (`autoplug-mcu`). Such an ECU
+//! meets the car as a board on the bench would: the vehicle model puts volts on its ADC
+//! pins and levels on its switch inputs, reads its PWM duties and output levels, all by
+//! the pins its crate declares (`ecu_<name>::pins`, which the firmware's board module
+//! takes from the HAL), and its bxCAN is a node of the car's bit-timed bus.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+
+use autoplug_can::{ecu_name, firmware_name, parse_ecu, Gear, Node, ECUS, ECU_NAME_LIST};
+use autoplug_ecu::pins::{AnalogIn, DigitalIn, DigitalOut, Pull, PwmOut};
+use autoplug_ecu::EcuLogic;
+use autoplug_mcu::chip::Chip;
+use autoplug_mcu::mcu::Mcu;
+use autoplug_mcu::node::{run_together, BusNode};
+use autoplug_mcu::programming::FlashContents;
+use autoplug_mcu::rtt::RttLog;
+use autoplug_virtual_bus::{NodeId, VirtualBus};
+
+/// Where the firmware the car runs comes from when none is named: the release build of
+/// `cargo build --release --target thumbv7em-none-eabihf`.
+pub const DEFAULT_FIRMWARE_DIR: &str = "target/thumbv7em-none-eabihf/release";
+
+/// The log lines the car keeps for its caller (the oldest go first beyond this).
+const LOG_CAPACITY: usize = 100_000;
+
+/// Which ECUs run as firmware, and where their ELF files are.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FirmwareChoice {
+    /// The ECUs, in the catalogue's order.
+    pub ecus: Vec<Node>,
+    /// The directory with `boot` and `<ecu>-fw` (a cargo release directory).
+    pub dir: PathBuf,
+}
+
+impl FirmwareChoice {
+    /// `all`, or ECU names separated by commas (`cruise,abs`), from `dir`.
+    pub fn parse(list: &str, dir: &Path) -> Result<Self, String> {
+        let mut ecus = Vec::new();
+        if list.trim().eq_ignore_ascii_case("all") {
+            ecus.extend(ECUS);
+        } else {
+            for name in list.split(',') {
+                let node = parse_ecu(name).ok_or_else(|| {
+                    format!(
+                        "--firmware: no ECU '{}' (all, or some of: {ECU_NAME_LIST})",
+                        name.trim()
+                    )
+                })?;
+                if ecus.contains(&node) {
+                    return Err(format!("--firmware: {} named twice", ecu_name(node)));
+                }
+                ecus.push(node);
+            }
+        }
+        ecus.sort_by_key(|n| ECUS.iter().position(|e| e == n));
+        Ok(Self {
+            ecus,
+            dir: dir.to_path_buf(),
+        })
+    }
+
+    /// Whether `node` runs as firmware.
+    pub fn runs(&self, node: Node) -> bool {
+        self.ecus.contains(&node)
+    }
+}
+
+/// A line of an emulated ECU's defmt log.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FirmwareLogLine {
+    /// When the car read it from the RTT buffer, µs of the scenario's time (negative in
+    /// the warm-up before it).
+    pub t_us: i64,
+    /// The ECU's short name.
+    pub ecu: &'static str,
+    /// The level (`INFO`, `WARN`...), when the frame has one.
+    pub level: Option<String>,
+    /// The line as `defmt-print` shows it (the firmware's own timestamp first).
+    pub text: String,
+}
+
+/// An emulated ECU that stopped: its MCU halted, locked up or ended, and left the bus.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FirmwareStop {
+    /// The ECU.
+    pub node: Node,
+    /// When, µs of the scenario's time (negative in the warm-up).
+    pub t_us: i64,
+    /// Why, with the registers that say where.
+    pub reason: String,
+    /// Its last log lines.
+    pub last_lines: Vec<String>,
+}
+
+/// One ECU on its emulated MCU.
+pub(crate) struct EmulatedEcu {
+    pub(crate) node: Node,
+    logs: Vec<RttLog>,
+    /// Its last lines, for a stop's report.
+    recent: VecDeque<String>,
+    /// HardFaults already reported.
+    faults_seen: usize,
+}
+
+/// The emulated ECUs of a car and their bus nodes (kept apart: the bus runs them as a
+/// slice).
+pub(crate) struct Firmware {
+    ecus: Vec<EmulatedEcu>,
+    nodes: Vec<BusNode>,
+    log: VecDeque<FirmwareLogLine>,
+    dropped_lines: u64,
+    stops: Vec<FirmwareStop>,
+}
+
+/// The bootloader and an ECU's firmware programmed into a fresh flash, as a programmer
+/// writes them, and the MCU powered on; its logs' decoders.
+pub(crate) fn load(node: Node, dir: &Path, seed: u64) -> Result<(Mcu, Vec<RttLog>), String> {
+    let mut flash = FlashContents::erased();
+    let mut logs = Vec::new();
+    let app = format!("{}-fw", firmware_name(node));
+    for file in ["boot", app.as_str()] {
+        let path = dir.join(file);
+        let name = path.display().to_string();
+        let bytes = std::fs::read(&path).map_err(|e| {
+            format!(
+                "{name}: {e} (build the firmware first: cargo build --release --target thumbv7em-none-eabihf -p {})",
+                if file == "boot" {
+                    "autoplug-boot".to_string()
+                } else {
+                    format!("ecu-{}", firmware_name(node))
+                }
+            )
+        })?;
+        flash
+            .program_elf(&name, &bytes)
+            .map_err(|e| e.to_string())?;
+        if let Some(log) = RttLog::for_elf(&name, &bytes)? {
+            logs.push(log);
+        }
+    }
+    let index = ECUS.iter().position(|n| *n == node).unwrap_or(0) as u32;
+    // Each board's own unique ID (the F446's 96-bit UID: lot, wafer, position).
+    let uid = [0x0031_0042 + index, 0x3433_5107, 0x3236_3731];
+    let name = ecu_name(node);
+    let mut first = Mcu::power_on(flash.to_sim_flash(seed ^ u64::from(index)), uid)
+        .map_err(|e| format!("{name}: {e}"))?;
+    // The board's first start, as at the end of the line: it formats the A/B record (a
+    // sector erase, about 0.5 s) and reaches its control loop, then is powered off. The
+    // car then starts a board that has run before, in a few milliseconds.
+    first
+        .run_until(FIRST_START_NS)
+        .map_err(|e| format!("{name}: its first start stopped: {e}"))?;
+    if let Some(fault) = first.faults.first() {
+        return Err(format!(
+            "{name}: its first start took a HardFault at PC {:#010x} (LR {:#010x}, CFSR {:#010x}, HFSR {:#010x})",
+            fault.pc, fault.lr, fault.cfsr, fault.hfsr
+        ));
+    }
+    let mcu = Mcu::power_on(first.chip.flash, uid).map_err(|e| format!("{name}: {e}"))?;
+    Ok((mcu, logs))
+}
+
+/// How long a board's first start runs before it is powered off: past the A/B record's
+/// sector erase and into the control loop.
+const FIRST_START_NS: u64 = 800_000_000;
+
+impl Firmware {
+    pub(crate) fn new() -> Self {
+        Self {
+            ecus: Vec::new(),
+            nodes: Vec::new(),
+            log: VecDeque::new(),
+            dropped_lines: 0,
+            stops: Vec::new(),
+        }
+    }
+
+    /// Puts an ECU's MCU on the bus as `node`'s board.
+    pub(crate) fn attach(
+        &mut self,
+        bus: &mut VirtualBus,
+        node: Node,
+        mcu: Mcu,
+        logs: Vec<RttLog>,
+    ) -> NodeId {
+        let bus_node = BusNode::attach(bus, node.name(), mcu);
+        let id = bus_node.node;
+        self.nodes.push(bus_node);
+        self.ecus.push(EmulatedEcu {
+            node,
+            logs,
+            recent: VecDeque::new(),
+            faults_seen: 0,
+        });
+        id
+    }
+
+    /// Whether any ECU runs as firmware.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.ecus.is_empty() && self.stops.is_empty()
+    }
+
+    /// The chip of `node`'s board, while it runs.
+    pub(crate) fn chip(&mut self, node: Node) -> Option<&mut Chip> {
+        let i = self.ecus.iter().position(|e| e.node == node)?;
+        Some(&mut self.nodes[i].mcu.chip)
+    }
+
+    /// Runs the bus and the MCUs to `until_ns`. An MCU that stops leaves the bus (its node
+    /// falls silent) and is reported; the others run on.
+    pub(crate) fn run(&mut self, bus: &mut VirtualBus, until_ns: u64, start_us: u64) {
+        while let Err((i, stop)) = run_together(bus, &mut self.nodes, until_ns) {
+            let node = self.nodes.remove(i);
+            let mut ecu = self.ecus.remove(i);
+            let mut chip = node.mcu.chip;
+            let t_us = scenario_us(bus.now_ns() / 1000, start_us);
+            Self::read_log(
+                &mut ecu,
+                &mut chip,
+                t_us,
+                &mut self.log,
+                &mut self.dropped_lines,
+            );
+            bus.set_silenced(node.node, true);
+            let mut reason = stop.to_string();
+            if let Some(fault) = node.mcu.faults.last() {
+                reason.push_str(&format!(
+                    "; after a HardFault at PC {:#010x} (LR {:#010x}, CFSR {:#010x}, HFSR {:#010x})",
+                    fault.pc, fault.lr, fault.cfsr, fault.hfsr
+                ));
+            }
+            self.stops.push(FirmwareStop {
+                node: ecu.node,
+                t_us,
+                reason,
+                last_lines: ecu.recent.into_iter().collect(),
+            });
+        }
+    }
+
+    /// Reads what each firmware logged since the last call, and reports HardFaults it
+    /// took (the firmware's fault handler logs and resets; the car runs on).
+    pub(crate) fn poll_logs(&mut self, bus_us: u64, start_us: u64) {
+        let t_us = scenario_us(bus_us, start_us);
+        for (ecu, node) in self.ecus.iter_mut().zip(&mut self.nodes) {
+            Self::read_log(
+                ecu,
+                &mut node.mcu.chip,
+                t_us,
+                &mut self.log,
+                &mut self.dropped_lines,
+            );
+            for fault in &node.mcu.faults[ecu.faults_seen..] {
+                let text = format!(
+                    "emulator: HardFault at PC {:#010x}, LR {:#010x}, CFSR {:#010x}, HFSR {:#010x}, BFAR {:#010x} ({:?})",
+                    fault.pc, fault.lr, fault.cfsr, fault.hfsr, fault.bfar, fault.fault
+                );
+                push_line(
+                    &mut self.log,
+                    &mut self.dropped_lines,
+                    FirmwareLogLine {
+                        t_us,
+                        ecu: ecu_name(ecu.node),
+                        level: Some("ERROR".into()),
+                        text,
+                    },
+                );
+            }
+            ecu.faults_seen = node.mcu.faults.len();
+        }
+    }
+
+    fn read_log(
+        ecu: &mut EmulatedEcu,
+        chip: &mut Chip,
+        t_us: i64,
+        log: &mut VecDeque<FirmwareLogLine>,
+        dropped: &mut u64,
+    ) {
+        for rtt in &mut ecu.logs {
+            for line in rtt.poll(chip) {
+                if ecu.recent.len() == 20 {
+                    ecu.recent.pop_front();
+                }
+                ecu.recent.push_back(line.text.clone());
+                push_line(
+                    log,
+                    dropped,
+                    FirmwareLogLine {
+                        t_us,
+                        ecu: ecu_name(ecu.node),
+                        level: line.level,
+                        text: line.text,
+                    },
+                );
+            }
+        }
+    }
+
+    /// The log lines since the last call.
+    pub(crate) fn take_log(&mut self) -> Vec<FirmwareLogLine> {
+        self.log.drain(..).collect()
+    }
+
+    /// Lines dropped because nobody took them in time.
+    pub(crate) fn dropped_lines(&self) -> u64 {
+        self.dropped_lines
+    }
+
+    /// The ECUs that stopped.
+    pub(crate) fn stops(&self) -> &[FirmwareStop] {
+        &self.stops
+    }
+
+    /// Instructions the emulated cores have run.
+    pub(crate) fn instructions(&self) -> u64 {
+        self.nodes.iter().map(|n| n.mcu.cpu.instructions()).sum()
+    }
+}
+
+/// A time on the bus's clock as the scenario's (negative before it began).
+fn scenario_us(bus_us: u64, start_us: u64) -> i64 {
+    bus_us as i64 - start_us as i64
+}
+
+fn push_line(log: &mut VecDeque<FirmwareLogLine>, dropped: &mut u64, line: FirmwareLogLine) {
+    if log.len() == LOG_CAPACITY {
+        log.pop_front();
+        *dropped += 1;
+    }
+    log.push_back(line);
+}
+
+/// The bench's side of a board's pins: what the vehicle model drives and reads.
+pub(crate) struct Bench<'a> {
+    chip: &'a mut Chip,
+}
+
+/// GPIO mode bits (RM0390 8.4.1).
+const MODE_OUTPUT: u32 = 1;
+const MODE_ALTERNATE: u32 = 2;
+
+impl<'a> Bench<'a> {
+    pub(crate) fn new(chip: &'a mut Chip) -> Self {
+        Self { chip }
+    }
+
+    /// Puts the voltage for `value` on an analog input.
+    fn analog(&mut self, input: &AnalogIn, value: f32) {
+        self.chip
+            .adc
+            .set_input(usize::from(input.adc_channel), input.volts(value));
+    }
+
+    /// A switch between the pin and GND (pull-up inputs): closed pulls it low, open leaves
+    /// it to the pull-up.
+    fn switch(&mut self, input: &DigitalIn, closed: bool) {
+        debug_assert_eq!(input.pull, Pull::Up);
+        let pin = input.pin;
+        self.chip.gpio[pin.port_index()].drive(u32::from(pin.number), closed.then_some(false));
+    }
+
+    /// A line driven high or low by the other side (pull-down inputs).
+    fn level(&mut self, input: &DigitalIn, high: bool) {
+        let pin = input.pin;
+        self.chip.gpio[pin.port_index()].drive(u32::from(pin.number), Some(high));
+    }
+
+    /// The value a PWM output stands for, once the firmware drives it (pin in its
+    /// alternate function, the timer channel enabled in a PWM mode).
+    fn pwm(&self, output: &PwmOut) -> Option<f32> {
+        let pin = output.pin;
+        if self.chip.gpio[pin.port_index()].mode(u32::from(pin.number)) != MODE_ALTERNATE {
+            return None;
+        }
+        let duty = self
+            .chip
+            .tim3
+            .pwm_duty(usize::from(output.tim3_channel) - 1)?;
+        Some(output.value(duty))
+    }
+
+    /// An output's level, once the firmware made the pin an output.
+    fn output(&self, output: &DigitalOut) -> Option<bool> {
+        let pin = output.pin;
+        let port = &self.chip.gpio[pin.port_index()];
+        (port.mode(u32::from(pin.number)) == MODE_OUTPUT)
+            .then(|| port.output(u32::from(pin.number)))
+    }
+}
+
+/// How an ECU's sensors reach its board's pins and its pins drive its actuators: the
+/// bench wiring of `ecu_<name>::pins`, the inverse of the firmware's board module.
+pub(crate) trait Wiring: EcuLogic {
+    /// Puts the sensor readings on the pins.
+    fn drive(sensors: &Self::Sensors, bench: &mut Bench<'_>);
+    /// The actuator commands the pins show; `None` until the firmware drives them all.
+    fn read(bench: &Bench<'_>) -> Option<Self::Actuators>;
+}
+
+impl Wiring for ecu_pedals::PedalsEcu {
+    fn drive(s: &ecu_pedals::Sensors, bench: &mut Bench<'_>) {
+        use ecu_pedals::pins::*;
+        bench.analog(&ACCELERATOR_PEDAL, s.accelerator_pedal);
+        bench.analog(&BRAKE_PEDAL, s.brake_pedal);
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_pedals::Actuators> {
+        use ecu_pedals::pins::*;
+        Some(ecu_pedals::Actuators {
+            accelerator_cmd: bench.pwm(&ACCELERATOR_CMD)?,
+            brake_cmd: bench.pwm(&BRAKE_CMD)?,
+        })
+    }
+}
+
+impl Wiring for ecu_steering::SteeringEcu {
+    fn drive(s: &ecu_steering::Sensors, bench: &mut Bench<'_>) {
+        use ecu_steering::pins::*;
+        bench.analog(&WHEEL_ANGLE, s.wheel_angle_deg);
+        bench.switch(&SHIFT_UP, s.shift_up_button);
+        bench.switch(&SHIFT_DOWN, s.shift_down_button);
+        bench.switch(&CRUISE_ON, s.cruise_on_button);
+        bench.switch(&CRUISE_OFF, s.cruise_off_button);
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_steering::Actuators> {
+        Some(ecu_steering::Actuators {
+            steering_cmd_deg: bench.pwm(&ecu_steering::pins::STEERING_CMD)?,
+        })
+    }
+}
+
+impl Wiring for ecu_console::ConsoleEcu {
+    fn drive(s: &ecu_console::Sensors, bench: &mut Bench<'_>) {
+        use ecu_console::pins::*;
+        bench.switch(&HEADLIGHT_SWITCH, s.headlight_switch);
+        bench.switch(&ENGINE_MODE_SWITCH, s.economy_mode_switch);
+        bench.switch(&TRANSMISSION_MODE_SWITCH, s.manual_mode_switch);
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_console::Actuators> {
+        use ecu_console::pins::*;
+        Some(ecu_console::Actuators {
+            headlights: bench.output(&HEADLIGHTS)?,
+            brake_lights: bench.output(&BRAKE_LIGHTS)?,
+        })
+    }
+}
+
+impl Wiring for ecu_engine::EngineEcu {
+    fn drive(s: &ecu_engine::Sensors, bench: &mut Bench<'_>) {
+        use ecu_engine::pins::*;
+        bench.analog(&ENGINE_SPEED, s.engine_rpm);
+        bench.analog(&FUEL_LEVEL, s.fuel_level_l);
+        bench.analog(&FUEL_FLOW, s.fuel_flow_l_per_h);
+    }
+    fn read(_: &Bench<'_>) -> Option<ecu_engine::Status> {
+        None // the engine ECU drives no pin: it reports on EngineMsg
+    }
+}
+
+impl Wiring for ecu_trans::TransEcu {
+    fn drive(s: &ecu_trans::Sensors, bench: &mut Bench<'_>) {
+        let code = s.current_gear.raw();
+        for (bit, line) in ecu_trans::pins::GEAR_ENGAGED.iter().enumerate() {
+            bench.level(line, code >> bit & 1 == 1);
+        }
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_trans::Actuators> {
+        let mut code = 0;
+        for (bit, line) in ecu_trans::pins::GEAR_CMD.iter().enumerate() {
+            code |= i64::from(bench.output(line)?) << bit;
+        }
+        Some(ecu_trans::Actuators {
+            gear_cmd: Gear::from_raw(code)?,
+        })
+    }
+}
+
+impl Wiring for ecu_cabin::CabinEcu {
+    fn drive(s: &ecu_cabin::Sensors, bench: &mut Bench<'_>) {
+        use ecu_cabin::pins::*;
+        bench.analog(&CABIN_TEMP, s.cabin_temp_f);
+        bench.analog(&SET_TEMP, s.set_temp_f);
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_cabin::Actuators> {
+        Some(ecu_cabin::Actuators {
+            fan: bench.pwm(&ecu_cabin::pins::FAN)?,
+        })
+    }
+}
+
+impl Wiring for ecu_diff::DiffEcu {
+    fn drive(s: &ecu_diff::Sensors, bench: &mut Bench<'_>) {
+        bench.analog(&ecu_diff::pins::YAW_RATE_ERROR, s.yaw_rate_error_rad_s);
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_diff::Actuators> {
+        Some(ecu_diff::Actuators {
+            torque_split_nm: bench.pwm(&ecu_diff::pins::TORQUE_SPLIT)?,
+        })
+    }
+}
+
+impl Wiring for ecu_cruise::CruiseEcu {
+    fn drive(s: &ecu_cruise::Sensors, bench: &mut Bench<'_>) {
+        bench.analog(&ecu_cruise::pins::VEHICLE_SPEED, s.vehicle_speed_kmh);
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_cruise::Status> {
+        // The lamp is the board's one output; the command goes out on CAN, and the set
+        // speed stays inside the ECU (0 here: what the bench cannot see).
+        Some(ecu_cruise::Status {
+            engaged: bench.output(&ecu_cruise::pins::ENGAGED_LAMP)?,
+            set_speed_kmh: 0.0,
+            command: 0.0,
+        })
+    }
+}
+
+impl Wiring for ecu_abs::AbsEcu {
+    fn drive(s: &ecu_abs::Sensors, bench: &mut Bench<'_>) {
+        for (input, speed) in ecu_abs::pins::WHEEL_SPEEDS.iter().zip(s.wheel_speed_kmh) {
+            bench.analog(input, speed);
+        }
+    }
+    fn read(bench: &Bench<'_>) -> Option<ecu_abs::Actuators> {
+        let mut brake = [0.0; 4];
+        for (value, output) in brake.iter_mut().zip(&ecu_abs::pins::BRAKES) {
+            *value = bench.pwm(output)?;
+        }
+        Some(ecu_abs::Actuators { brake })
+    }
+}
