@@ -3,6 +3,7 @@
 #![deny(missing_docs)]
 
 pub mod car;
+pub mod compare;
 pub mod console;
 pub mod decimal;
 pub mod diag;

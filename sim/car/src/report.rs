@@ -20,6 +20,7 @@ pub const TRACE_PERIOD_US: u64 = 10_000;
 const G: f64 = 9.80665;
 
 /// A run's complete record.
+#[derive(Clone)]
 pub struct RunRecord {
     /// One row per 10 ms.
     pub trace: Vec<TraceRow>,

@@ -8,6 +8,7 @@
 
 use autoplug_vin::Vin;
 use autoplug_virtual_car::car::VirtualCar;
+use autoplug_virtual_car::compare::{compare, table as compare_table};
 use autoplug_virtual_car::console::ReaderMayLeave;
 use autoplug_virtual_car::firmware::{self, FirmwareChoice};
 use autoplug_virtual_car::report::{self, RunRecord};
@@ -92,6 +93,28 @@ enum Command {
         /// Where the firmware ELF files are: `boot` and `<ecu>-fw`.
         #[arg(long, value_name = "DIR", default_value = firmware::DEFAULT_FIRMWARE_DIR)]
         firmware_dir: PathBuf,
+    },
+    /// Runs scenarios twice, on host logic and with ECUs as their firmware on emulated
+    /// STM32F446s, and compares the runs: every periodic message at its period, the gear
+    /// sequence, distance, fuel and maximum speed within 1 %, every stop within 2 %.
+    /// Writes both runs (host/ and firmware/) under --out; fails if a check fails.
+    Compare {
+        /// Scenario files (TOML).
+        #[arg(required = true)]
+        scenarios: Vec<PathBuf>,
+        /// The ECUs that run as firmware: `all`, or names separated by commas.
+        #[arg(long, value_name = "all|ECU,...", default_value = "all")]
+        firmware: String,
+        /// Where the firmware ELF files are: `boot` and `<ecu>-fw`.
+        #[arg(long, value_name = "DIR", default_value = firmware::DEFAULT_FIRMWARE_DIR)]
+        firmware_dir: PathBuf,
+        /// Output folder; each scenario writes into a folder named after it.
+        #[arg(long, default_value = "out/compare")]
+        out: PathBuf,
+        /// Run the emulated car a second time and require the same bus log, byte for
+        /// byte: the emulation is deterministic.
+        #[arg(long)]
+        twice: bool,
     },
     /// Full braking over a grid of road friction (0.2 to 1.0) and speed (40 to 200 km/h),
     /// and on split friction: each stop against the limit v²/(2µg), as a table
@@ -205,6 +228,40 @@ fn main() -> ExitCode {
                             }
                         }
                     }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        failed = true;
+                    }
+                }
+            }
+            if failed {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Command::Compare {
+            scenarios,
+            firmware,
+            firmware_dir,
+            out,
+            twice,
+        } => {
+            let choice = match FirmwareChoice::parse(&firmware, &firmware_dir) {
+                Ok(choice) => choice,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::from(2);
+                }
+            };
+            let mut failed = false;
+            for path in &scenarios {
+                let outcome = Scenario::load(path)
+                    .map_err(|e| e.to_string())
+                    .and_then(|scenario| compare_one(&scenario, &choice, &out, twice));
+                match outcome {
+                    Ok(true) => {}
+                    Ok(false) => failed = true,
                     Err(e) => {
                         eprintln!("error: {e}");
                         failed = true;
@@ -355,6 +412,119 @@ fn run_one(
         eprintln!("error: firmware stopped: {stop}");
     }
     Ok(!record.summary.firmware_stops.is_empty())
+}
+
+/// A run of the emulated car, with its firmware log and how fast it went.
+struct EmulatedRun {
+    record: RunRecord,
+    firmware_log: Vec<String>,
+    wall_s: f64,
+    instructions: u64,
+}
+
+fn run_emulated(scenario: &Scenario, choice: &FirmwareChoice) -> Result<EmulatedRun, String> {
+    let wall = Instant::now();
+    let car = VirtualCar::with_firmware(scenario, choice)?;
+    let mut firmware_log = Vec::new();
+    let mut instructions = 0;
+    let record = report::run_car(car, |car| {
+        for line in car.take_firmware_log() {
+            firmware_log.push(format!(
+                "{:>11.6} {:<12} {}",
+                line.t_us as f64 * 1e-6,
+                line.ecu,
+                line.text
+            ));
+        }
+        instructions = car.firmware_instructions();
+    });
+    Ok(EmulatedRun {
+        record,
+        firmware_log,
+        wall_s: wall.elapsed().as_secs_f64(),
+        instructions,
+    })
+}
+
+/// The run's bus log as `bus.log` holds it (candump).
+fn candump(record: &RunRecord) -> Result<Vec<u8>, String> {
+    let mut bytes = Vec::new();
+    report::write_bus_log(&mut bytes, &record.log).map_err(|e| e.to_string())?;
+    Ok(bytes)
+}
+
+fn write_run(dir: &Path, record: &RunRecord, firmware_log: &[String]) -> Result<(), String> {
+    let written = (|| -> std::io::Result<()> {
+        std::fs::create_dir_all(dir)?;
+        std::fs::write(
+            dir.join("bus.log"),
+            candump(record).map_err(std::io::Error::other)?,
+        )?;
+        let mut trace = BufWriter::new(File::create(dir.join("trace.csv"))?);
+        report::write_trace(&mut trace, &record.trace)?;
+        std::io::Write::flush(&mut trace)?;
+        if !firmware_log.is_empty() {
+            std::fs::write(dir.join("firmware.log"), firmware_log.join("\n") + "\n")?;
+        }
+        report::write_summary_and_plots(dir, record)
+    })();
+    written.map_err(|e| format!("{}: {e}", dir.display()))
+}
+
+/// Compares one scenario on host logic and on the emulated firmware; `Ok(false)` when a
+/// check failed.
+fn compare_one(
+    scenario: &Scenario,
+    choice: &FirmwareChoice,
+    out: &Path,
+    twice: bool,
+) -> Result<bool, String> {
+    let dir = out.join(&scenario.name);
+    let host = report::run(scenario);
+    write_run(&dir.join("host"), &host, &[])?;
+    let emulated = run_emulated(scenario, choice)?;
+    write_run(
+        &dir.join("firmware"),
+        &emulated.record,
+        &emulated.firmware_log,
+    )?;
+    let checks = compare(&host, &emulated.record, &choice.ecus);
+    outln!(
+        "{}: host logic against the firmware of {}",
+        scenario.name,
+        emulated.record.summary.firmware.join(", ")
+    );
+    out!("{}", compare_table(&checks));
+    let mut ok = checks.iter().all(|c| c.ok);
+    for stop in &emulated.record.summary.firmware_stops {
+        outln!("  FAIL firmware stopped: {stop}");
+        ok = false;
+    }
+    outln!(
+        "  {:<28} {:.1} s wall for {:.1} s simulated ({:.2}x real time), {:.1} M instructions per simulated second",
+        "emulated run",
+        emulated.wall_s,
+        scenario.duration_s,
+        scenario.duration_s / emulated.wall_s.max(1e-9),
+        emulated.instructions as f64 / scenario.duration_s / 1e6
+    );
+    if twice {
+        let again = run_emulated(scenario, choice)?;
+        let (first, second) = (candump(&emulated.record)?, candump(&again.record)?);
+        let same = first == second && emulated.firmware_log == again.firmware_log;
+        outln!(
+            "  {} {:<44} {} bytes of bus log and {} firmware log lines, then {} and {}",
+            if same { "ok  " } else { "FAIL" },
+            "the same run twice: the same bus log",
+            first.len(),
+            emulated.firmware_log.len(),
+            second.len(),
+            again.firmware_log.len()
+        );
+        ok &= same;
+    }
+    outln!("  {:<28} {}", "written to", dir.display());
+    Ok(ok)
 }
 
 fn list(dir: &Path) -> ExitCode {
