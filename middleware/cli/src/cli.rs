@@ -35,6 +35,7 @@ use autoplug_tester::{
 };
 use autoplug_transport::{Transport, TransportError, Via};
 use autoplug_virtual_car::console::ReaderMayLeave;
+use autoplug_virtual_car::firmware::FirmwareChoice;
 use autoplug_virtual_car::scenario::Scenario;
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -188,6 +189,9 @@ pub enum Command {
         /// The fleet this vehicle reports to (needs --transmit).
         #[command(flatten)]
         fleet: crate::fleet_cli::VehicleFleetArgs,
+        /// ECUs of the virtual car that run as their firmware.
+        #[command(flatten)]
+        firmware: FirmwareArgs,
     },
     /// The dashboard (the main command): the virtual car in real time (or a live bus), the
     /// gateway on its bus, trips and recordings in a data folder, and the web dashboard on
@@ -249,6 +253,9 @@ pub enum Command {
         /// the page.
         #[command(flatten)]
         fleet: crate::fleet_cli::VehicleFleetArgs,
+        /// ECUs of the virtual car that run as their firmware.
+        #[command(flatten)]
+        firmware: FirmwareArgs,
         /// Show the campaigns of this fleet database on the Fleet view (postgresql://...
         /// or a SQLite file): the manufacturer's side, read only.
         #[arg(long, value_name = "ADDRESS")]
@@ -864,8 +871,10 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             web_origins,
             allowed_hosts,
             fleet,
+            firmware,
         } => {
             let options = GatewayOptions {
+                firmware: firmware.choice(&bus)?,
                 transmit: transmit.then_some((dtc_interval * 1e6) as u64),
                 record,
                 rotate: autoplug_logs::RotatePolicy {
@@ -908,6 +917,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             exit_with_input,
             fleet,
             fleet_db,
+            firmware,
         } => {
             if exit_with_input {
                 // Reads until the other end closes (the parent ended, however it ended).
@@ -945,6 +955,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 None => None,
             };
             let options = GatewayOptions {
+                firmware: firmware.choice(&bus)?,
                 transmit: (virtual_car || (transmit && matches!(bus, BusUrl::Transport(_))))
                     .then_some(60_000_000),
                 record: None,
@@ -1161,6 +1172,43 @@ struct GatewayOptions {
     replay_pages: Option<autoplug_dashboard::dashboard::ReplayPages>,
     /// Report to a fleet (needs `transmit`).
     fleet: Option<autoplug_fleet::link::FleetConfig>,
+    /// ECUs of the virtual car that run as their firmware on emulated MCUs.
+    firmware: Option<FirmwareChoice>,
+}
+
+/// `--firmware`: ECUs of the virtual car that run as their firmware.
+#[derive(Debug, clap::Args, Clone)]
+pub struct FirmwareArgs {
+    /// Run these ECUs of the virtual car as their firmware (the release ELF and the
+    /// bootloader) on emulated STM32F446s instead of host logic: `all`, or names separated
+    /// by commas (cruise,abs).
+    #[arg(long, value_name = "all|ECU,...")]
+    firmware: Option<String>,
+    /// Where the firmware ELF files are: `boot` and `<ecu>-fw`.
+    #[arg(
+        long,
+        value_name = "DIR",
+        default_value = autoplug_virtual_car::firmware::DEFAULT_FIRMWARE_DIR,
+        requires = "firmware"
+    )]
+    firmware_dir: PathBuf,
+}
+
+impl FirmwareArgs {
+    /// The choice, for a bus that is the virtual car.
+    fn choice(&self, bus: &BusUrl) -> Result<Option<FirmwareChoice>, CliError> {
+        let Some(list) = &self.firmware else {
+            return Ok(None);
+        };
+        if !matches!(bus, BusUrl::Virtual(_) | BusUrl::Dashboard) {
+            return Err(CliError::Log(
+                "--firmware runs ECUs of the virtual car: the bus is not the virtual car".into(),
+            ));
+        }
+        FirmwareChoice::parse(list, &self.firmware_dir)
+            .map(Some)
+            .map_err(CliError::Log)
+    }
 }
 
 /// Set by Ctrl-C: the live gateway stops at the next frame or idle moment.
@@ -1205,7 +1253,9 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
                 .map_err(|e| CliError::Log(e.to_string()))?;
             Box::new(source) as Box<dyn autoplug_gateway::FrameSource>
         }
-        _ => bus.open(pace, desk.clone()).map_err(CliError::Log)?,
+        _ => bus
+            .open(pace, desk.clone(), options.firmware.as_ref())
+            .map_err(CliError::Log)?,
     };
     let replaying = matches!(bus, BusUrl::Replay(_));
     if replaying && options.transmit.is_some() {

@@ -287,10 +287,12 @@ impl BusUrl {
     /// Opens the bus as a frame source; `speed` paces the virtual car (1 = real time,
     /// `None` = as fast as the machine goes).
     /// `desk`: a person may drive the virtual car (ignored for a real bus).
+    /// `firmware`: ECUs of the virtual car that run as their firmware on emulated MCUs.
     pub fn open(
         &self,
         speed: Option<f64>,
         desk: Option<Rc<RefCell<crate::driving::DriverDesk>>>,
+        firmware: Option<&autoplug_virtual_car::firmware::FirmwareChoice>,
     ) -> Result<Box<dyn FrameSource>, String> {
         match self {
             BusUrl::Virtual(_) | BusUrl::Dashboard => {
@@ -299,7 +301,10 @@ impl BusUrl {
                     _ => Scenario::parse(DASHBOARD_SCENARIO, "scenarios/dashboard.toml")
                         .map_err(|e| e.to_string())?,
                 };
-                let car = VirtualCar::new(&scenario);
+                let car = match firmware {
+                    Some(choice) => VirtualCar::with_firmware(&scenario, choice)?,
+                    None => VirtualCar::new(&scenario),
+                };
                 let source = match desk {
                     Some(desk) => VirtualCarSource::with_desk(car, desk),
                     None => VirtualCarSource::new(car),

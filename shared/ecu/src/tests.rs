@@ -32,3 +32,32 @@ fn dtcs_print_as_j2012_codes() {
         "C0035-00"
     );
 }
+
+/// A control loop on an MCU polls right after its ticker, a few µs late and not always by
+/// the same amount: the message keeps its period, neither drifting a period behind when
+/// a poll is earlier than the last nor sending twice.
+#[test]
+fn a_period_survives_jittered_polls() {
+    use crate::*;
+    use autoplug_can::VehicleSpeedMsg;
+    let mut tx = PeriodicTx::of::<VehicleSpeedMsg>(); // 10 ms
+    tx.set_message(&VehicleSpeedMsg {
+        vehicle_speed: 50.0,
+    });
+    let latency_us = [40, 3, 25, 1, 60, 2, 30, 7];
+    let mut sent = 0;
+    for (k, latency) in (0..80u64).zip(latency_us.iter().cycle()) {
+        if tx
+            .poll(Instant::from_micros(k * 10_000 + latency))
+            .is_some()
+        {
+            sent += 1;
+        }
+        // A poll between the steps (a frame received) sends nothing new.
+        assert_eq!(tx.poll(Instant::from_micros(k * 10_000 + 4_000)), None);
+    }
+    assert_eq!(sent, 80, "one frame per step");
+    // A poll a period and more late starts the period afresh from it.
+    assert!(tx.poll(Instant::from_micros(830_000)).is_some());
+    assert_eq!(tx.next_due(), Some(Instant::from_micros(840_000)));
+}

@@ -470,6 +470,14 @@ impl VirtualBus {
         true
     }
 
+    /// The frame of `node`'s on the wire now, if one is (a controller cannot abort it: its
+    /// transmission decides).
+    pub fn transmitting(&self, node: NodeId) -> Option<Frame> {
+        self.on_wire
+            .filter(|tx| tx.senders.contains(node))
+            .map(|tx| tx.frame)
+    }
+
     /// When the frame on the wire ends (its EOF, or its error delimiter), if there is one:
     /// the next moment a receiver gets a frame or a sender learns how its frame went.
     pub fn wire_busy_until_ns(&self) -> Option<u64> {

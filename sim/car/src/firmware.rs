@@ -530,3 +530,120 @@ impl Wiring for ecu_abs::AbsEcu {
         Some(ecu_abs::Actuators { brake })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use autoplug_flash::sim::SimFlash;
+
+    #[test]
+    fn the_choice_is_all_or_named_ecus_in_the_catalogues_order() {
+        let dir = Path::new("fw");
+        assert_eq!(FirmwareChoice::parse("all", dir).unwrap().ecus, ECUS);
+        let choice = FirmwareChoice::parse("abs, Cruise,trans", dir).unwrap();
+        assert_eq!(choice.ecus, [Node::Transmission, Node::Cruise, Node::ABS]);
+        assert!(choice.runs(Node::ABS) && !choice.runs(Node::Engine));
+        let twice = FirmwareChoice::parse("cruise,cruise", dir).unwrap_err();
+        assert_eq!(twice, "--firmware: cruise named twice");
+        let unknown = FirmwareChoice::parse("cruise,brakes", dir).unwrap_err();
+        assert!(
+            unknown.starts_with("--firmware: no ECU 'brakes' (all, or some of: engine"),
+            "{unknown}"
+        );
+    }
+
+    #[test]
+    fn a_missing_or_damaged_image_is_refused_with_its_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = load(Node::Cruise, dir.path(), 1).err().unwrap();
+        assert!(missing.contains("boot: No such file"), "{missing}");
+        assert!(missing.contains("-p autoplug-boot"), "{missing}");
+        std::fs::write(dir.path().join("boot"), b"#!/bin/sh\necho not firmware\n").unwrap();
+        let not_elf = load(Node::Cruise, dir.path(), 1).err().unwrap();
+        assert!(
+            not_elf.contains("boot") && not_elf.contains("ELF"),
+            "{not_elf}"
+        );
+    }
+
+    fn chip() -> Chip {
+        Chip::new(SimFlash::new(1), [0; 3])
+    }
+
+    #[test]
+    fn sensors_reach_the_boards_pins() {
+        let mut chip = chip();
+        let sensors = ecu_steering::Sensors {
+            wheel_angle_deg: 67.5,
+            shift_up_button: true,
+            shift_down_button: false,
+            cruise_on_button: false,
+            cruise_off_button: true,
+        };
+        // The firmware's inputs: pull-ups on the four buttons.
+        for pin in [
+            &ecu_steering::pins::SHIFT_UP,
+            &ecu_steering::pins::SHIFT_DOWN,
+            &ecu_steering::pins::CRUISE_ON,
+            &ecu_steering::pins::CRUISE_OFF,
+        ] {
+            let n = u32::from(pin.pin.number);
+            chip.gpio[pin.pin.port_index()]
+                .write(0x0C, 1 << (2 * n), 3 << (2 * n))
+                .unwrap();
+        }
+        ecu_steering::SteeringEcu::drive(&sensors, &mut Bench::new(&mut chip));
+        // 67.5° of ±135° is three quarters of 3.3 V.
+        assert!((chip.adc.inputs()[0] - 2.475).abs() < 1e-4);
+        let idr = |chip: &Chip, pin: &DigitalIn| {
+            chip.gpio[pin.pin.port_index()].read(0x10).unwrap() >> pin.pin.number & 1
+        };
+        use ecu_steering::pins::*;
+        assert_eq!(idr(&chip, &SHIFT_UP), 0, "pressed: to GND");
+        assert_eq!(idr(&chip, &SHIFT_DOWN), 1, "open: the pull-up");
+        assert_eq!(idr(&chip, &CRUISE_OFF), 0);
+
+        let mut chip = self::chip();
+        let gear = ecu_trans::Sensors {
+            current_gear: Gear::Fifth,
+        };
+        ecu_trans::TransEcu::drive(&gear, &mut Bench::new(&mut chip));
+        let code: u32 = ecu_trans::pins::GEAR_ENGAGED
+            .iter()
+            .enumerate()
+            .map(|(bit, line)| idr(&chip, line) << bit)
+            .sum();
+        assert_eq!(i64::from(code), Gear::Fifth.raw());
+    }
+
+    #[test]
+    fn actuators_are_read_once_the_firmware_drives_the_pins() {
+        let mut chip = chip();
+        assert_eq!(
+            ecu_diff::DiffEcu::read(&Bench::new(&mut chip)),
+            None,
+            "pins not set up"
+        );
+        // PB4 in its alternate function, TIM3 channel 1 in PWM mode 1 at 3/4 duty.
+        let pb4 = ecu_diff::pins::TORQUE_SPLIT.pin;
+        chip.gpio[pb4.port_index()]
+            .write(0x00, 2 << 8, 3 << 8)
+            .unwrap();
+        chip.tim3.write(0x2C, 9_999, u32::MAX, 0).unwrap(); // ARR
+        chip.tim3.write(0x18, 6 << 4, u32::MAX, 0).unwrap(); // CCMR1: OC1M = PWM 1
+        chip.tim3.write(0x34, 7_500, u32::MAX, 0).unwrap(); // CCR1
+        chip.tim3.write(0x20, 1, u32::MAX, 0).unwrap(); // CCER: CC1E
+        chip.tim3.write(0x14, 1, u32::MAX, 0).unwrap(); // EGR: UG loads ARR
+        let split = ecu_diff::DiffEcu::read(&Bench::new(&mut chip)).expect("driven");
+        assert!((split.torque_split_nm - 25.0).abs() < 0.01, "{split:?}");
+
+        // The lamp: PA5 an output, high.
+        let lamp = ecu_cruise::pins::ENGAGED_LAMP.pin;
+        chip.gpio[0].write(0x00, 1 << 10, 3 << 10).unwrap();
+        chip.gpio[0]
+            .write(0x14, 1 << lamp.number, 1 << lamp.number)
+            .unwrap();
+        let status = ecu_cruise::CruiseEcu::read(&Bench::new(&mut chip)).expect("driven");
+        assert!(status.engaged);
+    }
+}

@@ -28,8 +28,10 @@ pub struct BusNode {
     pub mcu: Mcu,
     /// Its node on the bus.
     pub node: NodeId,
-    /// The frame each mailbox has handed to the bus and not yet seen through.
-    offered: [Option<Frame>; 3],
+    /// The frame each mailbox has handed to the bus and not yet seen through, with the
+    /// cycle of its transmit request (which tells it from a later request of the same
+    /// mailbox, even one with the same frame).
+    offered: [Option<(Frame, u64)>; 3],
 }
 
 impl BusNode {
@@ -57,14 +59,14 @@ impl BusNode {
 
     /// Transmit requests the bus has not been given yet: (simulated ns of the request,
     /// mailbox, frame).
-    fn new_requests(&self) -> Result<Vec<(u64, usize, Frame)>, Stop> {
+    fn new_requests(&self) -> Result<Vec<(u64, usize, Frame, u64)>, Stop> {
         let can = &self.mcu.chip.can1;
         if can.fifo_priority() {
             return Err(Stop::Unsupported("transmit priority by request order (CAN_MCR.TXFP) on the virtual bus, whose nodes send their lowest identifier first".into()));
         }
         let mut requests = Vec::new();
         for (mailbox, frame, cycle) in can.requests() {
-            if self.offered[mailbox].is_some() {
+            if self.offered[mailbox].is_some_and(|(_, at)| at == cycle) {
                 continue;
             }
             if frame.extended || frame.remote {
@@ -81,25 +83,27 @@ impl BusNode {
                     frame.id
                 )));
             };
-            requests.push((self.mcu.chip.ns_at(cycle), mailbox, bus_frame));
+            requests.push((self.mcu.chip.ns_at(cycle), mailbox, bus_frame, cycle));
         }
         Ok(requests)
     }
 
-    /// Takes back from the bus the frames of mailboxes the firmware aborted.
+    /// Takes back from the bus the frames of mailboxes the firmware aborted, whether the
+    /// mailbox is empty now or holds a request made since (the HAL aborts the
+    /// lowest-priority frame to put a higher one in its place).
     fn withdraw_aborted(&mut self, bus: &mut VirtualBus) {
-        let pending: Vec<usize> = self
+        let pending: Vec<(usize, u64)> = self
             .mcu
             .chip
             .can1
             .requests()
-            .map(|(mailbox, _, _)| mailbox)
+            .map(|(mailbox, _, cycle)| (mailbox, cycle))
             .collect();
         for mailbox in 0..3 {
-            if let Some(frame) = self.offered[mailbox] {
-                if !pending.contains(&mailbox) {
-                    // On the wire already, the frame goes out anyway; the mailbox stays
-                    // aborted (a simplification: bxCAN would report TXOK).
+            if let Some((frame, at)) = self.offered[mailbox] {
+                if !pending.contains(&(mailbox, at)) {
+                    // Aborted before the bus started it (an abort of the frame on the
+                    // wire waits for its end in the bxCAN model).
                     bus.cancel(self.node, frame);
                     self.offered[mailbox] = None;
                 }
@@ -112,7 +116,11 @@ impl BusNode {
     fn collect(&mut self, bus: &mut VirtualBus) {
         let can = &mut self.mcu.chip.can1;
         while let Some(done) = bus.transmitted(self.node) {
-            if let Some(mailbox) = self.offered.iter().position(|f| *f == Some(done.frame)) {
+            if let Some(mailbox) = self
+                .offered
+                .iter()
+                .position(|o| o.is_some_and(|(f, _)| f == done.frame))
+            {
                 if !done.retrying {
                     self.offered[mailbox] = None;
                 }
@@ -155,18 +163,26 @@ pub fn run_together(
         };
         let mut requests = Vec::new();
         for (i, node) in nodes.iter_mut().enumerate() {
+            // The mailbox whose frame is on the wire for this window (the window ends
+            // with it): an abort of it waits for its end.
+            let on_wire = bus.transmitting(node.node).and_then(|frame| {
+                node.offered
+                    .iter()
+                    .position(|o| o.is_some_and(|(f, _)| f == frame))
+            });
+            node.mcu.chip.can1.set_sending(on_wire);
             node.mcu.run_until(next).map_err(|stop| (i, stop))?;
-            for (at, mailbox, frame) in node.new_requests().map_err(|stop| (i, stop))? {
-                requests.push((at.max(now), i, mailbox, frame));
-            }
             node.withdraw_aborted(bus);
+            for (at, mailbox, frame, cycle) in node.new_requests().map_err(|stop| (i, stop))? {
+                requests.push((at.max(now), i, mailbox, frame, cycle));
+            }
         }
-        requests.sort_by_key(|&(at, i, mailbox, _)| (at, i, mailbox));
-        for (at, i, mailbox, frame) in requests {
+        requests.sort_by_key(|&(at, i, mailbox, _, _)| (at, i, mailbox));
+        for (at, i, mailbox, frame, cycle) in requests {
             let node = &mut nodes[i];
             // A mailbox is one frame: the node's queue (three) cannot overflow.
             if bus.send(node.node, frame, at).is_ok() {
-                node.offered[mailbox] = Some(frame);
+                node.offered[mailbox] = Some((frame, cycle));
             }
         }
         bus.run_until(next);

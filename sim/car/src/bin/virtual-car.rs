@@ -480,7 +480,9 @@ fn compare_one(
     twice: bool,
 ) -> Result<bool, String> {
     let dir = out.join(&scenario.name);
+    let host_wall = Instant::now();
     let host = report::run(scenario);
+    let host_wall_s = host_wall.elapsed().as_secs_f64();
     write_run(&dir.join("host"), &host, &[])?;
     let emulated = run_emulated(scenario, choice)?;
     write_run(
@@ -500,6 +502,13 @@ fn compare_one(
         outln!("  FAIL firmware stopped: {stop}");
         ok = false;
     }
+    outln!(
+        "  {:<28} {:.3} s wall for {:.1} s simulated ({:.0}x real time)",
+        "host-logic run",
+        host_wall_s,
+        scenario.duration_s,
+        scenario.duration_s / host_wall_s.max(1e-9)
+    );
     outln!(
         "  {:<28} {:.1} s wall for {:.1} s simulated ({:.2}x real time), {:.1} M instructions per simulated second",
         "emulated run",

@@ -146,6 +146,12 @@ impl Can {
         self.btr & 0xC000_0000
     }
 
+    /// Which mailbox's frame the bus has on the wire (`autoplug_mcu::node`): an abort
+    /// request waits for its transmission's end.
+    pub fn set_sending(&mut self, mailbox: Option<usize>) {
+        self.sending = mailbox;
+    }
+
     /// The pending mailbox to send next (by identifier, or by request order with TXFP),
     /// marked as on the wire, and its frame.
     pub fn next_transmit(&mut self) -> Option<CanFrame> {
@@ -174,6 +180,9 @@ impl Can {
             return;
         };
         let shift = 8 * i as u32;
+        // An abort requested while the frame was on the wire ends with it.
+        let no_retry = self.mcr & (1 << 4) != 0 || self.tsr & (0x80 << shift) != 0;
+        self.tsr &= !(0x80 << shift);
         if acked {
             self.tsr = (self.tsr & !(0xF << shift)) | (0b011 << shift) | (TME0 << i);
             self.mailboxes[i].tir &= !1;
@@ -182,7 +191,7 @@ impl Can {
         }
         if lost_arbitration {
             self.tsr |= 0b100 << shift;
-            if self.mcr & (1 << 4) != 0 {
+            if no_retry {
                 // NART: no automatic retransmission.
                 self.tsr = (self.tsr & !(0b010 << shift)) | (0b001 << shift) | (TME0 << i);
                 self.mailboxes[i].tir &= !1;
@@ -191,7 +200,7 @@ impl Can {
         }
         self.tsr |= 0b1000 << shift;
         self.set_tec(self.tec() + 8);
-        if self.mcr & (1 << 4) != 0 {
+        if no_retry {
             self.tsr = (self.tsr & !(0b010 << shift)) | (0b001 << shift) | (TME0 << i);
             self.mailboxes[i].tir &= !1;
         }
@@ -350,8 +359,14 @@ impl Can {
             return;
         }
         let shift = 8 * mailbox as u32;
+        let abort_requested = self.tsr & (0x80 << shift) != 0;
+        self.tsr &= !(0x80 << shift);
         if ok {
             self.tsr = (self.tsr & !(0xF << shift)) | (0b011 << shift) | (TME0 << mailbox);
+            self.mailboxes[mailbox].tir &= !1;
+        } else if abort_requested {
+            // Failed with an abort requested: aborted, not retried.
+            self.tsr = (self.tsr & !(0xF << shift)) | (0b1001 << shift) | (TME0 << mailbox);
             self.mailboxes[mailbox].tir &= !1;
         } else if retrying {
             self.tsr |= 0b1000 << shift;
@@ -490,13 +505,18 @@ impl Can {
                     if value & (1 << shift) != 0 {
                         self.tsr &= !(0xF << shift);
                     }
-                    if value & (0x80 << shift) != 0
-                        && self.tsr & (TME0 << i) == 0
-                        && self.sending != Some(i)
-                    {
-                        // Abort a pending, not yet sending, request.
-                        self.mailboxes[i].tir &= !1;
-                        self.tsr = (self.tsr & !(0xF << shift)) | (0b001 << shift) | (TME0 << i);
+                    if value & (0x80 << shift) != 0 && self.tsr & (TME0 << i) == 0 {
+                        if self.sending == Some(i) {
+                            // On the wire: ABRQ stays set until the transmission ends;
+                            // sent, it is TXOK, else aborted (RM0390 32.7.1). The HAL
+                            // waits for ABRQ to clear, then takes TXOK as "not aborted".
+                            self.tsr |= 0x80 << shift;
+                        } else {
+                            // Abort a pending, not yet sending, request.
+                            self.mailboxes[i].tir &= !1;
+                            self.tsr =
+                                (self.tsr & !(0xF << shift)) | (0b001 << shift) | (TME0 << i);
+                        }
                     }
                 }
             }
@@ -639,6 +659,40 @@ mod tests {
             "RQCP1 and TXOK1"
         );
         assert_eq!(can.next_transmit().map(|f| f.id), Some(0x200));
+    }
+
+    #[test]
+    fn an_abort_of_the_frame_on_the_wire_waits_for_its_end() {
+        // The HAL aborts the lowest-priority mailbox to make room and takes its frame
+        // back only if ABRQ cleared without TXOK: a frame on the wire that then goes out
+        // must read as sent, or the firmware sends it twice.
+        let mut can = on_bus();
+        can.write(0x184, 1, u32::MAX, 0).unwrap();
+        can.write(0x180, 0x78E << 21 | 1, u32::MAX, 0).unwrap();
+        can.set_sending(Some(0));
+        can.write(0x008, 0x80, u32::MAX, 0).unwrap();
+        let tsr = can.read(0x008).unwrap();
+        assert_ne!(tsr & 0x80, 0, "ABRQ0 set while the frame is on the wire");
+        assert_eq!(tsr & (1 << 26), 0, "mailbox 0 still busy");
+        can.complete(0, true, false);
+        let tsr = can.read(0x008).unwrap();
+        assert_eq!(
+            tsr & 0x83,
+            0b11,
+            "ABRQ0 clear, RQCP0 and TXOK0: it was sent"
+        );
+        // On the wire and then lost: aborted, not retried.
+        can.write(0x180, 0x78E << 21 | 1, u32::MAX, 0).unwrap();
+        can.set_sending(Some(0));
+        can.write(0x008, 0x80, u32::MAX, 0).unwrap();
+        can.complete(0, false, true);
+        let tsr = can.read(0x008).unwrap();
+        assert_eq!(
+            tsr & 0x83,
+            0b01,
+            "ABRQ0 clear, RQCP0 without TXOK0: aborted"
+        );
+        assert_eq!(can.requests().count(), 0, "not retried");
     }
 
     #[test]
