@@ -118,24 +118,8 @@ where
         E::STEP_PERIOD_US,
         timeout_us
     );
-    // The diagnostic stack is polled every millisecond only while it has work: an idle
-    // ECU then wakes for its control step and the frames it receives, not 1000 times a
-    // second (a frame arriving wakes the loop anyway, and may give the stack work).
-    let mut diag_was_idle = true;
     loop {
-        let diag_idle = state.diag.quiescent();
-        if diag_was_idle && !diag_idle {
-            diag_ticker.reset();
-        }
-        diag_was_idle = diag_idle;
-        let diag_due = async {
-            if diag_idle {
-                core::future::pending::<()>().await
-            } else {
-                diag_ticker.next().await
-            }
-        };
-        match select3(ticker.next(), RX_QUEUE.receive(), diag_due).await {
+        match select3(ticker.next(), RX_QUEUE.receive(), diag_ticker.next()).await {
             Either3::First(()) => state.control_step(),
             Either3::Second(frame) => {
                 state.received(&frame);
