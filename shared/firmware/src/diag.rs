@@ -235,24 +235,25 @@ fn write_decimal(out: &mut [u8], mut n: u32) -> usize {
 fn stretched<T>(op: impl FnOnce() -> T) -> T {
     let iwdg = pac::IWDG;
     let (pr, rlr) = (iwdg.pr().read(), iwdg.rlr().read());
-    set_watchdog(FLASH_WATCHDOG_TIMEOUT_US);
+    load_watchdog(
+        pac::iwdg::vals::Pr::DIVIDE_BY64,
+        (FLASH_WATCHDOG_TIMEOUT_US / 2_000).min(0xFFF) as u16,
+    );
     let result = op();
-    iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::ENABLE));
-    iwdg.pr().write_value(pr);
-    iwdg.rlr().write_value(rlr);
-    iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+    load_watchdog(pr.pr(), rlr.rl());
     result
 }
 
-/// Sets the watchdog's timeout (prescaler 64 at the 32 kHz LSI: 2 ms per count) and
-/// feeds it.
-fn set_watchdog(timeout_us: u32) {
+/// Sets the watchdog's prescaler and reload (at the 32 kHz LSI; 2 ms a count at /64) and
+/// feeds it with them. The new values reach the watchdog's own clock domain up to five LSI
+/// cycles later (SR.PVU and SR.RVU busy meanwhile, RM0390 21.4.4): a feed before that
+/// would count down from the old ones, and a long erase would meet the 100 ms watchdog.
+fn load_watchdog(prescaler: pac::iwdg::vals::Pr, reload: u16) {
     let iwdg = pac::IWDG;
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::ENABLE));
-    iwdg.pr()
-        .write(|w| w.set_pr(pac::iwdg::vals::Pr::DIVIDE_BY64));
-    iwdg.rlr()
-        .write(|w| w.set_rl((timeout_us / 2_000).min(0xFFF) as u16));
+    iwdg.pr().write(|w| w.set_pr(prescaler));
+    iwdg.rlr().write(|w| w.set_rl(reload));
+    while iwdg.sr().read().0 != 0 {}
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
 }
 
