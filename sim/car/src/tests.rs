@@ -535,6 +535,22 @@ fn run_ms(car: &mut crate::car::VirtualCar, ms: u64) -> Vec<Frame> {
 }
 
 #[test]
+fn an_injected_frame_enters_at_the_time_the_bus_has_reached() {
+    // Emulated MCUs run with the bus, window by window: a frame from outside must not run
+    // the bus ahead of them (they would meet a tick of frames at once).
+    let mut car = standing_car("correct");
+    run_ms(&mut car, 20);
+    let bus_ns = car.bus().now_ns();
+    assert!(car.inject(Frame::new(0x70D, &[0x02, 0x10, 0x03, 0, 0, 0, 0, 0]).unwrap()));
+    assert_eq!(car.bus().now_ns(), bus_ns, "the bus did not run ahead");
+    // It is answered as before.
+    let frames = run_ms(&mut car, 20);
+    assert!(frames
+        .iter()
+        .any(|f| f.id() == 0x78D && f.data()[1] == 0x50));
+}
+
+#[test]
 fn virtual_ecus_answer_uds_and_obd_on_their_identifiers() {
     use autoplug_can::Node;
     let mut car = standing_car("correct");
