@@ -253,7 +253,12 @@ fn load_watchdog(prescaler: pac::iwdg::vals::Pr, reload: u16) {
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::ENABLE));
     iwdg.pr().write(|w| w.set_pr(prescaler));
     iwdg.rlr().write(|w| w.set_rl(reload));
-    while iwdg.sr().read().0 != 0 {}
+    // Bounded: the LSI runs whenever the watchdog does, so this ends within five LSI
+    // cycles (about 150 us); a chip whose LSI had stopped must not hang here.
+    let mut polls = 0u32;
+    while iwdg.sr().read().0 != 0 && polls < crate::entropy::MAX_POLLS {
+        polls += 1;
+    }
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
 }
 

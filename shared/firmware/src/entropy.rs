@@ -27,9 +27,10 @@ use embassy_stm32::pac;
 /// LSI handshake samples taken at start-up.
 pub const LSI_SAMPLES: usize = 64;
 
-/// Longest wait for one handshake, in polls: about 5 LSI cycles (156 µs) take a few
-/// thousand polls at 168 MHz; a stopped LSI must not hang the start.
-const MAX_POLLS: u32 = 100_000;
+/// Longest wait for one LSI handshake (here and for the watchdog's register updates), in
+/// polls: about 5 LSI cycles (156 µs) take a few thousand polls at 168 MHz; a stopped LSI
+/// must not hang the firmware.
+pub(crate) const MAX_POLLS: u32 = 100_000;
 
 /// The seed source of a start numbered `epoch`: UID, epoch and the LSI samples.
 pub fn seed_source(epoch: u32) -> SeedSource {
