@@ -301,6 +301,15 @@ pub enum Command {
         /// Also write the run's trace, bus log, summary and plots here.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
+        /// ECUs of the virtual car that run as their firmware (the flashed one among
+        /// them); the releases flashed then come from --images.
+        #[command(flatten)]
+        firmware: FirmwareArgs,
+        /// With --firmware: the directory of the signed releases flashed,
+        /// `<ecu>-1.1.0-faulty.img` and `<ecu>-1.2.0.img` (scripts/firmware-demo-images
+        /// builds them).
+        #[arg(long, value_name = "DIR", requires = "firmware")]
+        images: Option<PathBuf>,
     },
 }
 
@@ -816,7 +825,22 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
             timing,
             out,
         ),
-        Command::Demo { which, out: dir } => demo(which, dir.as_deref(), out),
+        Command::Demo {
+            which,
+            out: dir,
+            firmware,
+            images,
+        } => {
+            let on_firmware = match &firmware.firmware {
+                None => None,
+                Some(list) => Some(demo_on_firmware(
+                    which,
+                    FirmwareChoice::parse(list, &firmware.firmware_dir).map_err(CliError::Demo)?,
+                    images.as_deref(),
+                )?),
+            };
+            demo(which, dir.as_deref(), on_firmware.as_ref(), out)
+        }
         Command::Replay {
             log,
             speed,
@@ -930,9 +954,23 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 autoplug_dashboard::dashboard::DataFolder::prepare(&data).map_err(CliError::Log)?;
             let bus = log.map_or(bus, BusUrl::Replay);
             let virtual_car = matches!(bus, BusUrl::Virtual(_) | BusUrl::Dashboard);
+            let firmware = firmware.choice(&bus)?;
             if virtual_car {
-                for name in folder.add_demo_images().map_err(CliError::Log)? {
+                let emulated = firmware.as_ref().map_or(&[][..], |c| &c.ecus[..]);
+                for name in folder.add_demo_images(emulated).map_err(CliError::Log)? {
                     writeln!(out, "firmware library: added {name}")?;
+                }
+                for (ecu, variant, version) in autoplug_dashboard::dashboard::DEMO_IMAGES {
+                    let name =
+                        autoplug_dashboard::dashboard::demo_image_name(ecu, variant, version);
+                    if emulated.contains(&ecu) && !folder.images().join(&name).exists() {
+                        writeln!(
+                            out,
+                            "firmware library: no {name}; {} runs its firmware: put its signed releases there (scripts/firmware-demo-images {})",
+                            ecu.name(),
+                            folder.images().display()
+                        )?;
+                    }
                 }
             }
             let token = match (token, read_only) {
@@ -955,7 +993,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 None => None,
             };
             let options = GatewayOptions {
-                firmware: firmware.choice(&bus)?,
+                firmware,
                 transmit: (virtual_car || (transmit && matches!(bus, BusUrl::Transport(_))))
                     .then_some(60_000_000),
                 record: None,
@@ -1598,17 +1636,105 @@ fn export_log(
     }
 }
 
+/// The releases a demonstration on firmware flashes, read from `images` and checked: the
+/// demonstrated ECU's, the faulty 1.1.0 and the correct 1.2.0, signed with the development
+/// key the firmware's bootloader trusts.
+fn demo_on_firmware(
+    which: Demo,
+    choice: FirmwareChoice,
+    images: Option<&Path>,
+) -> Result<autoplug_live::demo::OnFirmware, CliError> {
+    autoplug_live::demo::check_choice(which, &choice).map_err(|e| CliError::Demo(e.to_string()))?;
+    let dir = images.ok_or_else(|| {
+        CliError::Demo(
+            "--firmware needs --images DIR, the signed releases to flash (scripts/firmware-demo-images DIR builds them)"
+                .into(),
+        )
+    })?;
+    let mut files = Vec::new();
+    for (variant, version) in [
+        (SoftwareVariant::Faulty, Version::new(1, 1, 0)),
+        (SoftwareVariant::Standard, Version::new(1, 2, 0)),
+    ] {
+        let path = dir.join(autoplug_dashboard::dashboard::demo_image_name(
+            which.ecu(),
+            variant,
+            version,
+        ));
+        let bytes = std::fs::read(&path).map_err(|source| {
+            CliError::Image(ImageToolError::Io {
+                context: format!("cannot read the release '{}'", path.display()),
+                source,
+            })
+        })?;
+        let inspections =
+            autoplug_image_tool::inspect(&bytes, Some(&autoplug_image::dev::PUBLIC_KEY)).map_err(
+                |source| {
+                    CliError::Image(ImageToolError::NotAnImage {
+                        path: path.clone(),
+                        source,
+                    })
+                },
+            )?;
+        for inspection in &inspections {
+            let h = &inspection.header;
+            if Some(h.node) != which.ecu().diag_node_number()
+                || h.variant != variant
+                || h.version != version
+            {
+                return Err(CliError::WrongImage(format!(
+                    "'{}' is {} software {} for ECU node {} (the demonstration flashes the {} ECU's {variant} software {version})",
+                    path.display(),
+                    h.variant,
+                    h.version,
+                    h.node,
+                    which.ecu().name(),
+                )));
+            }
+            if let Some(problem) = inspection.problems().first() {
+                return Err(CliError::WrongImage(format!(
+                    "'{}': {problem} (the firmware's bootloader trusts the development key)",
+                    path.display()
+                )));
+            }
+        }
+        files.push(bytes);
+    }
+    let [faulty, fixed] = <[Vec<u8>; 2]>::try_from(files)
+        .map_err(|_| CliError::Demo("two releases expected".into()))?;
+    Ok(autoplug_live::demo::OnFirmware {
+        choice,
+        images: [faulty, fixed],
+    })
+}
+
 /// Runs a demonstration and reports what it showed.
-fn demo(which: Demo, dir: Option<&Path>, out: &mut dyn Write) -> Result<(), CliError> {
+fn demo(
+    which: Demo,
+    dir: Option<&Path>,
+    firmware: Option<&autoplug_live::demo::OnFirmware>,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
     let path = Path::new(which.scenario_file());
     let scenario = Scenario::load(path).map_err(|e| CliError::Demo(e.to_string()))?;
-    let report =
-        autoplug_live::demo::run(which, &scenario).map_err(|e| CliError::Demo(e.to_string()))?;
+    let report = autoplug_live::demo::run_on(which, &scenario, firmware)
+        .map_err(|e| CliError::Demo(e.to_string()))?;
     let w = |out: &mut dyn Write, text: String| writeln!(out, "{text}").map_err(CliError::Output);
     w(
         out,
         format!("{} ({})", scenario.name, which.scenario_file()),
     )?;
+    if let Some(on) = firmware {
+        let names: Vec<_> = on.choice.ecus.iter().map(|n| n.name()).collect();
+        w(
+            out,
+            format!(
+                "on firmware: {} run their release firmware with the bootloader on emulated STM32F446s; {} defmt log lines",
+                names.join(", "),
+                report.firmware_log.len()
+            ),
+        )?;
+    }
     for (variant, version, flash) in &report.flashes {
         w(
             out,
@@ -1664,6 +1790,14 @@ fn demo(which: Demo, dir: Option<&Path>, out: &mut dyn Write) -> Result<(), CliE
         std::fs::create_dir_all(&dir).map_err(CliError::Output)?;
         autoplug_virtual_car::report::write_outputs(&dir, &report.record)
             .map_err(CliError::Output)?;
+        if firmware.is_some() {
+            let text: String = report
+                .firmware_log
+                .iter()
+                .map(|line| format!("{line}\n"))
+                .collect();
+            std::fs::write(dir.join("firmware.log"), text).map_err(CliError::Output)?;
+        }
         w(out, format!("written to {}", dir.display()))?;
     }
     Ok(())

@@ -634,3 +634,68 @@ fn ids_and_flash_over_socketcand() {
     assert_eq!(&cruise.dfu[..bytes.len()], &bytes[..]);
     assert!(cruise.marked);
 }
+
+#[test]
+fn a_demonstration_on_firmware_checks_its_releases_before_it_starts() {
+    use autoplug_image::{SoftwareVariant, Version};
+    use autoplug_virtual_car::diag::build_image;
+    let dir = tempfile::tempdir().unwrap();
+    let images = dir.path().to_str().unwrap();
+    let without = run_args(&["demo", "cruise", "--firmware", "cruise"]).unwrap_err();
+    assert!(
+        without.contains("--firmware needs --images DIR"),
+        "{without}"
+    );
+    let no_firmware = run_args(&["demo", "cruise", "--images", images]).unwrap_err();
+    assert!(no_firmware.contains("--firmware"), "{no_firmware}");
+    let missing =
+        run_args(&["demo", "cruise", "--firmware", "cruise", "--images", images]).unwrap_err();
+    assert!(
+        missing.contains("cannot read the release") && missing.contains("cruise-1.1.0-faulty.img"),
+        "{missing}"
+    );
+
+    let dev = SigningKey::from_seed(autoplug_image::dev::SIGNING_SEED);
+    let write = |name: &str, variant, version, key: &SigningKey| {
+        let image = build_image(Node::Cruise, version, variant, 1024, key);
+        fs::write(dir.path().join(name), image).unwrap();
+    };
+    let (faulty, fixed) = (Version::new(1, 1, 0), Version::new(1, 2, 0));
+    // The correct software under the faulty one's name.
+    write(
+        "cruise-1.1.0-faulty.img",
+        SoftwareVariant::Standard,
+        faulty,
+        &dev,
+    );
+    write("cruise-1.2.0.img", SoftwareVariant::Standard, fixed, &dev);
+    let swapped =
+        run_args(&["demo", "cruise", "--firmware", "cruise", "--images", images]).unwrap_err();
+    assert!(
+        swapped.contains("cruise-1.1.0-faulty.img' is standard software 1.1.0")
+            && swapped.contains("flashes the Cruise ECU's faulty"),
+        "{swapped}"
+    );
+    // Signed with a key the bootloader does not trust.
+    write(
+        "cruise-1.1.0-faulty.img",
+        SoftwareVariant::Faulty,
+        faulty,
+        &dev,
+    );
+    let other = SigningKey::from_seed(SIGNING_SEED);
+    write("cruise-1.2.0.img", SoftwareVariant::Standard, fixed, &other);
+    let unsigned =
+        run_args(&["demo", "cruise", "--firmware", "cruise", "--images", images]).unwrap_err();
+    assert!(
+        unsigned.contains("cruise-1.2.0.img'") && unsigned.contains("development key"),
+        "{unsigned}"
+    );
+    // The flashed ECU must be one that runs its firmware.
+    let elsewhere =
+        run_args(&["demo", "cruise", "--firmware", "abs", "--images", images]).unwrap_err();
+    assert!(
+        elsewhere.contains("the Cruise ECU: it must run as its firmware (--firmware cruise)"),
+        "{elsewhere}"
+    );
+}

@@ -51,11 +51,17 @@ impl DataFolder {
         self.root.join("images")
     }
 
-    /// Writes the demonstration images the library lacks; returns the names written.
-    pub fn add_demo_images(&self) -> Result<Vec<String>, String> {
+    /// Writes the demonstration images the library lacks, except for the ECUs in
+    /// `emulated`: those run their firmware, which needs the real signed releases
+    /// (scripts/firmware-demo-images), not the virtual ECUs' header-only images. Returns
+    /// the names written.
+    pub fn add_demo_images(&self, emulated: &[Node]) -> Result<Vec<String>, String> {
         let key = SigningKey::from_seed(autoplug_image::dev::SIGNING_SEED);
         let mut written = Vec::new();
         for (ecu, variant, version) in DEMO_IMAGES {
+            if emulated.contains(&ecu) {
+                continue;
+            }
             let name = demo_image_name(ecu, variant, version);
             let path = self.images().join(&name);
             if path.exists() {

@@ -10,8 +10,14 @@
 //!    car spins; the correct software is flashed; the same braking keeps it straight. The
 //!    symptom: the heading change during the stop.
 //!
-//! Both images are signed with the development key; the virtual ECU runs what the signed
-//! header names (a host cannot execute the ARM payload: see `autoplug_virtual_car::diag`).
+//! On host logic the images are made here, signed with the development key, and the
+//! virtual ECU runs what the signed header names (a host cannot execute the ARM payload:
+//! see `autoplug_virtual_car::diag`). On firmware ([`OnFirmware`]) the flashed ECU runs its
+//! release firmware with the bootloader on an emulated STM32F446, and the images are
+//! signed releases of the real builds (`scripts/firmware-release`, the faulty one built
+//! with the `faulty` feature): the firmware's UDS server writes them into its other slot,
+//! the bootloader checks the signature and starts them on trial, they confirm themselves,
+//! and what the car does afterwards is what that code does.
 
 use std::fmt;
 
@@ -22,6 +28,7 @@ use autoplug_image::{SigningKey, SoftwareVariant, Version};
 use autoplug_logs::LogFrame;
 use autoplug_virtual_car::car::VirtualCar;
 use autoplug_virtual_car::diag::{build_image, FACTORY_PAYLOAD_LEN};
+use autoplug_virtual_car::firmware::{FirmwareChoice, FirmwareLogLine};
 use autoplug_virtual_car::report::{RunRecord, Summary, TRACE_PERIOD_US};
 use autoplug_virtual_car::scenario::Scenario;
 
@@ -86,6 +93,16 @@ impl Demo {
     }
 }
 
+/// A demonstration on firmware: which ECUs run as their firmware (the flashed one among
+/// them), and the two signed releases flashed into it.
+pub struct OnFirmware {
+    /// The ECUs on emulated MCUs, and where their ELF files are.
+    pub choice: FirmwareChoice,
+    /// The faulty release (1.1.0) and the fix (1.2.0), each a file as
+    /// `scripts/firmware-release` writes it (an image per slot).
+    pub images: [Vec<u8>; 2],
+}
+
 /// How the symptom looked with each software.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Symptom {
@@ -110,6 +127,8 @@ pub struct DemoReport {
     /// (the faulty software, judged since the bus showed it start), and at the end (the
     /// correct software, judged since the fix).
     pub gateway: [EcuDiagnosis; 2],
+    /// The emulated ECUs' defmt log (empty on host logic).
+    pub firmware_log: Vec<FirmwareLogLine>,
 }
 
 /// A demonstration could not run to its end.
@@ -124,6 +143,8 @@ pub enum DemoError {
     },
     /// The car did not do what the scenario needs (e.g. no stop to measure).
     Scenario(String),
+    /// The firmware could not be loaded, or an emulated ECU stopped.
+    Firmware(String),
 }
 
 impl fmt::Display for DemoError {
@@ -134,27 +155,59 @@ impl fmt::Display for DemoError {
                 write!(f, "the flash started at {at_s} s did not end in time")
             }
             DemoError::Scenario(why) => write!(f, "the scenario did not play out: {why}"),
+            DemoError::Firmware(why) => write!(f, "firmware: {why}"),
         }
     }
 }
 
 impl std::error::Error for DemoError {}
 
-/// Runs a demonstration on `scenario` (normally [`Demo::scenario_file`]'s).
+/// Whether `choice` fits a demonstration on firmware: the releases go into the
+/// demonstrated ECU, so that one must run as its firmware.
+pub fn check_choice(demo: Demo, choice: &FirmwareChoice) -> Result<(), DemoError> {
+    if choice.runs(demo.ecu()) {
+        return Ok(());
+    }
+    Err(DemoError::Firmware(format!(
+        "the releases are flashed into the {} ECU: it must run as its firmware (--firmware {})",
+        demo.ecu().name(),
+        autoplug_can::ecu_name(demo.ecu())
+    )))
+}
+
+/// Runs a demonstration on `scenario` (normally [`Demo::scenario_file`]'s) on host logic.
 pub fn run(demo: Demo, scenario: &Scenario) -> Result<DemoReport, DemoError> {
+    run_on(demo, scenario, None)
+}
+
+/// Runs a demonstration on `scenario`, on host logic or on `firmware`.
+pub fn run_on(
+    demo: Demo,
+    scenario: &Scenario,
+    firmware: Option<&OnFirmware>,
+) -> Result<DemoReport, DemoError> {
     let key = SigningKey::from_seed(autoplug_image::dev::SIGNING_SEED);
-    let mut car = VirtualCar::new(scenario);
+    let mut car = match firmware {
+        None => VirtualCar::new(scenario),
+        Some(on) => {
+            check_choice(demo, &on.choice)?;
+            VirtualCar::with_firmware(scenario, &on.choice).map_err(DemoError::Firmware)?
+        }
+    };
     let mut trace = Vec::new();
     let mut flashes = Vec::new();
-    for flash in demo.flashes() {
+    for (i, flash) in demo.flashes().into_iter().enumerate() {
         advance_to(&mut car, flash.at_s, &mut trace);
-        let image = build_image(
-            demo.ecu(),
-            flash.version,
-            flash.variant,
-            FACTORY_PAYLOAD_LEN,
-            &key,
-        );
+        let image = match firmware {
+            Some(on) => on.images[i].clone(),
+            None => build_image(
+                demo.ecu(),
+                flash.version,
+                flash.variant,
+                FACTORY_PAYLOAD_LEN,
+                &key,
+            ),
+        };
         let job = FlashJob::new(FlashConfig::new(demo.ecu(), image, DEV_SECURITY_SECRET))
             .map_err(|e| DemoError::Scenario(e.to_string()))?;
         let mut on_car = OnCar::new(job, &mut car);
@@ -171,6 +224,15 @@ pub fn run(demo: Demo, scenario: &Scenario) -> Result<DemoReport, DemoError> {
         flashes.push((flash.variant, flash.version, report));
     }
     advance_to(&mut car, scenario.duration_s, &mut trace);
+    if let Some(stop) = car.firmware_stops().first() {
+        return Err(DemoError::Firmware(format!(
+            "the {} ECU stopped at {:.3} s: {}",
+            stop.node.name(),
+            stop.t_us as f64 * 1e-6,
+            stop.reason
+        )));
+    }
+    let firmware_log = car.take_firmware_log();
     trace.push(car.trace_row());
     let summary = Summary::compute(scenario, &trace, &car);
     let record = RunRecord {
@@ -210,6 +272,7 @@ pub fn run(demo: Demo, scenario: &Scenario) -> Result<DemoReport, DemoError> {
         symptom,
         record,
         gateway,
+        firmware_log,
     })
 }
 

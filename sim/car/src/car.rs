@@ -898,11 +898,18 @@ impl VirtualCar {
                 )
             }
         };
-        let cruise = self.cruise_status().unwrap_or_else(|| ecu_cruise::Status {
-            // Emulated: the lamp, and the command CruiseAccelMsg carries.
-            engaged: self.ecus.cruise.outputs.is_some_and(|o| o.engaged),
-            set_speed_kmh: 0.0,
-            command: self.bus_view.cruise_accel,
+        let cruise = self.cruise_status().unwrap_or_else(|| {
+            // Emulated: the lamp, the set speed the firmware logged when it engaged, and
+            // the command CruiseAccelMsg carries.
+            let engaged = self.ecus.cruise.outputs.is_some_and(|o| o.engaged);
+            ecu_cruise::Status {
+                engaged,
+                set_speed_kmh: match self.firmware.cruise_set_speed_kmh() {
+                    Some(kmh) if engaged => kmh,
+                    _ => 0.0,
+                },
+                command: self.bus_view.cruise_accel,
+            }
         });
         let pedals = self.ecus.pedals.outputs.unwrap_or_default();
         let c = &self.controls;

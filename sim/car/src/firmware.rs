@@ -81,6 +81,20 @@ pub struct FirmwareLogLine {
     pub text: String,
 }
 
+/// As the car's `firmware.log` and terminal show it: the scenario's time, the ECU, the
+/// line.
+impl std::fmt::Display for FirmwareLogLine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:>11.6} {:<8} {}",
+            self.t_us as f64 * 1e-6,
+            self.ecu,
+            self.text
+        )
+    }
+}
+
 /// An emulated ECU that stopped: its MCU halted, locked up or ended, and left the bus.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FirmwareStop {
@@ -102,6 +116,9 @@ pub(crate) struct EmulatedEcu {
     recent: VecDeque<String>,
     /// HardFaults already reported.
     faults_seen: usize,
+    /// The set speed the cruise firmware latched, as its log line "cruise: engaged at X
+    /// km/h" says: the firmware publishes it nowhere else (the DBC has no signal for it).
+    logged_set_speed_kmh: Option<f32>,
 }
 
 /// The emulated ECUs of a car and their bus nodes (kept apart: the bus runs them as a
@@ -193,6 +210,7 @@ impl Firmware {
             logs,
             recent: VecDeque::new(),
             faults_seen: 0,
+            logged_set_speed_kmh: None,
         });
         id
     }
@@ -285,6 +303,11 @@ impl Firmware {
                     ecu.recent.pop_front();
                 }
                 ecu.recent.push_back(line.text.clone());
+                if ecu.node == Node::Cruise {
+                    if let Some(kmh) = logged_set_speed(&line.text) {
+                        ecu.logged_set_speed_kmh = Some(kmh);
+                    }
+                }
                 push_line(
                     log,
                     dropped,
@@ -314,10 +337,26 @@ impl Firmware {
         &self.stops
     }
 
+    /// The set speed the emulated cruise ECU logged when it last engaged.
+    pub(crate) fn cruise_set_speed_kmh(&self) -> Option<f32> {
+        self.ecus
+            .iter()
+            .find(|e| e.node == Node::Cruise)
+            .and_then(|e| e.logged_set_speed_kmh)
+    }
+
     /// Instructions the emulated cores have run.
     pub(crate) fn instructions(&self) -> u64 {
         self.nodes.iter().map(|n| n.mcu.cpu.instructions()).sum()
     }
+}
+
+/// The speed of a cruise log line `… cruise: engaged at 90.5 km/h …` (ecu-cruise's
+/// `engage`), as defmt prints it.
+fn logged_set_speed(text: &str) -> Option<f32> {
+    let (_, rest) = text.split_once("cruise: engaged at ")?;
+    let (number, _) = rest.split_once(" km/h")?;
+    number.trim().parse::<f32>().ok().filter(|v| v.is_finite())
 }
 
 /// A time on the bus's clock as the scenario's (negative before it began).
@@ -564,6 +603,15 @@ mod tests {
             not_elf.contains("boot") && not_elf.contains("ELF"),
             "{not_elf}"
         );
+    }
+
+    #[test]
+    fn the_cruise_set_speed_is_read_from_its_engage_line() {
+        let line = "45.101234 INFO  cruise: engaged at 89.73126 km/h";
+        assert_eq!(logged_set_speed(line), Some(89.73126));
+        assert_eq!(logged_set_speed("1.0 INFO  cruise: disengaged"), None);
+        assert_eq!(logged_set_speed("cruise: engaged at NaN km/h"), None);
+        assert_eq!(logged_set_speed("cruise: engaged at 90"), None);
     }
 
     fn chip() -> Chip {

@@ -5,17 +5,23 @@
 // pass), driving from the page moves the car, the phone layout fits, and screenshots of
 // every view at desktop and phone size are written for a person to look at.
 //
-// node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR
+// node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR [--scenario-1]
+//
+// --scenario-1: report scenario 1 alone (a dashboard whose cruise ECU runs its firmware on
+// an emulated MCU, its library holding the real signed releases: scripts/dashboard-test
+// --firmware); its screenshots are named firmware-*.png.
 
 import assert from 'node:assert/strict';
 import { mkdirSync } from 'node:fs';
 import { launchChromium, steps, until } from './harness.mjs';
 
-const [base, token, shots] = process.argv.slice(2);
-if (!base || !token || !shots) {
-  console.error('usage: node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR');
+const [base, token, shots, mode] = process.argv.slice(2);
+if (!base || !token || !shots || (mode !== undefined && mode !== '--scenario-1')) {
+  console.error('usage: node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR [--scenario-1]');
   process.exit(2);
 }
+const onlyScenario1 = mode === '--scenario-1';
+const shotPrefix = onlyScenario1 ? 'firmware-' : 'desktop-';
 mkdirSync(shots, { recursive: true });
 
 const VIEWS = {
@@ -117,7 +123,74 @@ async function flash(page, ecu, image) {
   ok(`flashed ${image} into ${ecu} from the ECUs view (bar seen at ${midway.toFixed(0)} %), inventory shows ${inventory}, ${before} → ${running}`);
 }
 
+/** Report scenario 1 from the page: flash the faulty cruise, see it oscillate and the
+ *  verdict, flash the fix, see the verdict clear. The car stands when it starts. */
+async function scenario1(desktop) {
+  // Report scenario 1: the cruise control.
+  await flash(desktop, 'cruise', 'cruise-1.1.0-faulty.img');
+  // What a person sees after a flash: the slot written, the bytes sent, the new slot.
+  await desktop.screenshot({ path: `${shots}/${shotPrefix}ecus-flashed.png` });
+  await view(desktop, 'drive');
+  await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  await accelerateTo(desktop, 90);
+  await desktop.keyboard.press('c');
+  await until('cruise on', async () => (await state()).signals['Vehicle.ADAS.CruiseControl.IsActive'] === 1, 5_000);
+  const speeds = [];
+  const watchUntil = Date.now() + 20_000;
+  while (Date.now() < watchUntil) {
+    speeds.push((await state()).signals['Vehicle.Speed']);
+    await new Promise((r) => setTimeout(r, 200));
+  }
+  await view(desktop, 'car');
+  await desktop.waitForTimeout(500);
+  await desktop.screenshot({ path: `${shots}/${shotPrefix}car-cruising.png` });
+  const swing = Math.max(...speeds.slice(40)) - Math.min(...speeds.slice(40));
+  assert.ok(swing >= 3, `the faulty cruise should oscillate (swing ${swing} km/h)`);
+  await view(desktop, 'diagnostics');
+  const faulty = await until('the cruise ECU flagged', async () => {
+    const v = await verdict(desktop, 'cruise');
+    return v === 'faulty' ? v : null;
+  }, 30_000);
+  const number = await desktop.getAttribute('[data-testid=verdict-cruise] td:nth-child(3)', 'data-number');
+  await desktop.screenshot({ path: `${shots}/${shotPrefix}diagnostics-cruise-faulty.png` });
+  ok(`scenario 1: the faulty cruise oscillates (${swing} km/h peak to peak), Diagnostics flags cruise ${faulty} with ${Number(number).toFixed(2)} km/h rms`);
+  await view(desktop, 'drive');
+  await desktop.keyboard.press('x');
+  await brakeToStop(desktop);
+  await flash(desktop, 'cruise', 'cruise-1.2.0.img');
+  await view(desktop, 'drive');
+  await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  await accelerateTo(desktop, 90);
+  await desktop.keyboard.press('c');
+  await desktop.waitForTimeout(16_000);
+  await view(desktop, 'diagnostics');
+  const fixed = await until('the cruise verdict back to ok', async () => {
+    const v = await verdict(desktop, 'cruise');
+    const n = await desktop.getAttribute('[data-testid=verdict-cruise] td:nth-child(3)', 'data-number');
+    return v === 'ok' && n ? n : null;
+  }, 30_000);
+  const routine = await desktop.textContent('[data-testid=verdict-cruise] td:nth-child(5)');
+  ok(`scenario 1: with the fix flashed the cruise verdict is ok again (${routine}: ${Number(fixed).toFixed(2)} km/h rms)`);
+  await view(desktop, 'drive');
+  await desktop.keyboard.press('x');
+  await brakeToStop(desktop);
+
+}
+
 await run(async () => {
+  if (onlyScenario1) {
+    const desktop = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+    watch(desktop);
+    await desktop.goto(`${base}/car#token=${token}`);
+    await desktop.waitForSelector('[data-testid=speed][data-value]', { timeout: 15_000 });
+    await scenario1(desktop);
+    await view(desktop, 'ecus');
+    await desktop.waitForTimeout(500);
+    await desktop.screenshot({ path: `${shots}/firmware-ecus.png` });
+    assert.deepEqual(problems, [], `the pages logged errors:\n${problems.join('\n')}`);
+    ok('no console errors');
+    return;
+  }
   // Without the token, a write is refused.
   const refused = await fetch(`${base}/api/recording`, { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: '{"on":true}' });
   assert.equal(refused.status, 401);
@@ -220,54 +293,7 @@ await run(async () => {
   await replayPage.close();
   ok(`the recording made from the page replays in a dashboard of its own: it played (${p1.toFixed(1)} -> ${p2.toFixed(1)} s), paused at ${p3.toFixed(1)} s, jumped to 1 s`);
 
-  // Report scenario 1: the cruise control.
-  await flash(desktop, 'cruise', 'cruise-1.1.0-faulty.img');
-  // What a person sees after a flash: the slot written, the bytes sent, the new slot.
-  await desktop.screenshot({ path: `${shots}/desktop-ecus-flashed.png` });
-  await view(desktop, 'drive');
-  await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
-  await accelerateTo(desktop, 90);
-  await desktop.keyboard.press('c');
-  await until('cruise on', async () => (await state()).signals['Vehicle.ADAS.CruiseControl.IsActive'] === 1, 5_000);
-  const speeds = [];
-  const watchUntil = Date.now() + 20_000;
-  while (Date.now() < watchUntil) {
-    speeds.push((await state()).signals['Vehicle.Speed']);
-    await new Promise((r) => setTimeout(r, 200));
-  }
-  await view(desktop, 'car');
-  await desktop.waitForTimeout(500);
-  await desktop.screenshot({ path: `${shots}/desktop-car-cruising.png` });
-  const swing = Math.max(...speeds.slice(40)) - Math.min(...speeds.slice(40));
-  assert.ok(swing >= 3, `the faulty cruise should oscillate (swing ${swing} km/h)`);
-  await view(desktop, 'diagnostics');
-  const faulty = await until('the cruise ECU flagged', async () => {
-    const v = await verdict(desktop, 'cruise');
-    return v === 'faulty' ? v : null;
-  }, 30_000);
-  const number = await desktop.getAttribute('[data-testid=verdict-cruise] td:nth-child(3)', 'data-number');
-  await desktop.screenshot({ path: `${shots}/desktop-diagnostics-cruise-faulty.png` });
-  ok(`scenario 1: the faulty cruise oscillates (${swing} km/h peak to peak), Diagnostics flags cruise ${faulty} with ${Number(number).toFixed(2)} km/h rms`);
-  await view(desktop, 'drive');
-  await desktop.keyboard.press('x');
-  await brakeToStop(desktop);
-  await flash(desktop, 'cruise', 'cruise-1.2.0.img');
-  await view(desktop, 'drive');
-  await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
-  await accelerateTo(desktop, 90);
-  await desktop.keyboard.press('c');
-  await desktop.waitForTimeout(16_000);
-  await view(desktop, 'diagnostics');
-  const fixed = await until('the cruise verdict back to ok', async () => {
-    const v = await verdict(desktop, 'cruise');
-    const n = await desktop.getAttribute('[data-testid=verdict-cruise] td:nth-child(3)', 'data-number');
-    return v === 'ok' && n ? n : null;
-  }, 30_000);
-  const routine = await desktop.textContent('[data-testid=verdict-cruise] td:nth-child(5)');
-  ok(`scenario 1: with the fix flashed the cruise verdict is ok again (${routine}: ${Number(fixed).toFixed(2)} km/h rms)`);
-  await view(desktop, 'drive');
-  await desktop.keyboard.press('x');
-  await brakeToStop(desktop);
+  await scenario1(desktop);
 
   // Report scenario 2: the ABS, braking hard on split friction.
   await flash(desktop, 'abs', 'abs-1.1.0-faulty.img');

@@ -341,12 +341,7 @@ fn run_one(
         &mut trace,
         |car, frames| {
             for line in car.take_firmware_log() {
-                let text = format!(
-                    "{:>11.6} {:<8} {}",
-                    line.t_us as f64 * 1e-6,
-                    line.ecu,
-                    line.text
-                );
+                let text = line.to_string();
                 if realtime {
                     outln!("{text}");
                 }
