@@ -253,6 +253,15 @@ fn load_watchdog(prescaler: pac::iwdg::vals::Pr, reload: u16) {
     iwdg.kr().write(|w| w.set_key(pac::iwdg::vals::Key::ENABLE));
     iwdg.pr().write(|w| w.set_pr(prescaler));
     iwdg.rlr().write(|w| w.set_rl(reload));
+    feed_watchdog_when_loaded();
+}
+
+/// Feeds the watchdog once its prescaler and reload writes have reached it. Also right
+/// after it is started: the start counts down from 0xFFF at the prescaler then in use
+/// (RM0390 21.3.1), which after the seed sampler's /32 is 4 s, not the loop's 100 ms, so a
+/// hang before the first control step would go unnoticed that long.
+pub(crate) fn feed_watchdog_when_loaded() {
+    let iwdg = pac::IWDG;
     // Bounded: the LSI runs whenever the watchdog does, so this ends within five LSI
     // cycles (about 150 us); a chip whose LSI had stopped must not hang here.
     let mut polls = 0u32;

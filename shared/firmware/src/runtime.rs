@@ -221,6 +221,7 @@ where
         let mut watchdog = IndependentWatchdog::new(watchdog, watchdog_timeout_us as u32);
         let ecu = new_ecu(now());
         watchdog.unleash();
+        crate::diag::feed_watchdog_when_loaded();
         Self {
             ecu,
             board,

@@ -41,9 +41,13 @@ impl Default for Iwdg {
 }
 
 impl Iwdg {
+    fn divider(&self) -> u64 {
+        4u64 << self.pr_active.min(6)
+    }
+
+    /// A feed (0xAAAA) loads the counter from RLR.
     fn timeout_ns(&self) -> u64 {
-        let divider = 4u64 << self.pr_active.min(6);
-        (self.rlr_active as u64 + 1) * divider * LSI_NS
+        (self.rlr_active as u64 + 1) * self.divider() * LSI_NS
     }
 
     /// When the watchdog resets the chip, if running.
@@ -91,9 +95,14 @@ impl Iwdg {
                         self.expires = Some(now_ns + self.timeout_ns());
                     }
                 }
+                // The start counts down from the counter's reset value 0xFFF, not from
+                // RLR (RM0390 21.3.1): until the first feed the period is the longest one
+                // at the prescaler then in use.
                 0xCCCC => {
                     self.unlocked = false;
-                    self.expires = Some(now_ns + self.timeout_ns());
+                    if self.expires.is_none() {
+                        self.expires = Some(now_ns + 0x1000 * self.divider() * LSI_NS);
+                    }
                 }
                 _ => self.unlocked = false,
             },
@@ -126,8 +135,12 @@ mod tests {
         assert_eq!(iwdg.read(0x0C, 0).unwrap(), 0b11, "PVU and RVU busy");
         assert_eq!(iwdg.read(0x0C, 5 * LSI_NS).unwrap(), 0);
         iwdg.write(0x00, 0xCCCC, u32::MAX, 5 * LSI_NS).unwrap();
+        assert_eq!(
+            iwdg.expires(),
+            Some(5 * LSI_NS + 0x1000 * 32 * LSI_NS),
+            "started: from the counter's reset value 0xFFF"
+        );
         let timeout = 100 * 32 * LSI_NS;
-        assert_eq!(iwdg.expires(), Some(5 * LSI_NS + timeout));
         iwdg.write(0x00, 0xAAAA, u32::MAX, 1_000_000).unwrap();
         assert_eq!(
             iwdg.expires(),
