@@ -158,6 +158,14 @@ pub async fn transmit(mut tx: CanTx<'static>, queue: &'static TxQueue) -> ! {
     }
 }
 
+/// Whether every frame queued for [`transmit`] is on the bus: the queue empty and CAN1's
+/// three transmit mailboxes empty (the transmit task holds a frame only while it waits
+/// for a mailbox, when none is empty).
+pub fn all_sent(queue: &TxQueue) -> bool {
+    let tsr = pac::CAN1.tsr().read();
+    queue.is_empty() && tsr.tme(0) && tsr.tme(1) && tsr.tme(2)
+}
+
 /// Queues a frame for [`transmit`] without waiting; counts it as dropped if the queue is
 /// full (the bus is off or saturated), so the control loop never blocks on the bus.
 pub fn queue_for_transmit(queue: &TxQueue, frame: Frame) {

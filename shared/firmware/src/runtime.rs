@@ -177,6 +177,8 @@ struct LoopState<E, B> {
     steps: u32,
     sent: u32,
     logged_dtcs: Option<(usize, u32, u32)>,
+    /// Since when a long operation's next step has waited for the transmit path to empty.
+    resume_held_since: Option<Instant>,
 }
 
 /// The backend of one diagnostic call, from the loop's state (a macro, not a method, so
@@ -234,6 +236,7 @@ where
             steps: 0,
             sent: 0,
             logged_dtcs: None,
+            resume_held_since: None,
         }
     }
 
@@ -275,11 +278,31 @@ where
     }
 
     /// The diagnostic stack's timers, while it has work.
+    ///
+    /// The stack takes a frame as sent when it is queued (see `transmit`), but a long
+    /// operation's next step, a sector erase, stalls the core for a second, and the 0x78
+    /// before it must be on the bus by then. When the 1 ms tick fell due while the loop
+    /// handled the request, the next `select3` returned at once without yielding, the
+    /// erase began before the transmit task had run, and the 0x78 came after the tester's
+    /// P2 (on the emulated car, for requests ending in 50 of the tick's 1000 µs:
+    /// `firmware_update.rs`). So that step waits until the transmit path is empty, at most
+    /// the P2server the ECU announces; after that the tester has given up on the 0x78 and
+    /// the step goes ahead regardless.
     #[inline(never)]
     fn diag_poll(&mut self) {
-        if !self.diag.quiescent() {
-            self.diag.poll(now(), &mut backend!(self));
+        if self.diag.quiescent() {
+            return;
         }
+        let now = now();
+        if self.diag.resumes_after_send() && !can_io::all_sent(&TX_QUEUE) {
+            let since = *self.resume_held_since.get_or_insert(now);
+            let p2_us = u64::from(self.diag.server().config().p2_ms) * 1000;
+            if now.micros_since(since) < p2_us {
+                return;
+            }
+        }
+        self.resume_held_since = None;
+        self.diag.poll(now, &mut backend!(self));
     }
 
     /// Queues every frame the logic and the diagnostic stack have to send; returns the

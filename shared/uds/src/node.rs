@@ -237,6 +237,15 @@ impl DiagNode {
             && !self.server.programming_pending()
     }
 
+    /// Whether a long operation waits for its last frame (a 0x78) to be out before its
+    /// next step, which [`DiagNode::poll`] takes once the channel is idle. A caller that
+    /// confirms a frame when it queues it rather than when it is on the bus (the firmware)
+    /// holds that poll until its transmit path is empty: the next step may stall the core
+    /// (a sector erase, a second or more) with the 0x78 still queued, past the tester's P2.
+    pub fn resumes_after_send(&self) -> bool {
+        self.resume_after_send
+    }
+
     /// Whether `id` is one of the diagnostic identifiers this ECU listens to.
     pub fn accepts(&self, id: u16) -> bool {
         Some(id) == self.node.diag_request_id() || id == DIAG_FUNCTIONAL_REQUEST_ID

@@ -425,6 +425,11 @@ impl Server {
         Ok(())
     }
 
+    /// The timing and security parameters it was made with.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
     /// The active session.
     pub fn session(&self) -> Session {
         self.session

@@ -961,6 +961,45 @@ fn a_download_over_iso_tp_frames_reaches_the_dfu_partition() {
     assert_eq!(wire.ecu_node.take_reset(), Some(ResetKind::Hard));
 }
 
+/// A long operation's next step waits for its 0x78 to be confirmed, and the node says it is
+/// waiting: the firmware, which confirms a frame when it queues it, holds its poll on that
+/// until its transmit path is empty (a sector erase stalls its core for a second).
+#[test]
+fn a_long_operation_waits_for_its_0x78_to_be_out() {
+    let mut wire = Wire::new();
+    let ask = |wire: &mut Wire, request: &[u8]| wire.exchange(request, 10_000).expect("an answer");
+    assert_eq!(ask(&mut wire, &[0x10, 0x03])[..2], [0x50, 0x03]);
+    assert_eq!(ask(&mut wire, &[0x10, 0x02])[..2], [0x50, 0x02]);
+    let seed: [u8; 16] = ask(&mut wire, &[0x27, 0x01])[2..].try_into().unwrap();
+    let mut send = vec![0x27, 0x02];
+    send.extend_from_slice(&key_for(SECRET, NODE, &seed));
+    assert_eq!(ask(&mut wire, &send), [0x67, 0x02]);
+    assert!(!wire.ecu_node.resumes_after_send());
+
+    wire.ecu.dfu.fill(0);
+    let now = wire.now;
+    wire.tester.send(now, &[0x31, 0x01, 0xFF, 0x00]).unwrap();
+    let request = wire.tester.poll_transmit(now).expect("the erase request");
+    wire.tester.confirm_transmit(now);
+    wire.ecu_node.on_frame(now, &request, &mut wire.ecu);
+    wire.ecu_node.poll(now, &mut wire.ecu);
+    let pending = wire.ecu_node.poll_transmit(now).expect("a first response");
+    assert_eq!(pending.data()[..4], [0x03, 0x7F, 0x31, 0x78]);
+    assert!(wire.ecu_node.resumes_after_send());
+    // Handed out, not confirmed: polls leave the flash alone.
+    for ms in 1..=20 {
+        wire.ecu_node
+            .poll(now.plus_micros(ms * 1000), &mut wire.ecu);
+    }
+    assert!(wire.ecu.dfu[..SECTOR].iter().all(|&b| b == 0));
+    assert!(wire.ecu_node.resumes_after_send());
+    // Out: the next poll erases.
+    let now = now.plus_micros(21_000);
+    wire.ecu_node.confirm_transmit(now);
+    wire.ecu_node.poll(now, &mut wire.ecu);
+    assert!(wire.ecu.dfu[..SECTOR].iter().all(|&b| b == 0xFF));
+}
+
 #[test]
 fn obd_requests_on_0x7df_are_answered_on_the_iso_15765_4_identifier() {
     let mut node =
