@@ -25,6 +25,7 @@ use autoplug_can::{Frame, Node};
 use autoplug_ecu::Instant;
 use autoplug_flash::ab::ImageSlot;
 use autoplug_flash::sim::{FlashOp, SimFlash};
+use autoplug_flash::{FLASH_BASE, FLASH_SIZE};
 use autoplug_mcu::mcu::{Mcu, Stop};
 use autoplug_mcu::node::{run_together, BusNode};
 use autoplug_mcu::rtt::RttLog;
@@ -535,5 +536,156 @@ fn a_power_cut_at_any_flash_operation_of_an_update_leaves_a_complete_image() {
     println!(
         "firmware A/B power-cut sweep: {} cuts, 0 bricks; after the cut the board ran the old image {old} times, the new one {new} times; {retries} downloads after a cut, all in",
         cuts.len()
+    );
+}
+
+/// The whole flash as a tester reads it back.
+fn image_of(flash: &SimFlash) -> Vec<u8> {
+    let mut bytes = vec![0; FLASH_SIZE as usize];
+    flash.read(FLASH_BASE, &mut bytes).expect("the flash reads");
+    bytes
+}
+
+/// A power cut at every one of the update's flash operations in turn, each board then
+/// powered on: it must start a complete image, the old or the new one. The update runs once,
+/// its operations traced; the flash as a cut at operation k leaves it is then rebuilt from
+/// the factory flash by replaying operations 0..k and cutting the power in operation k
+/// (what an interrupted erase or program leaves is the simulated flash's own, as in the run
+/// above), which takes milliseconds where rerunning the download takes most of a second.
+/// The bytes of each program come from the updated flash: the trace programs no byte twice
+/// (checked), and replaying all of it gives the updated flash byte for byte (checked). A
+/// download must go in after every cut outside the image's words and after every
+/// `AUTOPLUG_RETRY_STRIDE`-th inside (default 512). On demand (14,789 cuts): `cargo test -p
+/// autoplug-live --test firmware_update -- --ignored --nocapture every_flash_operation`;
+/// `AUTOPLUG_CUT_STRIDE=N` cuts at every N-th operation only.
+#[test]
+#[ignore = "on demand (minutes): needs the firmware and the releases (scripts/firmware-demo-images target/demo-images)"]
+fn every_flash_operation_of_an_update_cut_in_turn_leaves_a_board_that_starts_a_complete_image() {
+    let env = |name: &str, default: usize| -> usize {
+        std::env::var(name)
+            .ok()
+            .map(|s| {
+                s.parse()
+                    .unwrap_or_else(|_| panic!("{name}: a whole number"))
+            })
+            .unwrap_or(default)
+            .max(1)
+    };
+    let (cut_stride, retry_stride) = (
+        env("AUTOPLUG_CUT_STRIDE", 1),
+        env("AUTOPLUG_RETRY_STRIDE", 512),
+    );
+    let update = release("cruise-1.2.0.img");
+    let started = std::time::Instant::now();
+
+    let mut bench = Bench::factory();
+    bench.idle(1000).unwrap();
+    let factory = bench.flash().clone();
+    bench.flash().record_trace(true);
+    done(bench.download(&update), "the update");
+    bench.idle(1000).unwrap();
+    let ops: Vec<FlashOp> = bench.flash().trace().to_vec();
+    bench.flash().record_trace(false);
+    let updated = bench.flash().clone();
+
+    // No byte programmed twice between erases of its sector: each program's bytes are the
+    // updated flash's.
+    let mut programmed = vec![false; FLASH_SIZE as usize];
+    for (k, op) in ops.iter().enumerate() {
+        match *op {
+            FlashOp::Erase { sector } => {
+                let from = (sector.start - FLASH_BASE) as usize;
+                programmed[from..from + sector.size as usize].fill(false);
+            }
+            FlashOp::Program { address, len } => {
+                let from = (address - FLASH_BASE) as usize;
+                for byte in &mut programmed[from..from + len as usize] {
+                    assert!(!*byte, "operation {k} ({op}) programs a byte again");
+                    *byte = true;
+                }
+            }
+        }
+    }
+    let apply = |flash: &mut SimFlash, op: &FlashOp| match *op {
+        FlashOp::Erase { sector } => flash.erase_sector(sector.index),
+        FlashOp::Program { address, len } => {
+            let mut data = vec![0; len as usize];
+            updated
+                .read(address, &mut data)
+                .expect("the updated flash reads");
+            flash.program(address, &data)
+        }
+    };
+    let mut before = factory.clone();
+    for op in &ops {
+        apply(&mut before, op).expect("the replay programs as the run did");
+    }
+    assert!(
+        image_of(&before) == image_of(&updated),
+        "the replay gives the updated flash"
+    );
+
+    let in_image = |op: &FlashOp| matches!(op, FlashOp::Program { address, .. } if ImageSlot::B.region().contains(*address));
+    let (mut cuts, mut old, mut new, mut retries, mut image_seen) = (0, 0, 0, 0, 0);
+    let mut before = factory;
+    for (k, op) in ops.iter().enumerate() {
+        let image_op = in_image(op);
+        if k % cut_stride == 0 || k + 1 == ops.len() {
+            cuts += 1;
+            let mut flash = before.clone();
+            flash.cut_power_at(0);
+            assert!(
+                apply(&mut flash, op).is_err(),
+                "cut at operation {k} ({op}): not cut"
+            );
+            assert!(!flash.is_powered());
+            bench = bench.power_on_with(flash);
+            // To the control loop (a repair after the cut may erase a sector first).
+            let mut ran_ms = 0;
+            while ran_ms < 200 || (bench.running().is_none() && ran_ms < 1500) {
+                bench.idle(50).unwrap_or_else(|stop| {
+                    panic!(
+                        "cut at operation {k} ({op}): after power returned the MCU stopped: {stop}"
+                    )
+                });
+                ran_ms += 50;
+            }
+            let running = bench.running();
+            match &running {
+                Some(Running::Factory) => old += 1,
+                Some(Running::Release {
+                    slot: ImageSlot::B,
+                    version,
+                }) if version == "1.2.0" => new += 1,
+                other => panic!(
+                    "cut at operation {k} ({op}): a brick: it runs {other:?}; its log:\n{}",
+                    bench.lines.join("\n")
+                ),
+            }
+            if running == Some(Running::Factory) && (!image_op || image_seen % retry_stride == 0) {
+                bench.idle(400).unwrap();
+                done(bench.download(&update), "the retry");
+                bench.idle(600).unwrap();
+                assert_eq!(
+                    bench.running(),
+                    Some(Running::Release {
+                        slot: ImageSlot::B,
+                        version: "1.2.0".into()
+                    }),
+                    "cut at operation {k} ({op}): after the retry"
+                );
+                retries += 1;
+            }
+            bench.lines.clear();
+        }
+        if image_op {
+            image_seen += 1;
+        }
+        apply(&mut before, op).expect("the replay programs as the run did");
+    }
+    println!(
+        "firmware A/B power-cut sweep, replayed: {} flash operations, cut at {cuts}, 0 bricks; after the cut the board ran the old image {old} times, the new one {new} times; {retries} downloads after a cut, all in; {:.0} s",
+        ops.len(),
+        started.elapsed().as_secs_f64()
     );
 }
