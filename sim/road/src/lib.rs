@@ -1,0 +1,699 @@
+//! Roads for the AutoPlug virtual car (issue 32): a centreline of straights, arcs and
+//! clothoids, the road's width, grade sections and friction patches (wet, icy, split
+//! friction), and the queries the simulation asks of it every step: where a point lies on
+//! the road (station along it, lateral offset, the road's heading there) and what surface
+//! is under it.
+//!
+//! Every [`Segment`]'s curvature varies linearly with the distance along it: zero for a
+//! straight, constant for an arc, from one to the other for a clothoid, the transition road
+//! design puts between a straight and an arc so that the steering wheel turns at a steady
+//! rate rather than in a step. The heading along a segment is then exact (a quadratic in
+//! the distance); positions are its integral, taken by Simpson's rule every
+//! [`SAMPLE_M`] (clothoids have no closed form: Fresnel integrals), and kept as samples
+//! that queries interpolate. Written here rather than taken from a crate: the geometry is
+//! a heading integral and a nearest-point search, and what the simulation needs from it
+//! (warm-started searches, patches across part of the width, closed circuits) is its own.
+//!
+//! Conventions: x east, y north, metres; headings in radians from +x, counter-clockwise;
+//! a positive radius or curvature turns left; lateral offsets are positive to the left of
+//! the direction of travel.
+
+use std::f64::consts::PI;
+use std::fmt;
+
+pub mod file;
+pub mod follow;
+
+/// Spacing of the centreline's samples, m: the integration's step, and the grid the
+/// nearest-point search walks (a pose between samples is integrated from the one before,
+/// and a located point is refined onto the exact centreline).
+pub const SAMPLE_M: f64 = 0.25;
+
+/// The tightest radius a segment may have, m: below a car's own turning circle (the Evo
+/// VI's is about 5.4 m at the kerb) a road makes no sense.
+pub const MIN_RADIUS_M: f64 = 5.0;
+
+/// The longest road, m (a bound on the samples kept: 400,000).
+pub const MAX_LENGTH_M: f64 = 100_000.0;
+
+/// How far a closed road's end may lie from its start and still close: position, m.
+pub const CLOSURE_GAP_M: f64 = 0.05;
+
+/// ... and heading, radians (0.1°).
+pub const CLOSURE_HEADING_RAD: f64 = 0.1 * PI / 180.0;
+
+/// Peak friction of dry asphalt, the road's own surface unless a patch says otherwise
+/// (the vehicle model's reference: `autoplug_vehicle::Environment::mu`).
+pub const DRY_ASPHALT_MU: f64 = 1.0;
+
+/// Peak friction beyond the road's edges: grass, about 0.35 (dry) to 0.2 (wet) in the
+/// tyre literature; the dry value.
+pub const GRASS_MU: f64 = 0.35;
+
+/// How far a warm-started search looks either side of its hint, m: a car at 300 km/h
+/// moves 0.083 m in the simulation's 1 ms step.
+const SEARCH_WINDOW_M: f64 = 8.0;
+
+/// One piece of the centreline: its curvature goes linearly from `curvature_start` to
+/// `curvature_end` (1/m, positive left) over `length_m`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Segment {
+    /// Length along the centreline, m.
+    pub length_m: f64,
+    /// Curvature where it starts, 1/m.
+    pub curvature_start: f64,
+    /// Curvature where it ends, 1/m.
+    pub curvature_end: f64,
+}
+
+impl Segment {
+    /// A straight of `length_m`.
+    pub fn straight(length_m: f64) -> Self {
+        Self {
+            length_m,
+            curvature_start: 0.0,
+            curvature_end: 0.0,
+        }
+    }
+
+    /// An arc of `length_m` on `radius_m` (positive: a left-hand bend).
+    pub fn arc(length_m: f64, radius_m: f64) -> Self {
+        Self {
+            length_m,
+            curvature_start: 1.0 / radius_m,
+            curvature_end: 1.0 / radius_m,
+        }
+    }
+
+    /// A clothoid of `length_m` from radius `from_radius_m` to `to_radius_m` (positive
+    /// left; `f64::INFINITY` for a straight's end).
+    pub fn clothoid(length_m: f64, from_radius_m: f64, to_radius_m: f64) -> Self {
+        Self {
+            length_m,
+            curvature_start: 1.0 / from_radius_m,
+            curvature_end: 1.0 / to_radius_m,
+        }
+    }
+
+    /// The curvature `s` metres into the segment.
+    pub fn curvature_at(&self, s: f64) -> f64 {
+        self.curvature_start + (self.curvature_end - self.curvature_start) * s / self.length_m
+    }
+
+    /// How far the heading has turned `s` metres into the segment, radians.
+    pub fn turn_at(&self, s: f64) -> f64 {
+        self.curvature_start * s
+            + (self.curvature_end - self.curvature_start) * s * s / (2.0 * self.length_m)
+    }
+
+    /// The whole segment's turn, radians.
+    pub fn turn(&self) -> f64 {
+        self.turn_at(self.length_m)
+    }
+
+    fn check(&self, index: usize) -> Result<(), RoadError> {
+        let bad = |what: String| Err(RoadError::Segment { index, what });
+        if !self.length_m.is_finite() || self.length_m <= 0.0 {
+            return bad(format!(
+                "length {} m: a length above 0 is needed",
+                self.length_m
+            ));
+        }
+        for curvature in [self.curvature_start, self.curvature_end] {
+            if !curvature.is_finite() || curvature.abs() > 1.0 / MIN_RADIUS_M {
+                return bad(format!(
+                    "radius {:.2} m: radii of at least {MIN_RADIUS_M} m (or a straight) are needed",
+                    1.0 / curvature
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A position and heading on the plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    /// East, m.
+    pub x_m: f64,
+    /// North, m.
+    pub y_m: f64,
+    /// Heading, radians from east, counter-clockwise.
+    pub heading_rad: f64,
+}
+
+/// A stretch of the road with a friction of its own, across part or all of its width.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Patch {
+    /// What it is (shown on the world view): "wet", "ice", "split-μ pad"...
+    pub name: String,
+    /// Where it starts and ends along the road, m (on a closed road it may run over the
+    /// start: `from_m` > `to_m`).
+    pub from_m: f64,
+    /// See `from_m`.
+    pub to_m: f64,
+    /// Its right and left edges, m from the centreline (positive left): the right half of
+    /// the road is `-width/2 ..= 0`.
+    pub right_m: f64,
+    /// See `right_m`.
+    pub left_m: f64,
+    /// Its peak friction coefficient.
+    pub mu: f64,
+}
+
+/// A stretch of constant grade.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grade {
+    /// Where it starts along the road, m.
+    pub from_m: f64,
+    /// Where it ends, m.
+    pub to_m: f64,
+    /// Rise per 100 m of run, positive uphill in the road's direction.
+    pub percent: f64,
+}
+
+/// Where a point lies relative to the road.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Location {
+    /// Distance along the centreline of the nearest centreline point, m.
+    pub station_m: f64,
+    /// Offset from the centreline, m, positive to the left.
+    pub lateral_m: f64,
+    /// The road's heading there, radians.
+    pub heading_rad: f64,
+}
+
+/// The surface under a point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surface {
+    /// Where the point is.
+    pub location: Location,
+    /// Whether it is between the road's edges.
+    pub on_road: bool,
+    /// Peak friction coefficient.
+    pub mu: f64,
+    /// The road's grade there, percent, in the road's direction.
+    pub grade_percent: f64,
+}
+
+impl Surface {
+    /// The grade a car heading `heading_rad` meets, percent: the road's grade times the
+    /// cosine between the car's heading and the road's (uphill ahead positive), which is
+    /// what `autoplug_vehicle::Environment::grade_percent` takes.
+    pub fn grade_along(&self, heading_rad: f64) -> f64 {
+        self.grade_percent * (heading_rad - self.location.heading_rad).cos()
+    }
+}
+
+/// Why a road description was refused.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RoadError {
+    /// No segments.
+    Empty,
+    /// A segment that cannot be driven.
+    Segment {
+        /// Its index, from 0.
+        index: usize,
+        /// What is wrong.
+        what: String,
+    },
+    /// The width.
+    Width(f64),
+    /// The whole road is too long.
+    TooLong(f64),
+    /// The start pose has a non-finite number.
+    Start,
+    /// A patch.
+    Patch {
+        /// Its index, from 0.
+        index: usize,
+        /// What is wrong.
+        what: String,
+    },
+    /// A grade section.
+    Grade {
+        /// Its index, from 0.
+        index: usize,
+        /// What is wrong.
+        what: String,
+    },
+    /// A closed road whose end does not meet its start.
+    NotClosed {
+        /// The gap, m.
+        gap_m: f64,
+        /// The heading error, degrees.
+        heading_deg: f64,
+    },
+    /// A closed road whose grades do not come back to its start's height.
+    HeightNotClosed {
+        /// The rise over the lap, m.
+        rise_m: f64,
+    },
+}
+
+impl fmt::Display for RoadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RoadError::Empty => write!(f, "a road needs at least one segment"),
+            RoadError::Segment { index, what } => write!(f, "segment {}: {what}", index + 1),
+            RoadError::Width(w) => write!(f, "width {w} m: a width from 2 to 50 m is needed"),
+            RoadError::TooLong(l) => write!(
+                f,
+                "the road is {l:.0} m long: at most {MAX_LENGTH_M:.0} m"
+            ),
+            RoadError::Start => write!(f, "the start position and heading must be numbers"),
+            RoadError::Patch { index, what } => write!(f, "patch {}: {what}", index + 1),
+            RoadError::Grade { index, what } => write!(f, "grade {}: {what}", index + 1),
+            RoadError::NotClosed { gap_m, heading_deg } => write!(
+                f,
+                "a closed road must end where it starts: its end is {gap_m:.2} m and {:.2}° off (at most {CLOSURE_GAP_M} m and 0.1°)",
+                heading_deg.abs()
+            ),
+            RoadError::HeightNotClosed { rise_m } => write!(
+                f,
+                "a closed road's grades must bring it back to its start's height: a lap rises {rise_m:.2} m"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for RoadError {}
+
+/// A centreline sample.
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    s: f64,
+    x: f64,
+    y: f64,
+    heading: f64,
+}
+
+/// A road: its centreline, width, surfaces and grades.
+#[derive(Clone, Debug)]
+pub struct Road {
+    start: Pose,
+    segments: Vec<Segment>,
+    /// Where each segment starts along the road, m.
+    segment_starts: Vec<f64>,
+    width_m: f64,
+    closed: bool,
+    patches: Vec<Patch>,
+    grades: Vec<Grade>,
+    samples: Vec<Sample>,
+    length_m: f64,
+}
+
+impl Road {
+    /// An open road from `start` along `segments`, `width_m` wide (2 to 50 m), dry
+    /// asphalt, level.
+    pub fn new(start: Pose, segments: Vec<Segment>, width_m: f64) -> Result<Self, RoadError> {
+        if segments.is_empty() {
+            return Err(RoadError::Empty);
+        }
+        if ![start.x_m, start.y_m, start.heading_rad]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(RoadError::Start);
+        }
+        if !(2.0..=50.0).contains(&width_m) {
+            return Err(RoadError::Width(width_m));
+        }
+        for (index, segment) in segments.iter().enumerate() {
+            segment.check(index)?;
+        }
+        let length_m: f64 = segments.iter().map(|s| s.length_m).sum();
+        if length_m > MAX_LENGTH_M {
+            return Err(RoadError::TooLong(length_m));
+        }
+        let mut segment_starts = Vec::with_capacity(segments.len());
+        let mut samples = Vec::with_capacity((length_m / SAMPLE_M) as usize + segments.len() + 1);
+        let (mut x, mut y, mut heading, mut s0) = (start.x_m, start.y_m, start.heading_rad, 0.0);
+        samples.push(Sample {
+            s: 0.0,
+            x,
+            y,
+            heading,
+        });
+        for segment in &segments {
+            segment_starts.push(s0);
+            let steps = (segment.length_m / SAMPLE_M).ceil().max(1.0) as usize;
+            let step = segment.length_m / steps as f64;
+            let base = heading;
+            for i in 0..steps {
+                let (a, b) = (i as f64 * step, (i + 1) as f64 * step);
+                let m = 0.5 * (a + b);
+                // Simpson's rule on each step: the heading is a quadratic in s, its cosine
+                // and sine smooth; the error per step is O(step^5 k^4).
+                let h = |s: f64| base + segment.turn_at(s);
+                let (ha, hm, hb) = (h(a), h(m), h(b));
+                x += step / 6.0 * (ha.cos() + 4.0 * hm.cos() + hb.cos());
+                y += step / 6.0 * (ha.sin() + 4.0 * hm.sin() + hb.sin());
+                samples.push(Sample {
+                    s: s0 + b,
+                    x,
+                    y,
+                    heading: hb,
+                });
+            }
+            heading = base + segment.turn();
+            s0 += segment.length_m;
+        }
+        Ok(Self {
+            start,
+            segments,
+            segment_starts,
+            width_m,
+            closed: false,
+            patches: Vec::new(),
+            grades: Vec::new(),
+            samples,
+            length_m,
+        })
+    }
+
+    /// The same road as a closed circuit: its end must meet its start (within
+    /// [`CLOSURE_GAP_M`] and 0.1°, the heading modulo a full turn), and its grades must
+    /// bring it back to the start's height.
+    pub fn closed(mut self) -> Result<Self, RoadError> {
+        let end = self.samples[self.samples.len() - 1];
+        let gap_m = (end.x - self.start.x_m).hypot(end.y - self.start.y_m);
+        let turned = end.heading - self.start.heading_rad;
+        let heading_error = turned - (turned / (2.0 * PI)).round() * 2.0 * PI;
+        if gap_m > CLOSURE_GAP_M || heading_error.abs() > CLOSURE_HEADING_RAD {
+            return Err(RoadError::NotClosed {
+                gap_m,
+                heading_deg: heading_error.to_degrees(),
+            });
+        }
+        // Before it is closed, the end's station is the lap's length (closed, it wraps to 0).
+        let rise_m = self.height_at(self.length_m);
+        if rise_m.abs() > 0.01 {
+            return Err(RoadError::HeightNotClosed { rise_m });
+        }
+        self.closed = true;
+        Ok(self)
+    }
+
+    /// Adds a friction patch (later patches lie on top of earlier ones).
+    pub fn with_patch(mut self, patch: Patch) -> Result<Self, RoadError> {
+        let index = self.patches.len();
+        let bad = |what: String| RoadError::Patch { index, what };
+        if !patch.mu.is_finite() || !(0.01..=2.0).contains(&patch.mu) {
+            return Err(bad(format!(
+                "friction {}: from 0.01 to 2 is needed",
+                patch.mu
+            )));
+        }
+        let half = self.width_m / 2.0;
+        if !(patch.right_m.is_finite() && patch.left_m.is_finite())
+            || patch.right_m >= patch.left_m
+            || patch.right_m < -half
+            || patch.left_m > half
+        {
+            return Err(bad(format!(
+                "from {} m to {} m across: a range within the road's {} m, right edge first",
+                patch.right_m, patch.left_m, self.width_m
+            )));
+        }
+        self.check_stretch(patch.from_m, patch.to_m, self.closed)
+            .map_err(bad)?;
+        self.patches.push(patch);
+        Ok(self)
+    }
+
+    /// Adds a grade section (later sections replace earlier ones where they overlap).
+    pub fn with_grade(mut self, grade: Grade) -> Result<Self, RoadError> {
+        let index = self.grades.len();
+        let bad = |what: String| RoadError::Grade { index, what };
+        if !grade.percent.is_finite() || grade.percent.abs() > 30.0 {
+            return Err(bad(format!("{} %: at most 30 % either way", grade.percent)));
+        }
+        self.check_stretch(grade.from_m, grade.to_m, false)
+            .map_err(bad)?;
+        self.grades.push(grade);
+        Ok(self)
+    }
+
+    fn check_stretch(&self, from_m: f64, to_m: f64, may_wrap: bool) -> Result<(), String> {
+        let within = |s: f64| s.is_finite() && (0.0..=self.length_m).contains(&s);
+        if !within(from_m) || !within(to_m) || (from_m >= to_m && !may_wrap) || from_m == to_m {
+            return Err(format!(
+                "from {from_m} m to {to_m} m along: a stretch within the road's {:.1} m",
+                self.length_m
+            ));
+        }
+        Ok(())
+    }
+
+    /// Length of the centreline, m.
+    pub fn length_m(&self) -> f64 {
+        self.length_m
+    }
+
+    /// Width, m.
+    pub fn width_m(&self) -> f64 {
+        self.width_m
+    }
+
+    /// Whether it is a closed circuit.
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+
+    /// Its segments.
+    pub fn segments(&self) -> &[Segment] {
+        &self.segments
+    }
+
+    /// Its friction patches.
+    pub fn patches(&self) -> &[Patch] {
+        &self.patches
+    }
+
+    /// Its grade sections.
+    pub fn grades(&self) -> &[Grade] {
+        &self.grades
+    }
+
+    /// A station on the road: wrapped onto the lap on a closed road, clamped to the ends
+    /// on an open one.
+    pub fn wrap(&self, station_m: f64) -> f64 {
+        if self.closed {
+            station_m.rem_euclid(self.length_m)
+        } else {
+            station_m.clamp(0.0, self.length_m)
+        }
+    }
+
+    /// The centreline's pose at `station_m` (see [`Road::wrap`]): from the sample before it,
+    /// one step of Simpson's rule (samples fall on every segment's ends, so the step lies
+    /// within one segment).
+    pub fn pose_at(&self, station_m: f64) -> Pose {
+        let s = self.wrap(station_m);
+        let a = self.samples[self.sample_index(s)];
+        let h = s - a.s;
+        let (ha, hm, hb) = (
+            self.heading_at(a.s.max(s - h)),
+            self.heading_at(a.s + 0.5 * h),
+            self.heading_at(s),
+        );
+        Pose {
+            x_m: a.x + h / 6.0 * (ha.cos() + 4.0 * hm.cos() + hb.cos()),
+            y_m: a.y + h / 6.0 * (ha.sin() + 4.0 * hm.sin() + hb.sin()),
+            heading_rad: hb,
+        }
+    }
+
+    /// The road's heading at `station_m`, exact (from the segment's curvature).
+    pub fn heading_at(&self, station_m: f64) -> f64 {
+        let s = self.wrap(station_m);
+        let k = self.segment_index(s);
+        let turned: f64 = self.segments[..k].iter().map(Segment::turn).sum();
+        self.start.heading_rad + turned + self.segments[k].turn_at(s - self.segment_starts[k])
+    }
+
+    /// The curvature at `station_m`, 1/m.
+    pub fn curvature_at(&self, station_m: f64) -> f64 {
+        let s = self.wrap(station_m);
+        let k = self.segment_index(s);
+        self.segments[k].curvature_at(s - self.segment_starts[k])
+    }
+
+    /// The height of the centreline at `station_m` over the start's, m (the grades'
+    /// integral).
+    pub fn height_at(&self, station_m: f64) -> f64 {
+        let s = self.wrap(station_m);
+        // Later sections replace earlier ones: walk the stretch in pieces between the
+        // sections' ends and take each piece's grade from its middle.
+        let mut cuts: Vec<f64> = self
+            .grades
+            .iter()
+            .flat_map(|g| [g.from_m, g.to_m])
+            .filter(|&c| c > 0.0 && c < s)
+            .collect();
+        cuts.push(0.0);
+        cuts.push(s);
+        cuts.sort_by(f64::total_cmp);
+        cuts.windows(2)
+            .map(|w| (w[1] - w[0]) * self.grade_at(0.5 * (w[0] + w[1])) / 100.0)
+            .sum()
+    }
+
+    /// The grade at `station_m`, percent.
+    pub fn grade_at(&self, station_m: f64) -> f64 {
+        let s = self.wrap(station_m);
+        self.grades
+            .iter()
+            .rev()
+            .find(|g| (g.from_m..g.to_m).contains(&s))
+            .map_or(0.0, |g| g.percent)
+    }
+
+    /// Where the point (`x_m`, `y_m`) lies: the nearest point of the centreline. `near`: a
+    /// station it was near a moment ago (the search then looks only around it, as a car
+    /// moves little in a step; without one, or when the point has left that
+    /// neighbourhood, the whole road is searched).
+    pub fn locate(&self, x_m: f64, y_m: f64, near: Option<f64>) -> Location {
+        let n = self.samples.len();
+        let nearest = |range: &mut dyn Iterator<Item = usize>| {
+            range
+                .map(|i| {
+                    let p = self.samples[i];
+                    (i, (p.x - x_m).powi(2) + (p.y - y_m).powi(2))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(i, _)| i)
+        };
+        let window = (SEARCH_WINDOW_M / SAMPLE_M) as isize;
+        let mut best = None;
+        if let Some(near) = near.filter(|s| s.is_finite()) {
+            let centre = self.sample_index(self.wrap(near)) as isize;
+            let indices = (centre - window..=centre + window).filter_map(|i| {
+                if self.closed {
+                    Some(i.rem_euclid(n as isize - 1) as usize)
+                } else {
+                    (0..n as isize).contains(&i).then_some(i as usize)
+                }
+            });
+            let mut indices = indices;
+            let found = nearest(&mut indices);
+            // At the window's edge the point may be nearer elsewhere: search it all.
+            best = found.filter(|&i| {
+                let offset = (i as isize - centre).rem_euclid(n as isize - 1);
+                let offset = offset.min(n as isize - 1 - offset);
+                offset < window || (!self.closed && (i == 0 || i == n - 1))
+            });
+        }
+        let i = best.unwrap_or_else(|| nearest(&mut (0..n)).unwrap_or(0));
+        let on_chord = self.project(i, x_m, y_m);
+        // The chord leaves the curve by up to Δs²/8r (1.6 mm on a 5 m radius): one Newton
+        // step onto the exact centreline, then the offset along its normal.
+        let mut station = on_chord.station_m;
+        for _ in 0..2 {
+            let p = self.pose_at(station);
+            let along = (x_m - p.x_m) * p.heading_rad.cos() + (y_m - p.y_m) * p.heading_rad.sin();
+            station = if self.closed {
+                station + along
+            } else {
+                (station + along).clamp(0.0, self.length_m)
+            };
+        }
+        let p = self.pose_at(station);
+        let lateral = -(x_m - p.x_m) * p.heading_rad.sin() + (y_m - p.y_m) * p.heading_rad.cos();
+        Location {
+            station_m: self.wrap(station),
+            lateral_m: lateral,
+            heading_rad: p.heading_rad,
+        }
+    }
+
+    /// The point projected onto the chords either side of sample `i`.
+    fn project(&self, i: usize, x_m: f64, y_m: f64) -> Location {
+        let n = self.samples.len();
+        let mut best: Option<(f64, Location)> = None;
+        for (a, b) in [
+            (i.checked_sub(1), Some(i)),
+            (Some(i), (i + 1 < n).then_some(i + 1)),
+        ] {
+            let (Some(a), Some(b)) = (a, b) else { continue };
+            let (pa, pb) = (self.samples[a], self.samples[b]);
+            let (dx, dy) = (pb.x - pa.x, pb.y - pa.y);
+            let chord = dx * dx + dy * dy;
+            if chord == 0.0 {
+                continue;
+            }
+            let t = (((x_m - pa.x) * dx + (y_m - pa.y) * dy) / chord).clamp(0.0, 1.0);
+            let (px, py) = (pa.x + dx * t, pa.y + dy * t);
+            let distance = (x_m - px).hypot(y_m - py);
+            let side = dx * (y_m - pa.y) - dy * (x_m - pa.x);
+            let station = pa.s + (pb.s - pa.s) * t;
+            let location = Location {
+                station_m: station,
+                lateral_m: distance.copysign(side),
+                heading_rad: self.heading_at(station),
+            };
+            if best.is_none_or(|(d, _)| distance < d) {
+                best = Some((distance, location));
+            }
+        }
+        best.map_or(
+            Location {
+                station_m: self.samples[i].s,
+                lateral_m: (x_m - self.samples[i].x).hypot(y_m - self.samples[i].y),
+                heading_rad: self.samples[i].heading,
+            },
+            |(_, location)| location,
+        )
+    }
+
+    /// The surface under the point (`x_m`, `y_m`); `near` as for [`Road::locate`].
+    pub fn surface(&self, x_m: f64, y_m: f64, near: Option<f64>) -> Surface {
+        let location = self.locate(x_m, y_m, near);
+        let half = self.width_m / 2.0;
+        let on_road = location.lateral_m.abs() <= half;
+        let mu = if on_road {
+            self.patches
+                .iter()
+                .rev()
+                .find(|p| self.patch_covers(p, &location))
+                .map_or(DRY_ASPHALT_MU, |p| p.mu)
+        } else {
+            GRASS_MU
+        };
+        Surface {
+            location,
+            on_road,
+            mu,
+            grade_percent: self.grade_at(location.station_m),
+        }
+    }
+
+    fn patch_covers(&self, patch: &Patch, at: &Location) -> bool {
+        let s = at.station_m;
+        let along = if patch.from_m < patch.to_m {
+            (patch.from_m..=patch.to_m).contains(&s)
+        } else {
+            s >= patch.from_m || s <= patch.to_m
+        };
+        along && (patch.right_m..=patch.left_m).contains(&at.lateral_m)
+    }
+
+    /// The index of the last sample at or before `s` (a station within the road).
+    fn sample_index(&self, s: f64) -> usize {
+        self.samples
+            .partition_point(|p| p.s <= s)
+            .saturating_sub(1)
+            .min(self.samples.len() - 1)
+    }
+
+    /// The index of the segment `s` is in.
+    fn segment_index(&self, s: f64) -> usize {
+        self.segment_starts
+            .partition_point(|&start| start <= s)
+            .saturating_sub(1)
+    }
+}
+
+#[cfg(test)]
+mod tests;
