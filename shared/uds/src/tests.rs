@@ -890,6 +890,17 @@ impl Wire {
         }
     }
 
+    /// The extended, then the programming session, and security unlocked, over frames.
+    fn enter_programming(&mut self) {
+        let mut ask = |request: &[u8]| self.exchange(request, 10_000).expect("an answer");
+        assert_eq!(ask(&[0x10, 0x03])[..2], [0x50, 0x03]);
+        assert_eq!(ask(&[0x10, 0x02])[..2], [0x50, 0x02]);
+        let seed: [u8; 16] = ask(&[0x27, 0x01])[2..].try_into().unwrap();
+        let mut send = vec![0x27, 0x02];
+        send.extend_from_slice(&key_for(SECRET, NODE, &seed));
+        assert_eq!(ask(&send), [0x67, 0x02]);
+    }
+
     /// Moves frames both ways until the tester has a response (not a 0x78) or `limit_ms`
     /// passes; returns it.
     fn exchange(&mut self, request: &[u8], limit_ms: u64) -> Option<Vec<u8>> {
@@ -928,12 +939,7 @@ impl Wire {
 fn a_download_over_iso_tp_frames_reaches_the_dfu_partition() {
     let mut wire = Wire::new();
     let ask = |wire: &mut Wire, request: &[u8]| wire.exchange(request, 10_000).expect("an answer");
-    assert_eq!(ask(&mut wire, &[0x10, 0x03])[..2], [0x50, 0x03]);
-    assert_eq!(ask(&mut wire, &[0x10, 0x02])[..2], [0x50, 0x02]);
-    let seed: [u8; 16] = ask(&mut wire, &[0x27, 0x01])[2..].try_into().unwrap();
-    let mut send = vec![0x27, 0x02];
-    send.extend_from_slice(&key_for(SECRET, NODE, &seed));
-    assert_eq!(ask(&mut wire, &send), [0x67, 0x02]);
+    wire.enter_programming();
     assert_eq!(
         ask(&mut wire, &[0x31, 0x01, 0xFF, 0x00]),
         [0x71, 0x01, 0xFF, 0x00, 0x00]
@@ -967,13 +973,7 @@ fn a_download_over_iso_tp_frames_reaches_the_dfu_partition() {
 #[test]
 fn a_long_operation_waits_for_its_0x78_to_be_out() {
     let mut wire = Wire::new();
-    let ask = |wire: &mut Wire, request: &[u8]| wire.exchange(request, 10_000).expect("an answer");
-    assert_eq!(ask(&mut wire, &[0x10, 0x03])[..2], [0x50, 0x03]);
-    assert_eq!(ask(&mut wire, &[0x10, 0x02])[..2], [0x50, 0x02]);
-    let seed: [u8; 16] = ask(&mut wire, &[0x27, 0x01])[2..].try_into().unwrap();
-    let mut send = vec![0x27, 0x02];
-    send.extend_from_slice(&key_for(SECRET, NODE, &seed));
-    assert_eq!(ask(&mut wire, &send), [0x67, 0x02]);
+    wire.enter_programming();
     assert!(!wire.ecu_node.resumes_after_send());
 
     wire.ecu.dfu.fill(0);

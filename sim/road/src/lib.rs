@@ -295,6 +295,8 @@ pub struct Road {
     segments: Vec<Segment>,
     /// Where each segment starts along the road, m.
     segment_starts: Vec<f64>,
+    /// The heading where each segment starts, radians (queries run every step).
+    segment_headings: Vec<f64>,
     width_m: f64,
     closed: bool,
     patches: Vec<Patch>,
@@ -327,6 +329,7 @@ impl Road {
             return Err(RoadError::TooLong(length_m));
         }
         let mut segment_starts = Vec::with_capacity(segments.len());
+        let mut segment_headings = Vec::with_capacity(segments.len());
         let mut samples = Vec::with_capacity((length_m / SAMPLE_M) as usize + segments.len() + 1);
         let (mut x, mut y, mut heading, mut s0) = (start.x_m, start.y_m, start.heading_rad, 0.0);
         samples.push(Sample {
@@ -337,6 +340,7 @@ impl Road {
         });
         for segment in &segments {
             segment_starts.push(s0);
+            segment_headings.push(heading);
             let steps = (segment.length_m / SAMPLE_M).ceil().max(1.0) as usize;
             let step = segment.length_m / steps as f64;
             let base = heading;
@@ -363,6 +367,7 @@ impl Road {
             start,
             segments,
             segment_starts,
+            segment_headings,
             width_m,
             closed: false,
             patches: Vec::new(),
@@ -509,8 +514,7 @@ impl Road {
     pub fn heading_at(&self, station_m: f64) -> f64 {
         let s = self.wrap(station_m);
         let k = self.segment_index(s);
-        let turned: f64 = self.segments[..k].iter().map(Segment::turn).sum();
-        self.start.heading_rad + turned + self.segments[k].turn_at(s - self.segment_starts[k])
+        self.segment_headings[k] + self.segments[k].turn_at(s - self.segment_starts[k])
     }
 
     /// The curvature at `station_m`, 1/m.
