@@ -11,14 +11,14 @@ pub(crate) struct Geometry {
     yaw_inertia: f64,
     cg_height: f64,
     wheelbase: f64,
-    cg_to_front: f64,
-    cg_to_rear: f64,
     track_front: f64,
     track_rear: f64,
     front_roll_fraction: f64,
     /// Wheel positions relative to the CG in the body frame, m.
     pub(crate) wheel_x: [f64; 4],
     pub(crate) wheel_y: [f64; 4],
+    /// Each wheel's share of the weight at rest on a level road (the four sum to 1).
+    pub(crate) weight_share: [f64; 4],
     load_filter_time_constant: f64,
 }
 
@@ -26,26 +26,23 @@ impl Geometry {
     pub(crate) fn new(p: &ChassisParams) -> Self {
         let a = p.cg_to_front_axle_m();
         let b = p.cg_to_rear_axle_m();
-        let half_front = 0.5 * p.track_front_m;
-        let half_rear = 0.5 * p.track_rear_m;
-        let mut wheel_x = [0.0; 4];
-        let mut wheel_y = [0.0; 4];
-        (wheel_x[FL], wheel_y[FL]) = (a, half_front);
-        (wheel_x[FR], wheel_y[FR]) = (a, -half_front);
-        (wheel_x[RL], wheel_y[RL]) = (-b, half_rear);
-        (wheel_x[RR], wheel_y[RR]) = (-b, -half_rear);
+        let offsets = p.wheel_offsets();
+        let wheel_x = offsets.map(|(x, _)| x);
+        let wheel_y = offsets.map(|(_, y)| y);
+        let wheelbase = p.wheelbase_m;
+        let front = 0.5 * b / wheelbase;
+        let rear = 0.5 * a / wheelbase;
         Self {
             mass: p.mass_kg,
             yaw_inertia: p.yaw_inertia_kgm2,
             cg_height: p.cg_height_m,
             wheelbase: p.wheelbase_m,
-            cg_to_front: a,
-            cg_to_rear: b,
             track_front: p.track_front_m,
             track_rear: p.track_rear_m,
             front_roll_fraction: p.front_roll_stiffness_fraction,
             wheel_x,
             wheel_y,
+            weight_share: [front, front, rear, rear],
             load_filter_time_constant: p.load_transfer_time_constant_s,
         }
     }
@@ -107,21 +104,21 @@ impl Body {
     ///
     /// The tyre forces act at the road, `h` below the CG, so they pitch and roll the
     /// body: ΔFz_axle = m·a_x·h/L, ΔFz_side = m·a_y·h·share/track. A wheel that would
-    /// lift carries 0.
-    pub(crate) fn normal_loads(&self, g: &Geometry, cos_grade: f64) -> [f64; 4] {
-        let weight = g.mass * GRAVITY * cos_grade;
+    /// lift carries 0. Each wheel's static share of the weight stands on the slope under
+    /// it (`cos_grade`), which carries its cosine.
+    pub(crate) fn normal_loads(&self, g: &Geometry, cos_grade: &[f64; 4]) -> [f64; 4] {
+        let weight = g.mass * GRAVITY;
+        let stat = |i: usize| weight * g.weight_share[i] * cos_grade[i];
         let pitch_transfer = g.mass * self.load_ax * g.cg_height / g.wheelbase;
-        let front_axle = weight * g.cg_to_rear / g.wheelbase - pitch_transfer;
-        let rear_axle = weight * g.cg_to_front / g.wheelbase + pitch_transfer;
         let roll_moment = g.mass * self.load_ay * g.cg_height;
         // A left turn (a_y > 0) loads the right-hand wheels.
         let front_shift = roll_moment * g.front_roll_fraction / g.track_front;
         let rear_shift = roll_moment * (1.0 - g.front_roll_fraction) / g.track_rear;
         let mut loads = [0.0; 4];
-        loads[FL] = 0.5 * front_axle - front_shift;
-        loads[FR] = 0.5 * front_axle + front_shift;
-        loads[RL] = 0.5 * rear_axle - rear_shift;
-        loads[RR] = 0.5 * rear_axle + rear_shift;
+        loads[FL] = stat(FL) - 0.5 * pitch_transfer - front_shift;
+        loads[FR] = stat(FR) - 0.5 * pitch_transfer + front_shift;
+        loads[RL] = stat(RL) + 0.5 * pitch_transfer - rear_shift;
+        loads[RR] = stat(RR) + 0.5 * pitch_transfer + rear_shift;
         loads.map(|load| load.max(0.0))
     }
 

@@ -74,13 +74,26 @@ pub struct Environment {
     /// wet ≈ 0.6, snow ≈ 0.3, ice ≈ 0.1). Clamped to 0.01 ..= 2; a non-finite value is
     /// read as 1.
     pub mu: [f64; 4],
-    /// Road grade along the car's longitudinal axis, percent (rise per 100 m run);
-    /// positive = uphill ahead.
-    pub grade_percent: f64,
+    /// Road grade under each wheel along the car's longitudinal axis, percent (rise per
+    /// 100 m run), FL FR RL RR; positive = uphill ahead. Each wheel carries its share of
+    /// the weight on the slope under it: the slope tilts that share's normal load and
+    /// pulls the car back along it (a car straddling the foot of a hill feels the part of
+    /// the hill its front wheels are on). A non-finite value is read as 0.
+    pub grade_percent: [f64; 4],
     /// Ambient air temperature, °C.
     pub ambient_c: f64,
     /// Solar heat entering the cabin, W (0 at night, ≈ 500–800 in summer sun).
     pub sun_load_w: f64,
+}
+
+impl Environment {
+    /// The same grade under every wheel, percent: a car wholly on one slope.
+    pub fn with_grade(self, percent: f64) -> Self {
+        Self {
+            grade_percent: [percent; 4],
+            ..self
+        }
+    }
 }
 
 impl Default for Environment {
@@ -88,7 +101,7 @@ impl Default for Environment {
     fn default() -> Self {
         Self {
             mu: [1.0; 4],
-            grade_percent: 0.0,
+            grade_percent: [0.0; 4],
             ambient_c: 20.0,
             sun_load_w: 0.0,
         }

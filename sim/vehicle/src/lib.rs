@@ -76,8 +76,9 @@ pub struct Vehicle {
     max_brake_torque_nm: [f64; 4],
     /// Brake torque acting on each wheel (it follows the command with a lag), N·m.
     brake_torque_nm: [f64; 4],
-    grade_sin: f64,
-    grade_cos: f64,
+    /// Sine and cosine of the slope under each wheel.
+    grade_sin: [f64; 4],
+    grade_cos: [f64; 4],
     mean_mu: f64,
     // Dynamic state.
     body: Body,
@@ -136,8 +137,8 @@ impl Vehicle {
             cornering_stiffness_per_load: [front_k, front_k, rear_k, rear_k],
             max_brake_torque_nm: [front_brake, front_brake, rear_brake, rear_brake],
             brake_torque_nm: [0.0; 4],
-            grade_sin: 0.0,
-            grade_cos: 1.0,
+            grade_sin: [0.0; 4],
+            grade_cos: [1.0; 4],
             mean_mu: 1.0,
             body: Body::new(
                 finite_or_zero(initial.x_m),
@@ -170,11 +171,12 @@ impl Vehicle {
                 1.0
             };
         }
-        env.grade_percent = finite_or_zero(env.grade_percent);
+        env.grade_percent = env.grade_percent.map(finite_or_zero);
         env.ambient_c = finite_or_zero(env.ambient_c);
         env.sun_load_w = finite_or_zero(env.sun_load_w);
-        let grade = (env.grade_percent / 100.0).atan();
-        (self.grade_sin, self.grade_cos) = grade.sin_cos();
+        for (i, percent) in env.grade_percent.iter().enumerate() {
+            (self.grade_sin[i], self.grade_cos[i]) = (percent / 100.0).atan().sin_cos();
+        }
         self.mean_mu = 0.25 * env.mu.iter().sum::<f64>();
         self.environment = env;
     }
@@ -192,6 +194,19 @@ impl Vehicle {
     /// The state after the last step.
     pub fn state(&self) -> &VehicleState {
         &self.state
+    }
+
+    /// Where each wheel touches the road, world frame (x, y), m, FL FR RL RR: what
+    /// decides the surface under each tyre.
+    pub fn wheel_positions(&self) -> [(f64, f64); 4] {
+        let (sin, cos) = self.body.heading.sin_cos();
+        std::array::from_fn(|i| {
+            let (x, y) = (self.geometry.wheel_x[i], self.geometry.wheel_y[i]);
+            (
+                self.body.x + x * cos - y * sin,
+                self.body.y + x * sin + y * cos,
+            )
+        })
     }
 
     /// Advances the model by `dt` seconds under `actuators` (held for the whole step).
@@ -241,7 +256,7 @@ impl Vehicle {
         let release_lag = h / (p.brakes.pressure_release_time_constant_s + h);
 
         // Tyres: forces from the body's motion and the wheels' spin.
-        let loads = self.body.normal_loads(&self.geometry, self.grade_cos);
+        let loads = self.body.normal_loads(&self.geometry, &self.grade_cos);
         let rolling_resistance = p.tyre.rolling_resistance_coefficient
             * (1.0 + self.body.vx.abs() * 3.6 / p.tyre.rolling_resistance_doubling_speed_kmh);
         let mut forces = BodyForces::default();
@@ -326,15 +341,19 @@ impl Vehicle {
         }
         self.engine.consume_fuel(&p.engine, h);
 
-        // Body: tyre forces, drag and the grade.
+        // Body: tyre forces, drag and the grade (each wheel's static share of the weight
+        // on the slope under it).
         let mass = self.geometry.mass();
+        let slope_pull: f64 = (0..4)
+            .map(|i| self.geometry.weight_share[i] * self.grade_sin[i])
+            .sum();
         let drag = 0.5
             * p.aero.air_density_kg_per_m3
             * p.aero.drag_coefficient
             * p.aero.frontal_area_m2
             * self.body.vx
             * self.body.vx.abs();
-        forces.external_x = -drag - mass * GRAVITY * self.grade_sin;
+        forces.external_x = -drag - mass * GRAVITY * slope_pull;
         self.body.integrate(&self.geometry, &forces, h);
 
         self.cabin.step(

@@ -52,6 +52,12 @@ pub struct ChassisParams {
     /// Time constant with which load transfer follows the accelerations, s (stands in for
     /// the pitch and roll dynamics of the suspension, which the planar model lacks).
     pub load_transfer_time_constant_s: f64,
+    /// Length of the body, m (what the world view and the path plot draw).
+    pub body_length_m: f64,
+    /// Width of the body without mirrors, m.
+    pub body_width_m: f64,
+    /// From the front axle to the front of the body, m.
+    pub front_overhang_m: f64,
 }
 
 /// Wheels and tyres: a Pacejka magic formula for the steady-state forces, combined slip
@@ -254,6 +260,12 @@ impl VehicleParams {
                 front_roll_stiffness_fraction: 0.60,
                 // Estimate: a damped 1.5–2 Hz pitch/roll mode settles in about this time.
                 load_transfer_time_constant_s: 0.05,
+                // Published: 4350 mm long, 1770 mm wide.
+                body_length_m: 4.35,
+                body_width_m: 1.77,
+                // Estimate: of the 1.84 m of overhangs, the longer at the front (engine
+                // ahead of the axle, intercooler in the bumper).
+                front_overhang_m: 1.0,
             },
             tyre: TyreParams {
                 // 225/45 ZR17 (published): unloaded radius 0.2159 + 0.225·0.45 = 0.317 m;
@@ -456,6 +468,14 @@ impl ChassisParams {
     /// Distance from the CG to the rear axle, m.
     pub fn cg_to_rear_axle_m(&self) -> f64 {
         self.wheelbase_m * self.front_weight_fraction
+    }
+
+    /// Each wheel's contact point relative to the CG in the body frame (x forward, y
+    /// left), m, FL FR RL RR.
+    pub fn wheel_offsets(&self) -> [(f64, f64); 4] {
+        let (a, b) = (self.cg_to_front_axle_m(), self.cg_to_rear_axle_m());
+        let (front, rear) = (0.5 * self.track_front_m, 0.5 * self.track_rear_m);
+        [(a, front), (a, -front), (-b, rear), (-b, -rear)]
     }
 }
 

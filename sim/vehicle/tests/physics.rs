@@ -310,10 +310,7 @@ fn idling_in_gear_without_brakes_does_not_creep() {
 
 #[test]
 fn braked_car_holds_on_a_grade_and_rolls_back_without_brakes() {
-    let env = Environment {
-        grade_percent: 15.0,
-        ..Environment::default()
-    };
+    let env = Environment::default().with_grade(15.0);
     let mut car = new_car(env, moving_at(0.0, Gear::Neutral));
     drive(&mut car, 10.0, |_| Actuators {
         brake: [0.5; 4],
@@ -366,6 +363,127 @@ fn split_mu_braking_yaws_towards_the_high_friction_side() {
     // More braking force on the left pulls the nose left (positive yaw).
     assert!(s.heading_rad > 0.2, "heading {}", s.heading_rad);
     assert!(max_yaw_rate > 0.2);
+}
+
+/// Deceleration of a car rolling in neutral at 30 km/h over 2 s on `env`, m/s².
+fn coasting_deceleration(env: Environment) -> f64 {
+    let mut car = new_car(env, moving_at(30.0, Gear::Neutral));
+    drive(&mut car, 0.5, |_| Actuators::default());
+    let v0 = car.state().speed_mps;
+    drive(&mut car, 2.0, |_| Actuators::default());
+    (v0 - car.state().speed_mps) / 2.0
+}
+
+#[test]
+fn a_grade_under_some_wheels_pulls_with_their_share_of_the_weight() {
+    // The same 10 % slope under all four wheels, under the front pair only (a car at the
+    // foot of a hill), and under the rear pair only (at its top).
+    let percent = 10.0;
+    let level = coasting_deceleration(Environment::default());
+    let slope = |grade_percent| {
+        coasting_deceleration(Environment {
+            grade_percent,
+            ..Environment::default()
+        })
+    };
+    let all = slope([percent; 4]) - level;
+    let front = slope([percent, percent, 0.0, 0.0]) - level;
+    let rear = slope([0.0, 0.0, percent, percent]) - level;
+    let chassis = &VehicleParams::evo_vi().chassis;
+    let front_share = chassis.cg_to_rear_axle_m() / chassis.wheelbase_m;
+    let sine = (percent / 100.0f64).atan().sin();
+    println!(
+        "10 % grade: extra deceleration all {all:.4}, front {front:.4}, rear {rear:.4} m/s² (front share {front_share:.3})"
+    );
+    // Wholly on the slope: g·sin θ, less what spinning the four wheels up takes (their
+    // inertia adds 4·I/r² to the mass the slope accelerates; the driveline's shafts, which
+    // turn with them in neutral, about 1 % more).
+    let p = VehicleParams::evo_vi();
+    let mass = p.chassis.mass_kg;
+    let wheels = 4.0 * p.tyre.wheel_inertia_kgm2 / p.tyre.rolling_radius_m.powi(2);
+    let expected = GRAVITY * sine * mass / (mass + wheels);
+    assert!(
+        (all - expected).abs() < 0.02 * expected,
+        "{all} against {expected}"
+    );
+    // Each axle pulls with the weight it carries, and the two add up to the whole.
+    assert!((front / all - front_share).abs() < 0.01, "{front} of {all}");
+    assert!(
+        (rear / all - (1.0 - front_share)).abs() < 0.01,
+        "{rear} of {all}"
+    );
+}
+
+#[test]
+fn a_tyre_on_a_slope_carries_its_weight_along_the_slope_normal() {
+    // A steep 30 % slope under the front-left wheel alone: that tyre carries cos θ of its
+    // share, its neighbour on the level road all of it.
+    let percent = 30.0;
+    let env = Environment {
+        grade_percent: [percent, 0.0, 0.0, 0.0],
+        ..Environment::default()
+    };
+    let mut car = new_car(env, moving_at(20.0, Gear::Neutral));
+    drive(&mut car, 0.5, |_| Actuators::default());
+    let s = car.state();
+    let cosine = (percent / 100.0f64).atan().cos();
+    let ratio = s.wheel_load_n[FL] / s.wheel_load_n[FR];
+    println!("30 % under FL: load FL/FR {ratio:.4} (cos θ {cosine:.4})");
+    assert!((ratio - cosine).abs() < 0.002, "{ratio}");
+    assert!((s.wheel_load_n[RL] / s.wheel_load_n[RR] - 1.0).abs() < 1e-3);
+}
+
+#[test]
+fn a_low_friction_patch_under_one_tyre_locks_that_tyre() {
+    // A brake (no ABS) that dry asphalt holds easily, with an icy patch under the front
+    // right wheel only.
+    let brake = Actuators {
+        brake: [0.25; 4],
+        ..Actuators::default()
+    };
+    let run = |mu: [f64; 4]| {
+        let mut car = new_car(
+            Environment {
+                mu,
+                ..Environment::default()
+            },
+            moving_at(60.0, Gear::Neutral),
+        );
+        drive(&mut car, 0.4, |_| brake);
+        car.state().clone()
+    };
+    let dry = run([1.0; 4]);
+    let patch = run([1.0, 0.15, 1.0, 1.0]);
+    let slip = |s: &VehicleState, i: usize| 1.0 - s.wheel_speed_mps[i] / s.speed_mps;
+    println!(
+        "0.4 s of braking at 25 %: dry slip FR {:.3}; patch under FR slip FL {:.3} FR {:.3} RL {:.3} RR {:.3}; heading {:.2}°",
+        slip(&dry, FR),
+        slip(&patch, FL),
+        slip(&patch, FR),
+        slip(&patch, RL),
+        slip(&patch, RR),
+        patch.heading_rad.to_degrees()
+    );
+    for i in [FL, FR, RL, RR] {
+        assert!(slip(&dry, i) < 0.1, "dry wheel {i}: slip {}", slip(&dry, i));
+    }
+    // The tyre on the patch locks; its neighbour on the asphalt rolls as on the dry road.
+    // (The rear wheels slow too: the AWD driveline's open differentials tie them to the
+    // locked wheel's shaft.)
+    assert!(slip(&patch, FR) > 0.9, "FR slip {}", slip(&patch, FR));
+    assert!(slip(&patch, FL) < 0.1, "FL slip {}", slip(&patch, FL));
+    for i in [RL, RR] {
+        assert!(
+            slip(&patch, i) < slip(&patch, FR),
+            "wheel {i}: slip {}",
+            slip(&patch, i)
+        );
+    }
+    // Its braking force is what the ice gives: the car brakes less and pulls left.
+    assert!(
+        patch.tyre_force_longitudinal_n[FR].abs() < 0.3 * dry.tyre_force_longitudinal_n[FR].abs()
+    );
+    assert!(patch.heading_rad > 0.0, "heading {}", patch.heading_rad);
 }
 
 #[test]
@@ -614,7 +732,7 @@ fn hostile_inputs_are_clamped_not_propagated() {
     car.step(&hostile, -1.0);
     car.set_environment(Environment {
         mu: [f64::NAN, 0.0, 5.0, 1.0],
-        grade_percent: f64::INFINITY,
+        grade_percent: [f64::INFINITY, f64::NAN, 3.0, -3.0],
         ..Environment::default()
     });
     drive(&mut car, 1.0, |_| hostile);
@@ -672,7 +790,7 @@ proptest! {
         grade_percent in -20.0..=20.0f64,
         initial_kmh in 0.0..=200.0f64,
     ) {
-        let env = Environment { mu, grade_percent, ..Environment::default() };
+        let env = Environment { mu, ..Environment::default() }.with_grade(grade_percent);
         let mut car = new_car(env, moving_at(initial_kmh, Gear::Neutral));
         for (accelerator, brake, steering_wheel_deg, gear, torque_split_nm, fan, steps) in segments {
             let gear = match gear {
