@@ -116,7 +116,7 @@ struct GradeFile {
 }
 
 /// A road read from a file, with its name.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct NamedRoad {
     /// What the file calls it.
     pub name: String,
@@ -141,13 +141,29 @@ impl std::fmt::Display for RoadFileError {
 
 impl std::error::Error for RoadFileError {}
 
+/// Largest road file read, bytes: a road of a few hundred segments and patches is a few
+/// tens of kilobytes, and a larger file is not worth parsing to refuse it.
+pub const MAX_ROAD_FILE_BYTES: u64 = 1 << 20;
+
 /// Reads a road file.
 pub fn load(path: &Path) -> Result<NamedRoad, RoadFileError> {
+    use std::io::Read as _;
     let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| RoadFileError {
+    let error = |message: String| RoadFileError {
         origin: origin.clone(),
-        message: e.to_string(),
-    })?;
+        message,
+    };
+    // At most one byte more than allowed: a device or a growing file reports no size.
+    let file = std::fs::File::open(path).map_err(|e| error(format!("cannot read: {e}")))?;
+    let mut text = String::new();
+    file.take(MAX_ROAD_FILE_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| error(format!("cannot read: {e}")))?;
+    if text.len() as u64 > MAX_ROAD_FILE_BYTES {
+        return Err(error(format!(
+            "more than {MAX_ROAD_FILE_BYTES} bytes: a road file is at most that"
+        )));
+    }
     parse(&text, &origin)
 }
 

@@ -23,6 +23,7 @@ use std::fmt;
 
 pub mod file;
 pub mod follow;
+pub mod shipped;
 
 /// Spacing of the centreline's samples, m: the integration's step, and the grid the
 /// nearest-point search walks (a pose between samples is integrated from the one before,
@@ -192,6 +193,9 @@ pub struct Surface {
     pub on_road: bool,
     /// Peak friction coefficient.
     pub mu: f64,
+    /// The patch it is on (an index into [`Road::patches`]); `None` on the plain road
+    /// and off it.
+    pub patch: Option<usize>,
     /// The road's grade there, percent, in the road's direction.
     pub grade_percent: f64,
 }
@@ -280,7 +284,7 @@ impl fmt::Display for RoadError {
 impl std::error::Error for RoadError {}
 
 /// A centreline sample.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Sample {
     s: f64,
     x: f64,
@@ -289,7 +293,7 @@ struct Sample {
 }
 
 /// A road: its centreline, width, surfaces and grades.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Road {
     start: Pose,
     segments: Vec<Segment>,
@@ -655,22 +659,41 @@ impl Road {
     pub fn surface(&self, x_m: f64, y_m: f64, near: Option<f64>) -> Surface {
         let location = self.locate(x_m, y_m, near);
         let half = self.width_m / 2.0;
-        let on_road = location.lateral_m.abs() <= half;
-        let mu = if on_road {
+        let on_road = location.lateral_m.abs() <= half && !self.beyond_an_end(x_m, y_m, &location);
+        let patch = if on_road {
             self.patches
                 .iter()
-                .rev()
-                .find(|p| self.patch_covers(p, &location))
-                .map_or(DRY_ASPHALT_MU, |p| p.mu)
+                .rposition(|p| self.patch_covers(p, &location))
         } else {
-            GRASS_MU
+            None
+        };
+        let mu = match patch {
+            Some(i) => self.patches[i].mu,
+            None if on_road => DRY_ASPHALT_MU,
+            None => GRASS_MU,
         };
         Surface {
             location,
             on_road,
             mu,
+            patch,
             grade_percent: self.grade_at(location.station_m),
         }
+    }
+
+    /// Whether the point lies past the start or the end of an open road (where the
+    /// nearest centreline point is the end itself): off the road, whatever its offset.
+    fn beyond_an_end(&self, x_m: f64, y_m: f64, at: &Location) -> bool {
+        if self.closed {
+            return false;
+        }
+        let (sin, cos) = at.heading_rad.sin_cos();
+        let end = |station: f64| {
+            let p = self.pose_at(station);
+            (x_m - p.x_m) * cos + (y_m - p.y_m) * sin
+        };
+        (at.station_m <= 0.0 && end(0.0) < -1e-6)
+            || (at.station_m >= self.length_m && end(self.length_m) > 1e-6)
     }
 
     fn patch_covers(&self, patch: &Patch, at: &Location) -> bool {

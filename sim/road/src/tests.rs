@@ -162,6 +162,12 @@ fn a_split_friction_patch_covers_its_half_of_the_road_and_grass_lies_beyond_the_
     assert_eq!(road.surface(50.0, -1.0, None).mu, DRY_ASPHALT_MU);
     let grass = road.surface(150.0, -4.5, None);
     assert_eq!((grass.mu, grass.on_road), (GRASS_MU, false));
+    // Past either end of an open road there is no road, whatever the offset.
+    for (x, y) in [(300.5, 0.0), (-0.5, 1.0), (310.0, -2.0)] {
+        let beyond = road.surface(x, y, None);
+        assert_eq!((beyond.mu, beyond.on_road), (GRASS_MU, false), "({x}, {y})");
+    }
+    assert!(road.surface(299.5, 0.0, None).on_road);
 }
 
 #[test]
