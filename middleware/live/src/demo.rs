@@ -239,6 +239,7 @@ pub fn run_on(
         trace,
         log: car.log().to_vec(),
         summary,
+        track: scenario.track.clone(),
     };
     let symptom = match demo {
         Demo::Cruise => Symptom {

@@ -7,10 +7,11 @@
 //! a fixed phase offset, as independent boards would, which also spreads the bus traffic.
 
 use crate::diag::VirtualDiag;
-use crate::driver::{DriverControls, ManualDriver, Timeline};
+use crate::driver::{CarOnRoad, DriverControls, ManualDriver, RoadDriver, Timeline};
 use crate::firmware::{self, Bench, FirmwareChoice, FirmwareLogLine, FirmwareStop, Wiring};
 use crate::scenario::FRICTION_RANGE;
 use crate::scenario::{Activation, Event, GearName, Scenario, Software};
+use crate::track::{self, OnTrack};
 use autoplug_can::{AbsMsg, CanMessage, CruiseAccelMsg, Frame, Gear as CanGear, Node, TracMsg};
 use autoplug_ecu::{Dtcs, EcuLogic, Instant, Variant};
 use autoplug_image::SoftwareVariant;
@@ -331,6 +332,11 @@ pub struct TraceRow {
     pub ay_mps2: f64,
     /// Distance travelled, m.
     pub distance_m: f64,
+    /// Lateral velocity of the CG, body frame, m/s (positive left): the car sliding
+    /// sideways. Not in `trace.csv`.
+    pub lateral_velocity_mps: f64,
+    /// Longitudinal slip of each wheel, FL FR RL RR (−1: locked). Not in `trace.csv`.
+    pub wheel_slip: [f64; 4],
 }
 
 impl TraceRow {
@@ -344,7 +350,13 @@ impl TraceRow {
 pub struct VirtualCar {
     scenario: Scenario,
     vehicle: Vehicle,
+    /// Road and weather as the scenario sets them (on a track: the friction of its
+    /// asphalt's left and right halves); the car's own, per wheel, is the vehicle's.
     environment: Environment,
+    /// The track, when the scenario names one.
+    track: Option<OnTrack>,
+    /// The scenario's driver when it follows the road or holds a speed.
+    road_driver: RoadDriver,
     bus: VirtualBus,
     ecus: Ecus,
     external: NodeId,
@@ -492,7 +504,7 @@ fn environment_of(scenario: &Scenario) -> Environment {
     let road = &scenario.road;
     Environment {
         mu: [road.mu_left, road.mu_right, road.mu_left, road.mu_right],
-        grade_percent: road.grade_percent,
+        grade_percent: [road.grade_percent; 4],
         ambient_c: road.ambient_c,
         sun_load_w: road.sun_load_w,
     }
@@ -540,16 +552,32 @@ impl VirtualCar {
 
     fn build(scenario: &Scenario, choice: Option<&FirmwareChoice>) -> Result<Self, String> {
         let environment = environment_of(scenario);
+        let start = scenario.track.as_ref().map_or(
+            autoplug_road::Pose {
+                x_m: 0.0,
+                y_m: 0.0,
+                heading_rad: 0.0,
+            },
+            |t| track::start_pose(&t.road, scenario.road.start_m, scenario.road.lane_m),
+        );
         let initial = InitialState {
             speed_kmh: scenario.initial.speed_kmh,
             gear: vehicle_gear(scenario.initial.gear),
             fuel_l: scenario.initial.fuel_l,
             cabin_temp_c: f64::from(fahrenheit_to_celsius(scenario.initial.cabin_temp_f as f32)),
-            x_m: 0.0,
-            y_m: 0.0,
-            heading_rad: 0.0,
+            x_m: start.x_m,
+            y_m: start.y_m,
+            heading_rad: start.heading_rad,
         };
-        let vehicle = Vehicle::new(Self::vehicle_params(), environment, initial, scenario.seed);
+        let mut vehicle = Vehicle::new(Self::vehicle_params(), environment, initial, scenario.seed);
+        let mut on_track = scenario
+            .track
+            .as_ref()
+            .map(|t| OnTrack::new(t.clone(), &vehicle));
+        if let Some(on_track) = &mut on_track {
+            let env = on_track.update(&vehicle, &environment);
+            vehicle.set_environment(env);
+        }
         let mut bus = VirtualBus::new(BusConfig {
             seed: scenario.seed,
             // Drained every tick: a 1 ms tick holds at most ~10 frames.
@@ -603,6 +631,8 @@ impl VirtualCar {
             scenario: scenario.clone(),
             vehicle,
             environment,
+            track: on_track,
+            road_driver: RoadDriver::default(),
             bus,
             ecus,
             external,
@@ -694,14 +724,32 @@ impl VirtualCar {
         }
         let mut env = self.environment;
         env.mu = [mu_left, mu_right, mu_left, mu_right];
-        if env != self.environment {
-            self.environment = env;
-            self.vehicle.set_environment(env);
-        }
+        self.set_environment(env);
         Ok(())
     }
 
-    /// The road's friction now: left and right wheels.
+    /// The scenario's road and weather become `env` (on a track, the surfaces under the
+    /// wheels are found again at the next tick).
+    fn set_environment(&mut self, env: Environment) {
+        if env != self.environment {
+            self.environment = env;
+            if self.track.is_none() {
+                self.vehicle.set_environment(env);
+            }
+        }
+    }
+
+    /// The car's track and where on it the car is; `None` on the endless plane.
+    pub fn track(&self) -> Option<&OnTrack> {
+        self.track.as_ref()
+    }
+
+    /// The model's road and weather now: on a track, the surface under each wheel.
+    pub fn wheel_environment(&self) -> &Environment {
+        self.vehicle.environment()
+    }
+
+    /// The road's friction now: left and right wheels (on a track: its asphalt's halves).
     pub fn friction(&self) -> (f64, f64) {
         (self.environment.mu[0], self.environment.mu[1])
     }
@@ -946,6 +994,8 @@ impl VirtualCar {
             ax_mps2: s.ax_mps2,
             ay_mps2: s.ay_mps2,
             distance_m: s.distance_m,
+            lateral_velocity_mps: s.lateral_velocity_mps,
+            wheel_slip: s.wheel_slip,
         }
     }
 
@@ -996,8 +1046,9 @@ impl VirtualCar {
             self.controls = self
                 .timeline
                 .advance(t_s, |event| road_changes.push(event.clone()));
-            if let Some(person) = self.manual.as_mut() {
-                self.controls = person.controls_at(t_s);
+            match self.manual.as_mut() {
+                Some(person) => self.controls = person.controls_at(t_s),
+                None => self.drive_along(),
             }
             if self.controls.held.brake > 0.0 && previous_brake <= 0.0 {
                 // The state is still the one at `t_us`: the model integrates below.
@@ -1137,12 +1188,54 @@ impl VirtualCar {
         e.cruise.transmit(&mut self.bus, t_us);
         e.abs.transmit(&mut self.bus, t_us);
 
-        // The actuators drive the car for the next tick.
+        // The actuators drive the car for the next tick, on the surface under its wheels.
         if !held {
+            if let Some(on_track) = &mut self.track {
+                let env = on_track.update(&self.vehicle, &self.environment);
+                if env != *self.vehicle.environment() {
+                    self.vehicle.set_environment(env);
+                }
+            }
             let actuators = self.actuators();
             self.vehicle.step(&actuators, TICK_US as f64 * 1e-6);
         }
         self.t_us += TICK_US;
+    }
+
+    /// The scenario's driver steers along the track and works the pedals to hold its
+    /// speed, when the timeline says so (the rest of the controls stay the timeline's).
+    fn drive_along(&mut self) {
+        let s = self.vehicle.state();
+        let following = self.timeline.follows_road();
+        let target = self.timeline.speed_target_kmh();
+        if let (true, Some(on_track)) = (following, &self.track) {
+            let params = self.vehicle.params();
+            let car = CarOnRoad {
+                rear_axle: track::rear_axle(&self.vehicle),
+                station_m: on_track.rear_axle_station(),
+                speed_mps: s.speed_mps,
+                wheelbase_m: params.chassis.wheelbase_m,
+                steering_ratio: params.steering.ratio,
+                understeer_rad_per_mps2: params.tyre.understeer_gradient_rad_per_mps2(),
+            };
+            self.controls.held.steering_deg =
+                RoadDriver::steering_deg(on_track.road(), &car, self.scenario.road.lane_m);
+        }
+        if let Some(target_kmh) = target {
+            let mut target_mps = target_kmh / 3.6;
+            if let (true, Some(on_track)) = (following, &self.track) {
+                target_mps = target_mps.min(RoadDriver::speed_allowed(
+                    on_track.road(),
+                    on_track.rear_axle_station(),
+                    s.speed_mps,
+                ));
+            }
+            let (accelerator, brake) =
+                self.road_driver
+                    .pedals(s.speed_mps, target_mps, TICK_US as f64 * 1e-6);
+            self.controls.held.accelerator = accelerator;
+            self.controls.held.brake = brake;
+        }
     }
 
     /// What the ECUs' outputs command the vehicle to do. Before an ECU's first step its
@@ -1173,7 +1266,7 @@ impl VirtualCar {
     fn apply_event(&mut self, event: &Event) {
         let mut env = self.environment;
         if let Some(g) = event.grade_percent {
-            env.grade_percent = g;
+            env.grade_percent = [g; 4];
         }
         if let Some(mu) = event.mu_left {
             env.mu[0] = mu;
@@ -1183,10 +1276,7 @@ impl VirtualCar {
             env.mu[1] = mu;
             env.mu[3] = mu;
         }
-        if env != self.environment {
-            self.environment = env;
-            self.vehicle.set_environment(env);
-        }
+        self.set_environment(env);
         if let Some(fault) = &event.fault {
             for (name, silenced) in [(&fault.silence, true), (&fault.restore, false)] {
                 if let Some(node) = name

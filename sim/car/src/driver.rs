@@ -35,6 +35,10 @@ pub struct Timeline {
     ramps: [Option<Ramp>; 3],
     /// Press start times per button, in `Button` order.
     pressed_at: [Option<f64>; 4],
+    /// Whether the driver steers along the track.
+    follow_road: bool,
+    /// The speed the driver holds with the pedals, km/h, when holding one.
+    speed_kmh: Option<f64>,
 }
 
 impl Timeline {
@@ -58,7 +62,20 @@ impl Timeline {
             },
             ramps: [None; 3],
             pressed_at: [None; 4],
+            follow_road: d.follow_road.unwrap_or(false),
+            speed_kmh: d.speed_kmh,
         }
+    }
+
+    /// Whether the driver steers along the track now.
+    pub fn follows_road(&self) -> bool {
+        self.follow_road
+    }
+
+    /// The speed the driver holds with the pedals now, km/h; `None`: the pedals are the
+    /// timeline's.
+    pub fn speed_target_kmh(&self) -> Option<f64> {
+        self.speed_kmh
     }
 
     /// The controls before any event.
@@ -131,6 +148,128 @@ impl Timeline {
         }
         for button in &event.press {
             self.pressed_at[button_index(*button)] = Some(event.t_s);
+        }
+        if let Some(follow) = event.follow_road {
+            self.follow_road = follow;
+        }
+        if event.speed_kmh.is_some() {
+            self.speed_kmh = event.speed_kmh;
+        } else if event.accelerator.is_some() || event.brake.is_some() {
+            self.speed_kmh = None;
+        }
+    }
+}
+
+/// Lateral acceleration the driver allows in a bend, m/s²: brisk road driving (a racing
+/// driver on this car's tyres goes to about 9).
+pub const BEND_LATERAL_MPS2: f64 = 4.0;
+
+/// Deceleration the driver plans with before a bend, m/s².
+pub const PLANNED_DECELERATION_MPS2: f64 = 4.0;
+
+/// Accelerator per m/s of speed below the target, %.
+const ACCELERATOR_GAIN: f64 = 25.0;
+/// Accelerator per m of speed deficit integrated over time (m/s · s), %.
+const ACCELERATOR_INTEGRAL_GAIN: f64 = 4.0;
+/// Brake per m/s above the target (beyond [`BRAKE_DEADBAND_MPS`]), %.
+const BRAKE_GAIN: f64 = 12.0;
+/// Speed above the target the driver tolerates before braking, m/s (lifting off slows
+/// the car by itself).
+const BRAKE_DEADBAND_MPS: f64 = 0.8;
+
+/// What the road driver knows of the car.
+#[derive(Clone, Copy, Debug)]
+pub struct CarOnRoad {
+    /// The middle of the rear axle, and the heading.
+    pub rear_axle: autoplug_road::Pose,
+    /// The rear axle's station on the road, m.
+    pub station_m: f64,
+    /// Speed, m/s.
+    pub speed_mps: f64,
+    /// Wheelbase, m.
+    pub wheelbase_m: f64,
+    /// Steering-wheel degrees per road-wheel degree.
+    pub steering_ratio: f64,
+    /// The car's understeer gradient, rad of road-wheel angle per m/s² of lateral
+    /// acceleration.
+    pub understeer_rad_per_mps2: f64,
+}
+
+/// The scenario's driver when it steers along the track or holds a speed: a path
+/// follower and a speed keeper, the driver models of vehicle-dynamics tools (CarSim's and
+/// IPG CarMaker's have the same two halves).
+///
+/// - Steering: pure pursuit ([`autoplug_road::follow`]) aimed at the scenario's lane,
+///   looking [`autoplug_road::follow::lookahead_m`] ahead, with the car's understeer at
+///   its speed added for the bend ahead.
+/// - Speed: the lower of the target and what the road ahead allows: in a bend of curvature
+///   κ the speed √([`BEND_LATERAL_MPS2`]/κ), and before it no faster than braking at
+///   [`PLANNED_DECELERATION_MPS2`] reaches that speed at the bend. A PI controller turns
+///   the shortfall into accelerator, a proportional one the excess into brake.
+#[derive(Clone, Debug, Default)]
+pub struct RoadDriver {
+    integral: f64,
+}
+
+impl RoadDriver {
+    /// The steering-wheel angle, degrees (positive left), that keeps `car` (its rear
+    /// axle at `car.rear_axle`, `car.station_m` along `road`) on the line `lane_m` left of
+    /// the centreline: pure pursuit, plus the understeer the car needs at its speed in the
+    /// bend ahead (`K_us·v²·κ`: pure pursuit alone is kinematic, and a car at speed runs
+    /// wide of it by that much).
+    pub fn steering_deg(road: &autoplug_road::Road, car: &CarOnRoad, lane_m: f64) -> f64 {
+        let lookahead = autoplug_road::follow::lookahead_m(car.speed_mps);
+        let kinematic = autoplug_road::follow::pure_pursuit(
+            road,
+            car.rear_axle,
+            car.station_m,
+            car.wheelbase_m,
+            lookahead,
+            lane_m,
+        );
+        let curvature = road.curvature_at(road.wrap(car.station_m + 0.5 * lookahead));
+        let understeer = car.understeer_rad_per_mps2 * car.speed_mps * car.speed_mps * curvature;
+        ((kinematic + understeer).to_degrees() * car.steering_ratio)
+            .clamp(-MAX_STEERING_DEG, MAX_STEERING_DEG)
+    }
+
+    /// The speed the road allows from `station_m` on for a car at `speed_mps`, m/s: the
+    /// bends within braking distance, each approached at [`PLANNED_DECELERATION_MPS2`].
+    pub fn speed_allowed(road: &autoplug_road::Road, station_m: f64, speed_mps: f64) -> f64 {
+        const STEP_M: f64 = 2.0;
+        let reach = speed_mps * speed_mps / (2.0 * PLANNED_DECELERATION_MPS2) + 20.0;
+        let mut allowed = f64::INFINITY;
+        let mut ahead = 0.0;
+        while ahead <= reach {
+            let s = station_m + ahead;
+            if !road.is_closed() && s > road.length_m() {
+                break;
+            }
+            let curvature = road.curvature_at(road.wrap(s)).abs().max(1e-9);
+            let in_bend = (BEND_LATERAL_MPS2 / curvature).sqrt();
+            let from_here = (in_bend * in_bend + 2.0 * PLANNED_DECELERATION_MPS2 * ahead).sqrt();
+            allowed = allowed.min(from_here);
+            ahead += STEP_M;
+        }
+        allowed
+    }
+
+    /// Accelerator and brake pedal, %, that bring `speed_mps` to `target_mps`, over a
+    /// step of `dt_s`.
+    pub fn pedals(&mut self, speed_mps: f64, target_mps: f64, dt_s: f64) -> (f64, f64) {
+        let shortfall = target_mps - speed_mps;
+        let accelerator = ACCELERATOR_GAIN * shortfall + ACCELERATOR_INTEGRAL_GAIN * self.integral;
+        // Integrate only while the pedal is not pinned (no wind-up) and the car is not
+        // being braked.
+        if (0.0..100.0).contains(&accelerator) || (accelerator >= 100.0) != (shortfall > 0.0) {
+            self.integral = (self.integral + shortfall * dt_s).max(0.0);
+        }
+        let brake = BRAKE_GAIN * (-shortfall - BRAKE_DEADBAND_MPS);
+        if brake > 0.0 {
+            self.integral = 0.0;
+            (0.0, brake.min(100.0))
+        } else {
+            (accelerator.clamp(0.0, 100.0), 0.0)
         }
     }
 }

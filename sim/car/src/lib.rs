@@ -9,11 +9,13 @@ pub mod decimal;
 pub mod diag;
 pub mod driver;
 pub mod firmware;
+pub mod path_plot;
 pub mod plot;
 pub mod report;
 pub mod scenario;
 pub mod socketcand;
 pub mod sweep;
+pub mod track;
 
 #[cfg(test)]
 mod tests;

@@ -28,6 +28,8 @@ pub struct RunRecord {
     pub log: Vec<LoggedFrame>,
     /// The figures.
     pub summary: Summary,
+    /// The road the car drove on, if any (`path.svg` draws it).
+    pub track: Option<std::sync::Arc<autoplug_road::file::NamedRoad>>,
 }
 
 /// Runs a scenario as fast as possible and records it.
@@ -73,6 +75,7 @@ fn run_observed(
         trace,
         log,
         summary,
+        track: scenario.track.clone(),
     }
 }
 
@@ -596,17 +599,12 @@ fn series(trace: &[TraceRow], name: &str, axis: Axis, f: impl Fn(&TraceRow) -> f
     }
 }
 
-/// The run's figures, like the report's: (file name, plot).
+/// The run's figures, like the report's: (file name, plot); `path.svg` is drawn apart
+/// ([`crate::path_plot`]).
 pub fn plots(trace: &[TraceRow]) -> Vec<(&'static str, Plot)> {
     let time = "Time (s)".to_string();
     let mut gear = series(trace, "Gear", Axis::Right, |r| f64::from(r.gear));
     gear.steps = true;
-    let path = Series {
-        name: "Path".into(),
-        points: trace.iter().step_by(5).map(|r| (r.x_m, r.y_m)).collect(),
-        axis: Axis::Left,
-        steps: false,
-    };
     vec![
         (
             "speed.svg",
@@ -691,16 +689,6 @@ pub fn plots(trace: &[TraceRow]) -> Vec<(&'static str, Plot)> {
                 ],
             },
         ),
-        (
-            "path.svg",
-            Plot {
-                title: "Path".into(),
-                x_label: "x (m)".into(),
-                left_label: "y (m)".into(),
-                right_label: String::new(),
-                series: vec![path],
-            },
-        ),
     ]
 }
 
@@ -727,6 +715,14 @@ pub fn write_reports(dir: &Path, record: &RunRecord) -> io::Result<()> {
 pub fn write_summary_and_plots(dir: &Path, record: &RunRecord) -> io::Result<()> {
     fs::create_dir_all(dir)?;
     fs::write(dir.join("summary.json"), record.summary.to_json())?;
+    fs::write(
+        dir.join("path.svg"),
+        crate::path_plot::path_svg(
+            &record.trace,
+            record.track.as_deref(),
+            &VirtualCar::vehicle_params(),
+        ),
+    )?;
     let plots = plots(&record.trace);
     let write = |part: &[(&str, Plot)]| -> io::Result<()> {
         for (name, plot) in part {

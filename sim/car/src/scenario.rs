@@ -8,9 +8,13 @@
 //! vin = "JA3AP47H0YF000042"     # the car's VIN (F190 of every ECU); else one from the seed
 //!
 //! [road]
-//! mu_left = 1.0                 # friction, left wheels
+//! track = "handling-circuit"    # optional: a road to drive on (a shipped one, roads/*.toml,
+//!                               # or a road file's path from this file's folder)
+//! start_m = 0.0                 # where on it the car starts, m along it
+//! lane_m = 0.0                  # and how far left of its centreline (negative: right)
+//! mu_left = 1.0                 # friction, left wheels (on a track: the left half's asphalt)
 //! mu_right = 1.0                # friction, right wheels (split-µ when different)
-//! grade_percent = 0.0
+//! grade_percent = 0.0           # without a track only: on one, the road sets the grade
 //! ambient_c = 25.0
 //! sun_load_w = 300.0
 //!
@@ -31,6 +35,8 @@
 //! [driver]                      # the driver's controls at t = 0
 //! accelerator = 20.0            # pedal %, 0..100
 //! set_temp_f = 72.0
+//! follow_road = false           # on a track: steer along it (path following)
+//! speed_kmh = 80.0              # hold this speed with the pedals, slowing for bends
 //!
 //! [[at]]                        # timeline: changes at a time, in order
 //! t_s = 2.0
@@ -46,11 +52,13 @@
 //! checked against its range with an error that names the field.
 
 use autoplug_image::Version;
+use autoplug_road::file::NamedRoad;
 use autoplug_vin::Vin;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt;
 use std::path::Path;
+use std::sync::Arc;
 
 /// A whole scenario.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -89,6 +97,9 @@ pub struct Scenario {
     /// Changes over time, in time order.
     #[serde(default)]
     pub at: Vec<Event>,
+    /// The road `road.track` names, read when the scenario is.
+    #[serde(skip)]
+    pub track: Option<Arc<NamedRoad>>,
 }
 
 fn default_seed() -> u64 {
@@ -99,11 +110,22 @@ fn default_seed() -> u64 {
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Road {
-    /// Tyre-road friction of the left wheels.
+    /// The road the car drives on: a shipped road's name (`handling-circuit`, see
+    /// `autoplug_road::shipped`) or the path of a road file (`*.toml`) from the scenario
+    /// file's folder. Without one the car drives on an endless plane, each side of the car
+    /// on its own friction.
+    pub track: Option<String>,
+    /// Where on the track the car starts, m along it.
+    pub start_m: f64,
+    /// How far left of the track's centreline the car starts, m (negative: right); the
+    /// line a driver that follows the road keeps.
+    pub lane_m: f64,
+    /// Tyre-road friction of the left wheels; on a track, of the asphalt of its left half
+    /// (patches and the verge keep their own).
     pub mu_left: f64,
-    /// Tyre-road friction of the right wheels.
+    /// Tyre-road friction of the right wheels; on a track, of its right half's asphalt.
     pub mu_right: f64,
-    /// Grade in percent (positive uphill).
+    /// Grade in percent (positive uphill); on a track the track's grades apply instead.
     pub grade_percent: f64,
     /// Ambient temperature, °C.
     pub ambient_c: f64,
@@ -114,6 +136,9 @@ pub struct Road {
 impl Default for Road {
     fn default() -> Self {
         Self {
+            track: None,
+            start_m: 0.0,
+            lane_m: 0.0,
             mu_left: 1.0,
             mu_right: 1.0,
             grade_percent: 0.0,
@@ -234,6 +259,11 @@ pub struct DriverSettings {
     pub manual_mode: Option<bool>,
     /// Cabin set-temperature knob, °F.
     pub set_temp_f: Option<f64>,
+    /// On a track: the driver steers along it ([`crate::driver::RoadDriver`]).
+    pub follow_road: Option<bool>,
+    /// A speed the driver holds with the pedals, km/h, slowing for the bends ahead when
+    /// following the road.
+    pub speed_kmh: Option<f64>,
 }
 
 pub use autoplug_vehicle::controls::Button;
@@ -275,6 +305,11 @@ pub struct Event {
     pub manual_mode: Option<bool>,
     /// Cabin set temperature, °F.
     pub set_temp_f: Option<f64>,
+    /// Start (true) or stop (false) steering along the track.
+    pub follow_road: Option<bool>,
+    /// A speed to hold with the pedals from now on, km/h; an `accelerator` or `brake`
+    /// given later hands the pedals back to the timeline.
+    pub speed_kmh: Option<f64>,
     /// New grade, %.
     pub grade_percent: Option<f64>,
     /// New friction, left wheels.
@@ -463,19 +498,32 @@ impl Scenario {
                 "more than {MAX_SCENARIO_BYTES} bytes: a scenario file is at most that"
             )));
         }
-        Self::parse(&text, &source)
+        Self::parse_in(&text, &source, path.parent())
     }
 
-    /// Parses and checks scenario text; `source` names it in errors.
+    /// Parses and checks scenario text; `source` names it in errors. A road file the
+    /// scenario names by path is read from the working directory.
     pub fn parse(text: &str, source: &str) -> Result<Self, ScenarioError> {
-        let scenario: Scenario = toml::from_str(text).map_err(|e| ScenarioError {
-            source: cut(source, MAX_MESSAGE_CHARS),
-            message: cut(&syntax_error(text, &e), MAX_MESSAGE_CHARS),
-        })?;
-        scenario.check().map_err(|message| ScenarioError {
+        Self::parse_in(text, source, None)
+    }
+
+    /// [`Scenario::parse`], reading a road file named by path from `folder` (the
+    /// scenario file's).
+    pub fn parse_in(
+        text: &str,
+        source: &str,
+        folder: Option<&Path>,
+    ) -> Result<Self, ScenarioError> {
+        let fail = |message: String| ScenarioError {
             source: cut(source, MAX_MESSAGE_CHARS),
             message: cut(&message, MAX_MESSAGE_CHARS),
-        })?;
+        };
+        let mut scenario: Scenario =
+            toml::from_str(text).map_err(|e| fail(syntax_error(text, &e)))?;
+        if let Some(name) = &scenario.road.track {
+            scenario.track = Some(Arc::new(read_track(name, folder).map_err(fail)?));
+        }
+        scenario.check().map_err(fail)?;
         Ok(scenario)
     }
 
@@ -548,6 +596,10 @@ impl Scenario {
             *FRICTION_RANGE.end(),
         )?;
         range("road.grade_percent", self.road.grade_percent, -30.0, 30.0)?;
+        self.check_track()?;
+        if let Some(v) = self.driver.speed_kmh {
+            range("driver.speed_kmh", v, 0.0, 250.0)?;
+        }
         range("road.ambient_c", self.road.ambient_c, -40.0, 50.0)?;
         range("road.sun_load_w", self.road.sun_load_w, 0.0, 2000.0)?;
         range("initial.speed_kmh", self.initial.speed_kmh, 0.0, 250.0)?;
@@ -567,6 +619,7 @@ impl Scenario {
             d.set_temp_f,
         )?;
         let mut previous = 0.0;
+        let mut following = self.driver.follow_road == Some(true);
         for (i, event) in self.at.iter().enumerate() {
             let at = format!("at[{i}] (t_s = {}): ", event.t_s);
             range(&format!("at[{i}].t_s"), event.t_s, 0.0, self.duration_s)?;
@@ -581,6 +634,25 @@ impl Scenario {
             controls(&at, c.accelerator, c.brake, c.steering_deg, c.set_temp_f)?;
             if let Some(v) = c.grade_percent {
                 range(&format!("{at}grade_percent"), v, -30.0, 30.0)?;
+                if self.track.is_some() {
+                    return Err(format!(
+                        "{at}grade_percent: on a track the track sets the grade"
+                    ));
+                }
+            }
+            if let Some(v) = c.speed_kmh {
+                range(&format!("{at}speed_kmh"), v, 0.0, 250.0)?;
+            }
+            if c.follow_road == Some(true) && self.track.is_none() {
+                return Err(format!(
+                    "{at}follow_road: there is no road to follow (road.track)"
+                ));
+            }
+            following = c.follow_road.unwrap_or(following);
+            if following && c.steering_deg.is_some() {
+                return Err(format!(
+                    "{at}steering_deg: the driver follows the road here (set follow_road = false first)"
+                ));
             }
             if let Some(v) = c.mu_left {
                 range(
@@ -611,6 +683,61 @@ impl Scenario {
         }
         Ok(())
     }
+
+    /// The track's settings agree with the track (and there is one when they need it).
+    fn check_track(&self) -> Result<(), String> {
+        let Some(track) = &self.track else {
+            if self.driver.follow_road == Some(true) {
+                return Err("driver.follow_road: there is no road to follow (road.track)".into());
+            }
+            if self.road.start_m != 0.0 || self.road.lane_m != 0.0 {
+                return Err(
+                    "road.start_m and road.lane_m place the car on a track: road.track names none"
+                        .into(),
+                );
+            }
+            return Ok(());
+        };
+        let road = &track.road;
+        if self.road.grade_percent != 0.0 {
+            return Err(format!(
+                "road.grade_percent: on a track ({}) the track sets the grade",
+                track.name
+            ));
+        }
+        let length = road.length_m();
+        if !(self.road.start_m.is_finite() && (0.0..=length).contains(&self.road.start_m)) {
+            return Err(format!(
+                "road.start_m = {} is outside the track (0..={length:.2} m)",
+                self.road.start_m
+            ));
+        }
+        let half = road.width_m() / 2.0 - 1.0;
+        if !(self.road.lane_m.is_finite() && self.road.lane_m.abs() <= half) {
+            return Err(format!(
+                "road.lane_m = {}: the car must start on the road (-{half}..={half} m from its centreline)",
+                self.road.lane_m
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The road `name` stands for: a shipped road, or a road file (a path ending in `.toml`)
+/// from `folder`.
+fn read_track(name: &str, folder: Option<&Path>) -> Result<NamedRoad, String> {
+    if let Some(shipped) = autoplug_road::shipped::road(name) {
+        return shipped.map_err(|e| format!("road.track \"{name}\": {e}"));
+    }
+    if !name.ends_with(".toml") {
+        return Err(format!(
+            "road.track \"{}\": no such road (the shipped ones: {}; or a road file's path, *.toml)",
+            cut(name, 60),
+            autoplug_road::shipped::names()
+        ));
+    }
+    let path = folder.map_or_else(|| Path::new(name).to_path_buf(), |f| f.join(name));
+    autoplug_road::file::load(&path).map_err(|e| format!("road.track: {e}"))
 }
 
 /// The VIN of a car whose scenario names none: WMI `JA3` and the EVO VI's descriptor as on

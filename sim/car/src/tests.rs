@@ -138,6 +138,142 @@ fn scenario_errors_name_the_field() {
 }
 
 #[test]
+fn a_track_and_its_driver_are_checked_against_each_other() {
+    let on_circuit = "name = \"x\"\nduration_s = 10\n[road]\ntrack = \"handling-circuit\"\n";
+    let s = Scenario::parse(on_circuit, "x.toml").unwrap();
+    let track = s.track.as_ref().expect("the shipped road is read");
+    assert_eq!(track.name, "handling circuit");
+    let cases = [
+        (
+            "name = \"x\"\nduration_s = 10\n[road]\ntrack = \"nurburgring\"\n".to_string(),
+            "road.track \"nurburgring\": no such road (the shipped ones: handling-circuit, braking-straight",
+        ),
+        (
+            "name = \"x\"\nduration_s = 10\n[road]\ntrack = \"missing.toml\"\n".to_string(),
+            "road.track: missing.toml: cannot read",
+        ),
+        (
+            format!("{on_circuit}grade_percent = 4\n"),
+            "road.grade_percent: on a track (handling circuit) the track sets the grade",
+        ),
+        (
+            format!("{on_circuit}start_m = 5000\n"),
+            "road.start_m = 5000 is outside the track (0..=1678.85 m)",
+        ),
+        (
+            format!("{on_circuit}lane_m = -4.5\n"),
+            "road.lane_m = -4.5: the car must start on the road",
+        ),
+        (
+            "name = \"x\"\nduration_s = 10\n[driver]\nfollow_road = true\n".to_string(),
+            "driver.follow_road: there is no road to follow (road.track)",
+        ),
+        (
+            format!("{on_circuit}[driver]\nfollow_road = true\n[[at]]\nt_s = 2\nsteering_deg = 10\n"),
+            "at[0] (t_s = 2): steering_deg: the driver follows the road here",
+        ),
+        (
+            format!("{on_circuit}[[at]]\nt_s = 2\ngrade_percent = 3\n"),
+            "at[0] (t_s = 2): grade_percent: on a track the track sets the grade",
+        ),
+        (
+            format!("{on_circuit}[driver]\nspeed_kmh = 300\n"),
+            "driver.speed_kmh = 300 is outside 0..=250",
+        ),
+    ];
+    for (text, expected) in cases {
+        let shown = Scenario::parse(&text, "x.toml").unwrap_err().to_string();
+        assert!(
+            shown.contains(expected),
+            "expected {expected:?} in {shown:?}"
+        );
+    }
+    // A road file by path, from the scenario file's folder; steering again once the
+    // driver stops following.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("short.toml"),
+        "name = \"short\"\nwidth_m = 8\n[[segment]]\nstraight_m = 200\n",
+    )
+    .unwrap();
+    let path = dir.path().join("s.toml");
+    std::fs::write(
+        &path,
+        "name = \"x\"\nduration_s = 10\n[road]\ntrack = \"short.toml\"\n[driver]\nfollow_road = true\n[[at]]\nt_s = 1\nfollow_road = false\nsteering_deg = 5\n",
+    )
+    .unwrap();
+    let s = Scenario::load(&path).unwrap();
+    assert_eq!(s.track.as_ref().unwrap().road.length_m(), 200.0);
+}
+
+#[test]
+fn path_svg_draws_the_road_and_the_path_at_one_scale() {
+    use crate::path_plot::path_svg;
+    // A 60 m stop along the braking straight, the car sliding at its end.
+    let s = Scenario::parse(
+        "name = \"x\"\nduration_s = 1\n[road]\ntrack = \"braking-straight\"\n",
+        "x",
+    )
+    .unwrap();
+    let rows: Vec<crate::car::TraceRow> = (0..=60)
+        .map(|i| {
+            let sliding = i > 40;
+            crate::car::TraceRow {
+                t_s: i as f64 * 0.05,
+                x_m: i as f64,
+                y_m: 0.0,
+                heading_rad: if sliding { 0.02 * (i - 40) as f64 } else { 0.0 },
+                speed_kmh: 50.0,
+                distance_m: i as f64,
+                wheel_slip: if sliding { [-1.0; 4] } else { [0.0; 4] },
+                ..Default::default()
+            }
+        })
+        .collect();
+    let svg = path_svg(
+        &rows,
+        s.track.as_deref(),
+        &crate::car::VirtualCar::vehicle_params(),
+    );
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    assert!(
+        svg.contains("Path on the braking straight (equal scale)"),
+        "title"
+    );
+    assert!(!svg.contains("NaN") && !svg.contains("inf"));
+    // One scale: 60 m of path with 8 m of ground and the road's half width either side
+    // spans the 900 px limit, so a metre is 900 / 90 px; the 14 m road then shows 140 px
+    // wide (its two edges are 140 px apart at the start).
+    let scale = 900.0 / (60.0 + 2.0 * (8.0 + 7.0));
+    let edges: Vec<&str> = svg
+        .lines()
+        .filter(|l| l.contains(r##"stroke="#ffffff" stroke-width="1.5""##))
+        .collect();
+    assert_eq!(edges.len(), 2, "two road edges");
+    let first_y = |line: &str| -> f64 {
+        let points = line.split("points=\"").nth(1).unwrap();
+        points
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .split(',')
+            .nth(1)
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let apart = (first_y(edges[0]) - first_y(edges[1])).abs();
+    assert!((apart - 14.0 * scale).abs() < 0.2, "{apart} px for 14 m");
+    // Tyre marks for each wheel while it was locked, and the car's outline at intervals.
+    assert_eq!(
+        svg.matches(r##"stroke="#1a1a1a""##).count(),
+        4,
+        "tyre marks"
+    );
+    assert!(svg.matches("<title>t = ").count() >= 12, "outlines");
+}
+
+#[test]
 fn a_value_of_the_wrong_type_names_its_key_and_shows_its_line() {
     let shown = Scenario::parse("name = \"x\"\nduration_s = \"long\"\n", "x.toml")
         .unwrap_err()
