@@ -1277,6 +1277,12 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
         }
         _ => None,
     };
+    // The dashboard's live table, before the source: the virtual car publishes its world
+    // beside it.
+    let table = options
+        .web
+        .as_ref()
+        .map(|_| std::sync::Arc::new(autoplug_web::LiveTable::new()));
     let mut replay_desk = None;
     let mut source = match (bus, &options.web) {
         (BusUrl::Replay(path), Some(_)) => {
@@ -1287,12 +1293,27 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
             player.speed = options.speed.unwrap_or(1.0);
             let player = Rc::new(RefCell::new(player));
             replay_desk = Some(player.clone());
-            let source = autoplug_live::replay::ControlledReplay::open(path, first_us, player)
+            let mut source = autoplug_live::replay::ControlledReplay::open(path, first_us, player)
                 .map_err(|e| CliError::Log(e.to_string()))?;
+            if let Some(table) = &table {
+                // A recording of the virtual car shows its world too; without a world
+                // file the replay shows the bus alone.
+                match source.with_world(world_feed(table.world().clone())) {
+                    Ok(None) | Err(_) => {}
+                    Ok(Some(damage)) => {
+                        writeln!(out, "world file damaged, played up to the damage: {damage}")?
+                    }
+                }
+            }
             Box::new(source) as Box<dyn autoplug_gateway::FrameSource>
         }
         _ => bus
-            .open(pace, desk.clone(), options.firmware.as_ref())
+            .open(
+                pace,
+                desk.clone(),
+                options.firmware.as_ref(),
+                table.as_ref().map(|t| world_publisher(t.world().clone())),
+            )
             .map_err(CliError::Log)?,
     };
     let replaying = matches!(bus, BusUrl::Replay(_));
@@ -1393,7 +1414,9 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     let (result, mut watch, recorded) = match options.web {
         Some(config) => {
             // The dashboard: the session takes the watch, the recording and the commands.
-            let table = std::sync::Arc::new(autoplug_web::LiveTable::new());
+            let table = table
+                .clone()
+                .unwrap_or_else(|| std::sync::Arc::new(autoplug_web::LiveTable::new()));
             let (control, commands) = autoplug_web::control::channel();
             let token = config.token.clone();
             let server = autoplug_web::WebServer::start(config, table.clone(), Some(control))
@@ -1709,6 +1732,39 @@ fn demo_on_firmware(
 }
 
 /// Runs a demonstration and reports what it showed.
+/// What plays a recording's world into the dashboard's world channel.
+fn world_feed(
+    world: std::sync::Arc<autoplug_web::WorldChannel>,
+) -> autoplug_live::replay::WorldFeed {
+    use autoplug_live::replay::WorldEvent;
+    Box::new(move |event| match event {
+        // Too large a description: the replay shows no world (the bus plays on).
+        WorldEvent::Describe(json) => drop(world.describe(json)),
+        WorldEvent::Pose(json) => world.publish(json),
+    })
+}
+
+/// What publishes the virtual car's world into the dashboard's world channel: its
+/// description (road and car) once, then its pose each time the source hands the car over.
+fn world_publisher(
+    world: std::sync::Arc<autoplug_web::WorldChannel>,
+) -> autoplug_live::sources::WorldSink {
+    use autoplug_virtual_car::world::{description, WorldPose};
+    Box::new(move |car| {
+        if !world.is_described() {
+            let about = description(
+                car.scenario().track.as_deref(),
+                &autoplug_virtual_car::car::VirtualCar::vehicle_params(),
+            );
+            // A shipped or scenario road is far below the limit; a larger one has no view.
+            if world.describe(about.to_string()).is_err() {
+                return;
+            }
+        }
+        world.publish(WorldPose::of(car).to_json());
+    })
+}
+
 fn demo(
     which: Demo,
     dir: Option<&Path>,

@@ -22,6 +22,8 @@ use autoplug_image::ImageSet;
 use autoplug_logs::{LogFrame, RotatePolicy};
 use autoplug_virtual_car::driver::clamped;
 use autoplug_virtual_car::scenario::FRICTION_RANGE;
+use autoplug_virtual_car::world::{world_file_for, WorldFileWriter};
+use autoplug_web::world::WorldCursor;
 use autoplug_web::{Action, Answer, Command, Commands, LiveTable, Publisher, ReplayAction};
 use serde_json::{json, Value};
 
@@ -68,6 +70,19 @@ struct FlashState {
     result: Option<Result<Value, String>>,
 }
 
+/// The simulator's world written beside a recording (`*.world.jsonl`, see
+/// `autoplug_virtual_car::world`): never inside the candump file.
+struct WorldRecording {
+    writer: WorldFileWriter,
+    path: PathBuf,
+    cursor: WorldCursor,
+    seen: u64,
+    flushed: Instant,
+}
+
+/// How often the world file is flushed (as the candump file is).
+const WORLD_FLUSH: Duration = Duration::from_millis(100);
+
 /// The session (see the module docs).
 pub struct Session<'a> {
     /// The gateway's watch: diagnostics, trips, codes, its tester.
@@ -84,6 +99,8 @@ pub struct Session<'a> {
     recordings_dir: Option<PathBuf>,
     rotate: RotatePolicy,
     recording: Option<RecordingSink>,
+    /// The world file beside the recording's candump file (opened with its first file).
+    world_file: Option<WorldRecording>,
     flash: Option<FlashState>,
     events: VecDeque<(f64, String)>,
     last_written: Option<Instant>,
@@ -113,6 +130,7 @@ impl<'a> Session<'a> {
             recordings_dir: None,
             rotate: RotatePolicy::default(),
             recording: None,
+            world_file: None,
             flash: None,
             events: VecDeque::new(),
             last_written: None,
@@ -173,6 +191,7 @@ impl<'a> Session<'a> {
 
     /// Stops the recording, if one runs (at the end of the session).
     pub fn stop_recording(&mut self) -> Option<String> {
+        self.close_world_file();
         let mut sink = self.recording.take()?;
         Some(match sink.stop() {
             Ok(summary) => format!(
@@ -244,6 +263,23 @@ impl<'a> Session<'a> {
                     .push(DeskInput::Friction(mu_left, mu_right))
                     .map_err(str::to_string)?;
                 Ok(json!({ "mu_left": mu_left, "mu_right": mu_right }))
+            }
+            Action::RoadStart => {
+                let Some(desk) = &self.desk else {
+                    return Err("only the virtual car can be taken back to the start".into());
+                };
+                let speed = desk.borrow().report().speed_mps.abs();
+                if speed > autoplug_virtual_car::car::VirtualCar::STANDING_MPS {
+                    return Err(format!(
+                        "the car moves ({:.1} km/h): stop it first",
+                        speed * 3.6
+                    ));
+                }
+                desk.borrow_mut()
+                    .push(DeskInput::ToStart)
+                    .map_err(str::to_string)?;
+                self.event("the car was taken back to the start".into());
+                Ok(json!({ "to_start": true }))
             }
             Action::Replay(action) => self.control_replay(action),
             Action::ReplayRecording { path } => {
@@ -383,6 +419,7 @@ impl<'a> Session<'a> {
             let Some(mut sink) = self.recording.take() else {
                 return Err("no recording is running".into());
             };
+            self.close_world_file();
             let summary = sink.stop().map_err(|e| e.to_string())?;
             let files: Vec<String> = summary
                 .files
@@ -605,8 +642,85 @@ impl<'a> Session<'a> {
         })
     }
 
+    /// Writes what the world channel has new into the world file beside the recording,
+    /// opening it once the recording has its first file. A write error ends the world
+    /// file (the recording goes on) and says so.
+    fn record_world(&mut self) {
+        let Some(sink) = &self.recording else {
+            return;
+        };
+        let world = self.table.world().clone();
+        if self.world_file.is_none() {
+            if !world.is_described() {
+                return;
+            }
+            let Some(candump) = sink.written().1 else {
+                return;
+            };
+            let path = world_file_for(&candump);
+            match WorldFileWriter::create(&path) {
+                Ok(writer) => {
+                    self.world_file = Some(WorldRecording {
+                        writer,
+                        path,
+                        cursor: WorldCursor::default(),
+                        seen: u64::MAX,
+                        flushed: Instant::now(),
+                    })
+                }
+                Err(e) => {
+                    // Tried once per recording: the event says why there is no world file.
+                    self.event(format!(
+                        "the world file {} cannot be written: {e}",
+                        path.display()
+                    ));
+                    return;
+                }
+            }
+        }
+        let Some(file) = self.world_file.as_mut() else {
+            return;
+        };
+        let version = world.version();
+        let mut written = Ok(());
+        if version != file.seen {
+            file.seen = version;
+            if let Some(news) = world.take_since(file.cursor) {
+                file.cursor = news.cursor;
+                if let Some(description) = &news.description {
+                    written = file.writer.describe(description);
+                }
+                for pose in &news.poses {
+                    if written.is_err() {
+                        break;
+                    }
+                    written = file.writer.pose(pose);
+                }
+            }
+        }
+        if written.is_ok() && file.flushed.elapsed() >= WORLD_FLUSH {
+            file.flushed = Instant::now();
+            written = file.writer.flush();
+        }
+        if let Err(e) = written {
+            let path = file.path.display().to_string();
+            self.world_file = None;
+            self.event(format!("the world file {path} stopped: {e}"));
+        }
+    }
+
+    fn close_world_file(&mut self) {
+        if let Some(mut file) = self.world_file.take() {
+            if let Err(e) = file.writer.flush() {
+                let path = file.path.display().to_string();
+                self.event(format!("the world file {path} failed: {e}"));
+            }
+        }
+    }
+
     fn housekeeping(&mut self, state: &CarState) {
         self.now_us = state.now_us();
+        self.record_world();
         self.take_commands();
         self.take_outcomes();
         let busy = self

@@ -32,6 +32,8 @@ pub enum DeskInput {
     Release,
     /// The road's friction, left and right (already checked against its range).
     Friction(f64, f64),
+    /// Back to the start line (refused by the car while it moves).
+    ToStart,
 }
 
 /// What the car's side reports back for the dashboard.
@@ -41,6 +43,8 @@ pub struct DeskReport {
     pub held: Option<HeldControls>,
     /// The road's friction, left and right.
     pub friction: (f64, f64),
+    /// The car's speed (the simulator's), m/s.
+    pub speed_mps: f64,
 }
 
 /// The desk (see the module docs).
@@ -93,6 +97,10 @@ impl DriverDesk {
                 DeskInput::Friction(left, right) => {
                     let _ = car.set_friction(left, right);
                 }
+                DeskInput::ToStart => {
+                    // The session checked the car stands; one that moved off since stays.
+                    let _ = car.back_to_start();
+                }
             }
         }
         if !self.released
@@ -104,6 +112,7 @@ impl DriverDesk {
         self.report = DeskReport {
             held: car.manual_driver().map(|d| *d.held()),
             friction: car.friction(),
+            speed_mps: car.vehicle().speed_mps,
         };
     }
 

@@ -5,6 +5,11 @@
 //! Seeking reads the log again from its start up to the new position (logs are text or
 //! BLF, read forward), and the gateway starts its analysis over from there: a verdict or a
 //! trip across a jump would mix two moments of the drive.
+//!
+//! A recording of the virtual car has its world file beside it (`drive.world.jsonl`:
+//! the road and the car's poses, never inside the candump file); the player hands its
+//! poses to a world feed as the log's clock passes them, so a replayed drive shows its
+//! world too.
 
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
@@ -80,6 +85,48 @@ pub fn log_span(path: &Path) -> Result<(u64, u64), String> {
     span.ok_or_else(|| format!("'{}' holds no frame", path.display()))
 }
 
+/// What the player hands the world feed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum WorldEvent {
+    /// The world's description (JSON): a new world, its poses start over.
+    Describe(String),
+    /// A pose, as the world file holds it (JSON).
+    Pose(String),
+}
+
+/// Takes the recording's world as the replay plays it.
+pub type WorldFeed = Box<dyn FnMut(WorldEvent)>;
+
+/// A recording's world, played beside its frames.
+struct ReplayWorld {
+    description: String,
+    poses: Vec<autoplug_virtual_car::world::WorldPose>,
+    /// The next pose to hand over.
+    next: usize,
+    feed: WorldFeed,
+}
+
+impl ReplayWorld {
+    /// Hands over every pose up to `now_us`.
+    fn play_until(&mut self, now_us: u64) {
+        while let Some(pose) = self.poses.get(self.next) {
+            if pose.t_s * 1e6 > now_us as f64 {
+                break;
+            }
+            (self.feed)(WorldEvent::Pose(pose.to_json()));
+            self.next += 1;
+        }
+    }
+
+    /// Starts over (a seek): the world again, the poses from `from_us` on.
+    fn restart_at(&mut self, from_us: u64) {
+        (self.feed)(WorldEvent::Describe(self.description.clone()));
+        self.next = self
+            .poses
+            .partition_point(|pose| pose.t_s * 1e6 < from_us as f64);
+    }
+}
+
 /// The player (see the module docs).
 pub struct ControlledReplay {
     path: PathBuf,
@@ -96,6 +143,7 @@ pub struct ControlledReplay {
     /// After a seek, the frames before this time are played at once (even while paused),
     /// so the car state at the new position is whole.
     prime_until: Option<u64>,
+    world: Option<ReplayWorld>,
 }
 
 /// How much of the log before a seek's target is played at once: every message of the
@@ -119,7 +167,37 @@ impl ControlledReplay {
             held: None,
             now_us: first_us,
             prime_until: None,
+            world: None,
         })
+    }
+
+    /// Plays the recording's world file (beside the log, see the module docs) into
+    /// `feed`. Without one, or with one that cannot be read, the replay has no world and
+    /// says why (`Err`); a damaged world file plays up to the damage (`Ok` with the
+    /// reason).
+    pub fn with_world(&mut self, mut feed: WorldFeed) -> Result<Option<String>, String> {
+        let path = autoplug_virtual_car::world::world_file_for(&self.path);
+        if !path.exists() {
+            return Err(format!("no world file ({}) beside the log", path.display()));
+        }
+        let log = autoplug_virtual_car::world::read_world_file(&path)?;
+        let description = log.description.to_string();
+        feed(WorldEvent::Describe(description.clone()));
+        let mut world = ReplayWorld {
+            description,
+            poses: log.poses,
+            next: 0,
+            feed,
+        };
+        world.play_until(self.now_us);
+        self.world = Some(world);
+        Ok(log.damaged)
+    }
+
+    fn play_world(&mut self) {
+        if let Some(world) = &mut self.world {
+            world.play_until(self.now_us);
+        }
     }
 
     fn seek(&mut self, to_s: f64) -> Result<(), SourceError> {
@@ -139,6 +217,9 @@ impl ControlledReplay {
             }
         }
         self.now_us = primed_from;
+        if let Some(world) = &mut self.world {
+            world.restart_at(primed_from);
+        }
         self.pacer.restart();
         let mut desk = self.desk.borrow_mut();
         desk.position_s = to_s;
@@ -170,6 +251,7 @@ impl FrameSource for ControlledReplay {
             match frame {
                 Some(frame) if frame.t_us < until => {
                     self.now_us = self.now_us.max(frame.t_us);
+                    self.play_world();
                     return Ok(Poll::Frame(frame));
                 }
                 other => {
@@ -177,6 +259,7 @@ impl FrameSource for ControlledReplay {
                     self.held = other;
                     self.prime_until = None;
                     self.now_us = until;
+                    self.play_world();
                     self.pacer.restart();
                 }
             }
@@ -213,6 +296,7 @@ impl FrameSource for ControlledReplay {
             return Ok(Poll::Idle);
         }
         self.now_us = self.now_us.max(frame.t_us);
+        self.play_world();
         self.desk.borrow_mut().position_s = self.now_us.saturating_sub(self.first_us) as f64 * 1e-6;
         Ok(Poll::Frame(frame))
     }

@@ -24,7 +24,19 @@ pub struct VirtualCarSource {
     car: VirtualCar,
     pending: VecDeque<LogFrame>,
     desk: Option<Rc<RefCell<crate::driving::DriverDesk>>>,
+    world: Option<WorldSink>,
+    /// When the world sink is next due, µs of simulated time.
+    next_world_us: u64,
 }
+
+/// Takes the car every [`WORLD_PERIOD_US`] of simulated time: what publishes the
+/// simulator's world (the car's pose on its road) beside the bus, for the dashboard's
+/// world view. The gateway never sees it.
+pub type WorldSink = Box<dyn FnMut(&VirtualCar)>;
+
+/// How often the world sink takes the car, µs of simulated time (20 Hz: the dashboard's
+/// update rate; the page interpolates between).
+pub const WORLD_PERIOD_US: u64 = 50_000;
 
 impl VirtualCarSource {
     /// The source for a car (normally just built from a scenario).
@@ -33,7 +45,16 @@ impl VirtualCarSource {
             car,
             pending: VecDeque::new(),
             desk: None,
+            world: None,
+            next_world_us: 0,
         }
+    }
+
+    /// The same, handing the car to `world` every [`WORLD_PERIOD_US`] (from the first
+    /// poll on).
+    pub fn with_world(mut self, world: WorldSink) -> Self {
+        self.world = Some(world);
+        self
     }
 
     /// The same, with a person at the `desk` who may take the wheel (the dashboard).
@@ -79,6 +100,12 @@ impl FrameSource for VirtualCarSource {
                 desk.borrow_mut().apply(&mut self.car);
             }
             self.car.tick();
+            if let Some(world) = &mut self.world {
+                if self.car.time_us() >= self.next_world_us {
+                    world(&self.car);
+                    self.next_world_us = self.car.time_us() + WORLD_PERIOD_US;
+                }
+            }
             // Nothing here sums up stops: a person may drive the car for days.
             drop(self.car.take_brake_presses());
             // Taken, not copied: a long live run keeps no frames in the car.
@@ -288,11 +315,13 @@ impl BusUrl {
     /// `None` = as fast as the machine goes).
     /// `desk`: a person may drive the virtual car (ignored for a real bus).
     /// `firmware`: ECUs of the virtual car that run as their firmware on emulated MCUs.
+    /// `world`: takes the virtual car's world (ignored for a real bus).
     pub fn open(
         &self,
         speed: Option<f64>,
         desk: Option<Rc<RefCell<crate::driving::DriverDesk>>>,
         firmware: Option<&autoplug_virtual_car::firmware::FirmwareChoice>,
+        world: Option<WorldSink>,
     ) -> Result<Box<dyn FrameSource>, String> {
         match self {
             BusUrl::Virtual(_) | BusUrl::Dashboard => {
@@ -305,10 +334,13 @@ impl BusUrl {
                     Some(choice) => VirtualCar::with_firmware(&scenario, choice)?,
                     None => VirtualCar::new(&scenario),
                 };
-                let source = match desk {
+                let mut source = match desk {
                     Some(desk) => VirtualCarSource::with_desk(car, desk),
                     None => VirtualCarSource::new(car),
                 };
+                if let Some(world) = world {
+                    source = source.with_world(world);
+                }
                 Ok(match speed {
                     Some(speed) => Box::new(Paced::new(source, speed)),
                     None => Box::new(source),

@@ -9,6 +9,7 @@
 //! | `POST /api/ecus/{ecu}/clear-dtcs` | clear one ECU's trouble codes (`all`: every ECU's) | yes |
 //! | `POST /api/recording` | `{"on": true}` starts recording all traffic, `false` stops | yes |
 //! | `POST /api/road` | `{"mu_left": 1.0, "mu_right": 0.2}`: the virtual road's friction | yes |
+//! | `POST /api/road/start` | `{}`: the standing virtual car back to its start line | yes |
 //! | `POST /api/replay` | `{"action": "play"}`, `pause`, `{"action":"speed","speed":4}`, `{"action":"seek","t":30}` | yes |
 //! | `GET /api/images` | the firmware library: name, bytes, ECU, version of each image | — |
 //! | `GET /api/recordings`, `GET /api/recordings/{name}` | the recordings, and one to download | — |
@@ -73,6 +74,7 @@ pub(crate) fn routes() -> Router<Arc<Shared>> {
         .route("/api/ecus/{ecu}/clear-dtcs", post(clear_dtcs))
         .route("/api/recording", post(recording))
         .route("/api/road", post(road))
+        .route("/api/road/start", post(road_start))
         .route("/api/replay", post(replay))
         .route("/api/images", get(images))
         .route("/api/recordings", get(recordings))
@@ -283,6 +285,24 @@ async fn road(
         Ok(RoadBody { mu_left, mu_right }) => {
             act(&shared, Action::Road { mu_left, mu_right }).await
         }
+        Err(e) => e.into_response(),
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EmptyBody {}
+
+async fn road_start(
+    State(shared): State<Arc<Shared>>,
+    headers: HeaderMap,
+    body: Result<Json<EmptyBody>, JsonRejection>,
+) -> Response {
+    if let Err(e) = authorize(&shared, &headers) {
+        return e.into_response();
+    }
+    match json_body(body) {
+        Ok(EmptyBody {}) => act(&shared, Action::RoadStart).await,
         Err(e) => e.into_response(),
     }
 }

@@ -43,6 +43,8 @@ pub enum Action {
         /// Right wheels.
         mu_right: f64,
     },
+    /// Take the standing virtual car back to its start line.
+    RoadStart,
     /// Control a replay.
     Replay(ReplayAction),
     /// Open a recording in a replay dashboard of its own (a second page, beside the live

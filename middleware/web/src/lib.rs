@@ -23,6 +23,9 @@
 //!    `bus` only with what changed). A client that reads slowly gets fewer updates with the latest values,
 //!    never a backlog.
 //!
+//! 4. `{"type":"world",…}` messages when the bus is the virtual car's: the simulator's own
+//!    view of the car on its road, a channel apart from the signals (see [`world`]).
+//!
 //! A client may send `{"type":"ping"}` (answered `{"type":"pong"}`); anything else is
 //! answered `{"type":"error","error":"…"}` and the stream goes on. `GET /api/catalog` and
 //! `GET /api/state` give the first two messages over plain HTTP.
@@ -35,8 +38,10 @@ pub mod control;
 pub mod fleet;
 pub mod live;
 pub mod server;
+pub mod world;
 
 pub use control::{Action, Answer, Button, Command, Commands, Control, HeldControls, ReplayAction};
 pub use fleet::FleetData;
 pub use live::{LiveTable, Publisher};
 pub use server::{WebConfig, WebServer};
+pub use world::WorldChannel;

@@ -72,6 +72,9 @@ struct Table {
 pub struct LiveTable {
     table: Mutex<Table>,
     version: watch::Sender<u64>,
+    /// The simulator's world, streamed beside the signals (never written by the
+    /// pipeline: see [`crate::world`]).
+    world: std::sync::Arc<crate::world::WorldChannel>,
 }
 
 /// A signal of the catalogue, as the stream's first message describes it.
@@ -124,7 +127,14 @@ impl LiveTable {
                 ..Table::default()
             }),
             version: watch::channel(0).0,
+            world: std::sync::Arc::new(crate::world::WorldChannel::new()),
         }
+    }
+
+    /// The world channel streamed beside the table: the virtual car's loop publishes the
+    /// car's pose into it.
+    pub fn world(&self) -> &std::sync::Arc<crate::world::WorldChannel> {
+        &self.world
     }
 
     /// The catalogue's signals, in the table's order.

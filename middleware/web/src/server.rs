@@ -188,6 +188,7 @@ fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/api/catalog", get(catalog))
         .route("/api/state", get(state))
+        .route("/api/world", get(world))
         .route("/api/stream", get(stream))
         .merge(crate::api::routes())
         .fallback(crate::assets::serve)
@@ -303,6 +304,21 @@ async fn state(State(shared): State<Arc<Shared>>) -> Response {
 /// Whether a browser's `Origin` may open the stream: the server's own host, or one the
 /// user allowed. Tools that send no `Origin` (python, PlotJuggler) are not browsers
 /// running someone else's page, and may.
+/// The world channel's whole content (the description and the poses kept), as the
+/// stream's first `world` message; `{"type":"world","description":null,"poses":[]}` when
+/// the bus has no world (a real bus).
+async fn world(State(shared): State<Arc<Shared>>) -> Response {
+    let body = shared
+        .table
+        .world()
+        .message_since(crate::world::WorldCursor::default())
+        .map_or_else(
+            || r#"{"type":"world","description":null,"poses":[]}"#.to_string(),
+            |(json, _)| json,
+        );
+    ([(header::CONTENT_TYPE, "application/json")], body).into_response()
+}
+
 fn origin_allowed(headers: &HeaderMap, config: &WebConfig) -> bool {
     let Some(origin) = headers.get(header::ORIGIN) else {
         return true;
@@ -595,9 +611,28 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
     // Messages are read as they come meanwhile (waiting for the tick inside the loop held
     // them up to a period each, and a driver's inputs queued up behind it).
     let mut changed_since = false;
+    // The world channel has no waker: it is looked at on a ticker of its own, and sent
+    // when its version moved (the simulator publishes at 20 Hz).
+    let world = table.world().clone();
+    let mut world_cursor = crate::world::WorldCursor::default();
+    let mut world_seen = u64::MAX;
+    let mut world_ticker = tokio::time::interval(UPDATE_PERIOD);
+    world_ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         let drive_due = driver.drive_due();
         tokio::select! {
+            _ = world_ticker.tick() => {
+                let version = world.version();
+                if version != world_seen {
+                    world_seen = version;
+                    if let Some((message, cursor)) = world.message_since(world_cursor) {
+                        world_cursor = cursor;
+                        if !send(&mut socket, message).await {
+                            return;
+                        }
+                    }
+                }
+            }
             changed = changes.changed(), if !changed_since => {
                 if changed.is_err() {
                     return; // the table is gone: the gateway stopped

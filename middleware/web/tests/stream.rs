@@ -569,3 +569,43 @@ fn a_driver_at_60_inputs_a_second_builds_no_backlog_and_inputs_are_coalesced() {
     );
     assert_eq!(drives.last(), Some(&199.0), "{drives:?}");
 }
+
+#[test]
+fn the_world_goes_on_a_channel_of_its_own() {
+    let (table, server) = server(8);
+    table
+        .world()
+        .describe(r#"{"road":{"name":"handling circuit"},"car":{}}"#.into())
+        .unwrap();
+    table.world().publish("[0.05,20,0,0,1.5,0,0]".into());
+    runtime().block_on(async {
+        let mut client = connect(&server).await;
+        let world = loop {
+            let message = next_json(&mut client).await;
+            assert!(
+                message.get("poses").is_none() || message["type"] == "world",
+                "the signals' updates carry no pose: {message}"
+            );
+            if message["type"] == "world" {
+                break message;
+            }
+        };
+        assert_eq!(world["description"]["road"]["name"], "handling circuit");
+        assert_eq!(world["poses"][0][1], 20);
+        table.world().publish("[0.10,21,0,0,1.5,0,1]".into());
+        let next = loop {
+            let message = next_json(&mut client).await;
+            if message["type"] == "world" {
+                break message;
+            }
+        };
+        assert!(next.get("description").is_none(), "{next}");
+        assert_eq!(next["poses"].as_array().unwrap().len(), 1, "{next}");
+        assert_eq!(next["poses"][0][6], 1);
+    });
+    // The same over plain HTTP: everything kept.
+    let response = http_get(&server, "/api/world");
+    let body = response.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+    let whole: Value = serde_json::from_str(body).expect("JSON");
+    assert_eq!(whole["poses"].as_array().unwrap().len(), 2, "{whole}");
+}

@@ -332,11 +332,9 @@ pub struct TraceRow {
     pub ay_mps2: f64,
     /// Distance travelled, m.
     pub distance_m: f64,
-    /// Lateral velocity of the CG, body frame, m/s (positive left): the car sliding
-    /// sideways. Not in `trace.csv`.
-    pub lateral_velocity_mps: f64,
-    /// Longitudinal slip of each wheel, FL FR RL RR (−1: locked). Not in `trace.csv`.
-    pub wheel_slip: [f64; 4],
+    /// Which wheels mark the road (locked, spinning or sliding), FL FR RL RR
+    /// ([`crate::world::wheel_marks`]). Not in `trace.csv`.
+    pub marks: [bool; 4],
 }
 
 impl TraceRow {
@@ -739,6 +737,41 @@ impl VirtualCar {
         }
     }
 
+    /// Speed below which the car counts as standing for [`VirtualCar::back_to_start`], m/s.
+    pub const STANDING_MPS: f64 = 0.5;
+
+    /// Takes the standing car back to where the scenario started it (on its track: the
+    /// start line), as a person resetting a driving simulator does. Refused while it
+    /// moves.
+    pub fn back_to_start(&mut self) -> Result<(), String> {
+        let s = self.vehicle.state();
+        if s.speed_mps.abs() > Self::STANDING_MPS {
+            return Err(format!(
+                "the car moves ({:.1} km/h): stop it first",
+                s.speed_mps.abs() * 3.6
+            ));
+        }
+        let start = self.scenario.track.as_ref().map_or(
+            autoplug_road::Pose {
+                x_m: 0.0,
+                y_m: 0.0,
+                heading_rad: 0.0,
+            },
+            |t| {
+                track::start_pose(
+                    &t.road,
+                    self.scenario.road.start_m,
+                    self.scenario.road.lane_m,
+                )
+            },
+        );
+        self.vehicle.place(start.x_m, start.y_m, start.heading_rad);
+        if let Some(on_track) = &mut self.track {
+            *on_track = OnTrack::new(on_track.track().clone(), &self.vehicle);
+        }
+        Ok(())
+    }
+
     /// The car's track and where on it the car is; `None` on the endless plane.
     pub fn track(&self) -> Option<&OnTrack> {
         self.track.as_ref()
@@ -994,8 +1027,7 @@ impl VirtualCar {
             ax_mps2: s.ax_mps2,
             ay_mps2: s.ay_mps2,
             distance_m: s.distance_m,
-            lateral_velocity_mps: s.lateral_velocity_mps,
-            wheel_slip: s.wheel_slip,
+            marks: crate::world::wheel_marks(s, self.vehicle.params()),
         }
     }
 

@@ -22,12 +22,6 @@ const MIN_WIDTH_PX: f64 = 720.0;
 const MARGIN_PX: f64 = 40.0;
 /// Ground around the path, m.
 const GROUND_M: f64 = 8.0;
-/// A wheel leaves a mark when its longitudinal slip is beyond this (locked or spinning).
-const MARK_SLIP: f64 = 0.2;
-/// ... or when it slides sideways at more than this slip angle, radians.
-const MARK_SLIP_ANGLE_RAD: f64 = 0.12;
-/// Slower than this nothing leaves a mark, m/s.
-const MARK_MIN_SPEED_MPS: f64 = 2.0;
 /// How many car outlines the drawing shows at most (besides the last).
 const OUTLINES: usize = 12;
 /// Friction at or below this is drawn as ice, above it up to [`WET_MU`] as wet.
@@ -316,20 +310,10 @@ fn stations_between(from: f64, to: f64, step: f64) -> Vec<f64> {
 /// Where each wheel is, and whether it marks the road, at one trace row.
 fn wheel_marks(row: &TraceRow, body: &Body) -> [((f64, f64), bool); 4] {
     let (sin, cos) = row.heading_rad.sin_cos();
-    let vx = row.speed_kmh / 3.6;
-    let vy = row.lateral_velocity_mps;
-    let steer = (row.steering_deg / body.steering_ratio).to_radians();
     std::array::from_fn(|i| {
         let (x, y) = body.wheels[i];
         let at = (row.x_m + x * cos - y * sin, row.y_m + x * sin + y * cos);
-        // The wheel's velocity over the ground in its own axes.
-        let (along, across) = (vx - row.yaw_rate_rad_s * y, vy + row.yaw_rate_rad_s * x);
-        let speed = along.hypot(across);
-        let wheel_angle = if i < 2 { steer } else { 0.0 };
-        let slip_angle = across.atan2(along.abs()) - wheel_angle * along.signum();
-        let marks = speed > MARK_MIN_SPEED_MPS
-            && (row.wheel_slip[i].abs() > MARK_SLIP || slip_angle.abs() > MARK_SLIP_ANGLE_RAD);
-        (at, marks)
+        (at, row.marks[i])
     })
 }
 

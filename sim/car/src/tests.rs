@@ -225,7 +225,7 @@ fn path_svg_draws_the_road_and_the_path_at_one_scale() {
                 heading_rad: if sliding { 0.02 * (i - 40) as f64 } else { 0.0 },
                 speed_kmh: 50.0,
                 distance_m: i as f64,
-                wheel_slip: if sliding { [-1.0; 4] } else { [0.0; 4] },
+                marks: [sliding; 4],
                 ..Default::default()
             }
         })
@@ -873,4 +873,63 @@ fn a_person_at_the_wheel_drives_the_car_through_its_sensors() {
     assert_eq!(car.friction(), (0.2, 1.0));
     assert!(car.set_friction(0.0, 1.0).is_err());
     assert!(car.set_friction(f64::NAN, 1.0).is_err());
+}
+
+#[test]
+fn a_world_file_reads_back_and_a_damaged_one_keeps_what_precedes_the_damage() {
+    use crate::world::{read_world_file, world_file_for, WorldFileWriter, WorldPose};
+    let dir = tempfile::tempdir().unwrap();
+    let candump = dir.path().join("drive.log");
+    let path = world_file_for(&candump);
+    assert_eq!(path.file_name().unwrap(), "drive.world.jsonl");
+    let s = Scenario::parse(
+        "name = \"x\"\nduration_s = 1\n[road]\ntrack = \"handling-circuit\"\n",
+        "x",
+    )
+    .unwrap();
+    let about = crate::world::description(
+        s.track.as_deref(),
+        &crate::car::VirtualCar::vehicle_params(),
+    );
+    assert_eq!(about["road"]["name"], "handling circuit");
+    assert_eq!(about["road"]["patches"][0]["name"], "split-μ pad");
+    assert_eq!(about["car"]["wheels"].as_array().unwrap().len(), 4);
+    let mut car = crate::car::VirtualCar::new(&s);
+    let mut writer = WorldFileWriter::create(&path).unwrap();
+    writer.describe(&about.to_string()).unwrap();
+    let mut written = Vec::new();
+    for _ in 0..5 {
+        for _ in 0..50 {
+            car.tick();
+        }
+        let pose = WorldPose::of(&car);
+        writer.pose(&pose.to_json()).unwrap();
+        written.push(pose);
+    }
+    writer.flush().unwrap();
+    drop(writer);
+    let log = read_world_file(&path).unwrap();
+    assert_eq!(log.description, about);
+    assert_eq!(log.poses.len(), 5);
+    assert_eq!(log.damaged, None);
+    for (read, wrote) in log.poses.iter().zip(&written) {
+        assert!((read.t_s - wrote.t_s).abs() < 1e-9 && (read.x_m - wrote.x_m).abs() < 1e-3);
+    }
+    // Cut in the middle of its last line: the poses before it stay.
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, &text[..text.len() - 10]).unwrap();
+    let log = read_world_file(&path).unwrap();
+    assert_eq!(log.poses.len(), 4);
+    assert!(
+        log.damaged.as_deref().unwrap().contains("line 6"),
+        "{:?}",
+        log.damaged
+    );
+    // Not a world file at all.
+    std::fs::write(&path, "[0,0,0,0,0,0,0]\n").unwrap();
+    let refused = read_world_file(&path).unwrap_err();
+    assert!(refused.contains("starts with its description"), "{refused}");
+    std::fs::write(&path, "{\"description\":{}}\n[1,2,3]\n").unwrap();
+    let short = read_world_file(&path).unwrap();
+    assert!(short.damaged.unwrap().contains("not a pose"));
 }

@@ -196,6 +196,23 @@ impl Vehicle {
         &self.state
     }
 
+    /// Puts a standing car at (`x_m`, `y_m`) heading `heading_rad` (the simulator's hand:
+    /// a car taken back to the start line). The body stops there (no velocity, no yaw
+    /// rate, no load transfer); engine, driveline, fuel and cabin are left as they are.
+    pub fn place(&mut self, x_m: f64, y_m: f64, heading_rad: f64) {
+        if !(x_m.is_finite() && y_m.is_finite() && heading_rad.is_finite()) {
+            return;
+        }
+        self.body = Body::new(x_m, y_m, heading_rad, 0.0);
+        for omega in &mut self.driveline.wheel_omega {
+            *omega = 0.0;
+        }
+        self.tyres = [TyreState::default(); 4];
+        let distance = self.state.distance_m;
+        self.body.distance = distance;
+        self.publish(&Actuators::default());
+    }
+
     /// Where each wheel touches the road, world frame (x, y), m, FL FR RL RR: what
     /// decides the surface under each tyre.
     pub fn wheel_positions(&self) -> [(f64, f64); 4] {

@@ -115,6 +115,8 @@ export interface DriveState {
   set_temp_f: number;
 }
 
+import { World } from './world';
+
 type Listener = () => void;
 
 export class Live {
@@ -124,6 +126,8 @@ export class Live {
   messages = new Map<string, MessageInfo>();
   bus: BusFigures | null = null;
   session: Session | null = null;
+  /** The simulator's world (the virtual car on its road), from the `world` messages. */
+  world = new World();
   /** Bus time of the latest update, s. */
   t = 0;
   /** Wall time (performance.now) at which each signal last changed. */
@@ -202,6 +206,9 @@ export class Live {
       if (message.bus) this.bus = message.bus;
       if (message.session) this.session = message.session;
       this.notify();
+    } else if (message.type === 'world') {
+      // Drawn at the display's rate by the world view: no notify.
+      this.world.take(message);
     }
   }
 

@@ -2,7 +2,8 @@
 // running `autoplug dashboard` on the virtual car: every view renders without a console
 // error, the Car view follows the bus, the report's two scenarios are done from the page
 // (flash the faulty software, see the symptom, see the verdict, flash the fix, see it
-// pass), driving from the page moves the car, the phone layout fits, and screenshots of
+// pass), driving from the page moves the car (and the world view shows it on its road,
+// the faulty ABS's spin with its tyre marks), the phone layout fits, and screenshots of
 // every view at desktop and phone size are written for a person to look at.
 //
 // node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR [--scenario-1]
@@ -46,6 +47,31 @@ async function state() {
 async function view(page, name) {
   await page.click(`nav a[data-view=${name}]`);
   await page.waitForSelector(VIEWS[name], { timeout: 10_000 });
+}
+
+/** The simulator's latest pose, from the world channel (`GET /api/world`). */
+async function simPose() {
+  const world = await (await fetch(`${base}/api/world`)).json();
+  const p = world.poses[world.poses.length - 1];
+  return p ? { t: p[0], x: p[1], y: p[2], heading: (p[3] * 180) / Math.PI, speed: p[4] } : null;
+}
+
+/** What the world view draws now: the car's position and heading, the tyre-mark points
+ *  it holds, its frame rate over the last second. */
+async function pagePose(page) {
+  const world = await page.waitForSelector('[data-testid=world][data-x]', { timeout: 10_000 });
+  const n = async (name) => Number(await world.getAttribute(`data-${name}`));
+  return { x: await n('x'), y: await n('y'), heading: await n('heading'), marks: await n('marks'), fps: await n('fps') };
+}
+
+/** Takes the standing car back to the start line from the Drive view. */
+async function toStart(page) {
+  await view(page, 'drive');
+  await page.click('[data-testid=road-start]');
+  await until('the car on the start line', async () => {
+    const p = await simPose();
+    return p && Math.abs(p.x - 20) < 0.5 && Math.abs(p.y) < 0.5 && Math.abs(p.heading) < 0.5;
+  }, 5_000);
 }
 
 async function shownSpeed(page) {
@@ -132,6 +158,7 @@ async function scenario1(desktop) {
   await desktop.screenshot({ path: `${shots}/${shotPrefix}ecus-flashed.png` });
   await view(desktop, 'drive');
   await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  await toStart(desktop);
   await accelerateTo(desktop, 90);
   await desktop.keyboard.press('c');
   await until('cruise on', async () => (await state()).signals['Vehicle.ADAS.CruiseControl.IsActive'] === 1, 5_000);
@@ -160,6 +187,7 @@ async function scenario1(desktop) {
   await flash(desktop, 'cruise', 'cruise-1.2.0.img');
   await view(desktop, 'drive');
   await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  await toStart(desktop);
   await accelerateTo(desktop, 90);
   await desktop.keyboard.press('c');
   await desktop.waitForTimeout(16_000);
@@ -223,6 +251,32 @@ await run(async () => {
   const before = await speedNow();
   await accelerateTo(desktop, 30);
   ok(`the accelerator on the page raised the speed from ${before} to ${await speedNow()} km/h`);
+
+  // The world view beside the controls: the car on its road, moving as the simulator
+  // moves it, drawn smoothly.
+  await desktop.keyboard.down('ArrowUp');
+  const a = { page: await pagePose(desktop), sim: await simPose() };
+  const rates = [];
+  for (let i = 0; i < 6; i++) {
+    await desktop.waitForTimeout(400);
+    rates.push((await pagePose(desktop)).fps);
+  }
+  const b = { page: await pagePose(desktop), sim: await simPose() };
+  await desktop.keyboard.up('ArrowUp');
+  const movedSim = Math.hypot(b.sim.x - a.sim.x, b.sim.y - a.sim.y);
+  const movedPage = Math.hypot(b.page.x - a.page.x, b.page.y - a.page.y);
+  const gap = Math.hypot(b.page.x - b.sim.x, b.page.y - b.sim.y);
+  assert.ok(movedSim > 10, `the simulator's car moved ${movedSim.toFixed(1)} m`);
+  assert.ok(Math.abs(movedPage - movedSim) < 3, `the page moved the car ${movedPage.toFixed(1)} m, the simulator ${movedSim.toFixed(1)} m`);
+  assert.ok(gap < 3, `the page's car is ${gap.toFixed(1)} m from the simulator's`);
+  const fps = Math.min(...rates.slice(1));
+  assert.ok(fps >= 30, `the world view drew ${rates.join(', ')} frames/s while the car moved`);
+  await desktop.screenshot({ path: `${shots}/desktop-world-top.png` });
+  await desktop.click('[data-testid=world-chase]');
+  await desktop.waitForTimeout(500);
+  await desktop.screenshot({ path: `${shots}/desktop-world-chase.png` });
+  await desktop.click('[data-testid=world-top]');
+  ok(`the world view follows the simulator: the car moved ${movedPage.toFixed(1)} m on the page as it moved ${movedSim.toFixed(1)} m in the simulator (${gap.toFixed(1)} m apart at the end); ${fps} frames/s at the least while it moved (${rates.join(', ')})`);
 
   // The Car view follows the bus: within 1 km/h of the last VehicleSpeedMsg, within 200 ms.
   const drivingTab = desktop;
@@ -300,12 +354,30 @@ await run(async () => {
   async function hardStopOnSplit() {
     await view(desktop, 'drive');
     await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+    await toStart(desktop);
     await desktop.click('[data-testid=road-split]');
     await accelerateTo(desktop, 100);
     await brakeToStop(desktop);
     await desktop.click('[data-testid=road-dry]');
   }
   await hardStopOnSplit();
+  // The spin on the world view: the heading the simulator reports, and tyre marks.
+  await view(desktop, 'drive');
+  // The bus's speed is the car's forward speed: a spinning car can show 0 while it still
+  // turns and slides. Wait for the simulator's car to come to rest.
+  await until('the car at rest', async () => {
+    const first = await simPose();
+    await desktop.waitForTimeout(300);
+    const then = await simPose();
+    return Math.abs(then.heading - first.heading) < 0.1 && Math.hypot(then.x - first.x, then.y - first.y) < 0.02;
+  }, 20_000);
+  await desktop.waitForTimeout(300);
+  const spun = { page: await pagePose(desktop), sim: await simPose() };
+  assert.ok(Math.abs(spun.page.heading - spun.sim.heading) <= 3, `the world view shows heading ${spun.page.heading}°, the simulator ${spun.sim.heading.toFixed(1)}°`);
+  assert.ok(Math.abs(spun.sim.heading) > 20, `the faulty ABS should turn the car (heading ${spun.sim.heading.toFixed(1)}°)`);
+  assert.ok(spun.page.marks > 20, `tyre marks on the world view: ${spun.page.marks} points`);
+  await desktop.screenshot({ path: `${shots}/desktop-world-spin.png` });
+  ok(`scenario 2 on the world view: the car stopped turned ${spun.page.heading.toFixed(1)}° (the simulator: ${spun.sim.heading.toFixed(1)}°), ${spun.page.marks} tyre-mark points`);
   await view(desktop, 'diagnostics');
   const absFaulty = await until('the ABS ECU flagged', async () => ((await verdict(desktop, 'abs')) === 'faulty' ? 'faulty' : null), 10_000);
   const absNumber = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
@@ -333,6 +405,16 @@ await run(async () => {
     await phone.screenshot({ path: `${shots}/phone-${name}.png` });
   }
   ok(`on a phone (390 × 844) the Car view fits (${width} px), every view renders (phone screenshots written)`);
+  await view(phone, 'drive');
+  await pagePose(phone);
+  await phone.waitForTimeout(1200);
+  const onPhone = await pagePose(phone);
+  assert.ok(onPhone.fps >= 30, `the world view drew ${onPhone.fps} frames/s on the phone`);
+  const canvasWidth = await phone.$eval('[data-testid=world-canvas]', (c) => c.getBoundingClientRect().width);
+  const phoneWidth = await phone.evaluate(() => document.documentElement.scrollWidth);
+  assert.ok(canvasWidth > 300 && phoneWidth <= 390, `the world view is ${canvasWidth} px wide on the phone, the page ${phoneWidth} px`);
+  await phone.screenshot({ path: `${shots}/phone-world.png` });
+  ok(`on a phone the world view fits (${canvasWidth.toFixed(0)} px wide, ${onPhone.fps} frames/s)`);
 
   // Dark mode.
   await desktop.emulateMedia({ colorScheme: 'dark' });

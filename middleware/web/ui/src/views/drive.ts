@@ -6,6 +6,7 @@ import { post, setToken, token } from '../api';
 import type { DriveState } from '../live';
 import type { Ctx, View } from '../view';
 import { h, num, setText } from '../util';
+import { worldView } from '../world';
 
 /** How often the controls are sent while the view is open (the gateway's dead man's
  *  release comes after 1 s without them). */
@@ -63,10 +64,16 @@ export function driveView(ctx: Ctx): View {
     try { await post('/api/road', { mu_left: left, mu_right: right }); ctx.toast(`Road: ${label}`); } catch (e: any) { ctx.toast(e.message, 'error'); }
   } }, label);
 
+  const toStart = h('button', { class: 'btn', 'data-testid': 'road-start', onclick: async () => {
+    try { await post('/api/road/start', {}); ctx.toast('Back at the start'); } catch (e: any) { ctx.toast(e.message, 'error'); }
+  } }, 'Back to the start');
+
   const readout = h('div', { class: 'readout' });
   const speedBig = h('div', { class: 'big-speed', 'data-testid': 'drive-speed' });
   const pad = h('div', { class: 'muted small' });
+  const world = worldView(live);
   const el = h('section', { class: 'drive' },
+    world.el,
     h('div', { class: 'card' }, h('div', { class: 'toolbar' }, speedBig, readout), authState, tokenBox,
       h('p', { class: 'muted small', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
     h('div', { class: 'card controls' },
@@ -75,7 +82,8 @@ export function driveView(ctx: Ctx): View {
         h('div', { class: 'buttons' }, btn('Cruise on / set', 'cruise_on', 'C'), btn('Cruise off', 'cruise_off', 'X'), btn('Shift down', 'shift_down', 'Q'), btn('Shift up', 'shift_up', 'E')),
         h('div', { class: 'buttons' }, ...switches),
         h('label', { class: 'knob' }, 'Cabin set point ', knob, knobText))),
-    h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2))),
+    h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2), toStart),
+      h('p', { class: 'muted small', text: 'Dry, wet and split set the asphalt of the road’s left and right halves (patches and the verge keep their own). Back to the start takes the standing car to the start line.' })),
   );
 
   function authorize(): void {
@@ -184,6 +192,7 @@ export function driveView(ctx: Ctx): View {
       window.removeEventListener('keyup', onKey);
       window.removeEventListener('blur', onBlur);
       unlisten();
+      world.destroy();
     },
   };
 }
