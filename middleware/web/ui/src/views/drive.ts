@@ -83,7 +83,7 @@ export function driveView(ctx: Ctx): View {
         h('div', { class: 'buttons' }, ...switches),
         h('label', { class: 'knob' }, 'Cabin set point ', knob, knobText))),
     h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2), toStart),
-      h('p', { class: 'muted small', text: 'Dry, wet and split set the asphalt of the road’s left and right halves (patches and the verge keep their own). Back to the start takes the standing car to the start line.' })),
+      h('p', { class: 'muted small', text: 'Dry, wet and split set the friction under the left and right wheels (on a track: of the road’s left and right halves; patches and the verge keep their own). Back to the start takes the standing car back to where it started.' })),
   );
 
   function authorize(): void {
