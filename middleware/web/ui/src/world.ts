@@ -381,6 +381,29 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
         g.stroke();
       }
     }
+    if (!d.road) {
+      // Open ground: a 10 m grid, so that the ground is seen to move under the car.
+      g.strokeStyle = 'rgba(120,120,120,0.6)';
+      g.lineWidth = 1;
+      const step = 10, reach = 150;
+      const x0 = Math.floor((cam.x - reach) / step) * step, y0 = Math.floor((cam.y - reach) / step) * step;
+      const line = (ax: number, ay: number, bx: number, by: number) => {
+        // Drawn in 5 m pieces: a piece behind the camera is left out, not projected wrongly.
+        const n = Math.ceil(Math.hypot(bx - ax, by - ay) / 5);
+        g.beginPath();
+        let open = false;
+        for (let k = 0; k <= n; k++) {
+          const x = ax + ((bx - ax) * k) / n, y = ay + ((by - ay) * k) / n;
+          const p = inFront(x, y) ? project(x, y, 0) : null;
+          if (!p) { open = false; continue; }
+          if (open) g.lineTo(p[0], p[1]); else g.moveTo(p[0], p[1]);
+          open = true;
+        }
+        g.stroke();
+      };
+      for (let x = x0; x <= cam.x + reach; x += step) line(x, cam.y - reach, x, cam.y + reach);
+      for (let y = y0; y <= cam.y + reach; y += step) line(cam.x - reach, y, cam.x + reach, y);
+    }
     g.strokeStyle = 'rgba(20,20,20,0.7)';
     g.lineWidth = 2;
     for (const runs of world.marks) for (const run of runs) {
