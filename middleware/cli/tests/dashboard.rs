@@ -202,6 +202,41 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
         br#"{"mu_left":1.0,"mu_right":0.2}"#,
     );
     assert_eq!(status, 200);
+    // The simulator steers the dashboard's car along its track (the handling circuit);
+    // a body that is not a switch is refused with the reason, and so is a missing token.
+    let (status, answer) = request(
+        addr,
+        "POST",
+        "/api/road/steering",
+        Some(TOKEN),
+        br#"{"along_road":"yes"}"#,
+    );
+    assert_eq!(status, 422, "{answer}");
+    assert!(answer.contains("along_road"), "{answer}");
+    let (status, _) = request(
+        addr,
+        "POST",
+        "/api/road/steering",
+        None,
+        br#"{"along_road":true}"#,
+    );
+    assert_eq!(status, 401);
+    let mut steering = (0, String::new());
+    for _ in 0..50 {
+        // The session learns the car has a track from the car's first report.
+        steering = request(
+            addr,
+            "POST",
+            "/api/road/steering",
+            Some(TOKEN),
+            br#"{"along_road":true}"#,
+        );
+        if steering.0 == 200 {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert_eq!(steering.0, 200, "{}", steering.1);
     // The session shows them: the recording grows, the clear is reported, the road changed.
     let mut session = serde_json::Value::Null;
     for _ in 0..100 {
@@ -221,6 +256,8 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
         "{session}"
     );
     assert_eq!(session["driver"]["mu_right"], 0.2, "{session}");
+    assert_eq!(session["driver"]["on_track"], true, "{session}");
+    assert_eq!(session["driver"]["steers_along_road"], true, "{session}");
     assert_eq!(session["source"]["drive"], true);
     assert_eq!(
         session["inventory"].as_array().unwrap().len(),

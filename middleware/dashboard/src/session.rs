@@ -281,6 +281,28 @@ impl<'a> Session<'a> {
                 self.event("the car was taken back to the start".into());
                 Ok(json!({ "to_start": true }))
             }
+            Action::RoadSteering(on) => {
+                let Some(desk) = &self.desk else {
+                    return Err("only the virtual car can be steered along its road".into());
+                };
+                if on && !desk.borrow().report().on_track {
+                    return Err(
+                        "the car has no road to steer along (its scenario names no track)".into(),
+                    );
+                }
+                desk.borrow_mut()
+                    .push(DeskInput::SteerAlongRoad(on))
+                    .map_err(str::to_string)?;
+                self.event(
+                    if on {
+                        "the simulator steers along the road"
+                    } else {
+                        "the person steers"
+                    }
+                    .into(),
+                );
+                Ok(json!({ "along_road": on }))
+            }
             Action::Replay(action) => self.control_replay(action),
             Action::ReplayRecording { path } => {
                 let Some(pages) = self.replay_pages.as_mut() else {
@@ -613,6 +635,8 @@ impl<'a> Session<'a> {
                 })),
                 "mu_left": report.friction.0,
                 "mu_right": report.friction.1,
+                "on_track": report.on_track,
+                "steers_along_road": report.steers_along_road,
             })
         });
         json!({

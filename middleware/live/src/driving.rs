@@ -34,6 +34,8 @@ pub enum DeskInput {
     Friction(f64, f64),
     /// Back to the start line (refused by the car while it moves).
     ToStart,
+    /// The simulator steers along the road (`true`) or the person steers.
+    SteerAlongRoad(bool),
 }
 
 /// What the car's side reports back for the dashboard.
@@ -45,6 +47,10 @@ pub struct DeskReport {
     pub friction: (f64, f64),
     /// The car's speed (the simulator's), m/s.
     pub speed_mps: f64,
+    /// The car has a track (a road to steer along).
+    pub on_track: bool,
+    /// The simulator steers along the road.
+    pub steers_along_road: bool,
 }
 
 /// The desk (see the module docs).
@@ -101,6 +107,10 @@ impl DriverDesk {
                     // The session checked the car stands; one that moved off since stays.
                     let _ = car.back_to_start();
                 }
+                DeskInput::SteerAlongRoad(on) => {
+                    // The session checked the car has a track.
+                    let _ = car.set_steering_along_road(on);
+                }
             }
         }
         if !self.released
@@ -113,6 +123,8 @@ impl DriverDesk {
             held: car.manual_driver().map(|d| *d.held()),
             friction: car.friction(),
             speed_mps: car.vehicle().speed_mps,
+            on_track: car.track().is_some(),
+            steers_along_road: car.steers_along_road(),
         };
     }
 

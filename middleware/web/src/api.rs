@@ -10,6 +10,7 @@
 //! | `POST /api/recording` | `{"on": true}` starts recording all traffic, `false` stops | yes |
 //! | `POST /api/road` | `{"mu_left": 1.0, "mu_right": 0.2}`: the virtual road's friction | yes |
 //! | `POST /api/road/start` | `{}`: the standing virtual car back to its start line | yes |
+//! | `POST /api/road/steering` | `{"along_road": true}`: the simulator steers the virtual car along its road; `false`: the person does | yes |
 //! | `POST /api/replay` | `{"action": "play"}`, `pause`, `{"action":"speed","speed":4}`, `{"action":"seek","t":30}` | yes |
 //! | `GET /api/images` | the firmware library: name, bytes, ECU, version of each image | — |
 //! | `GET /api/recordings`, `GET /api/recordings/{name}` | the recordings, and one to download | — |
@@ -75,6 +76,7 @@ pub(crate) fn routes() -> Router<Arc<Shared>> {
         .route("/api/recording", post(recording))
         .route("/api/road", post(road))
         .route("/api/road/start", post(road_start))
+        .route("/api/road/steering", post(road_steering))
         .route("/api/replay", post(replay))
         .route("/api/images", get(images))
         .route("/api/recordings", get(recordings))
@@ -303,6 +305,26 @@ async fn road_start(
     }
     match json_body(body) {
         Ok(EmptyBody {}) => act(&shared, Action::RoadStart).await,
+        Err(e) => e.into_response(),
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SteeringBody {
+    along_road: bool,
+}
+
+async fn road_steering(
+    State(shared): State<Arc<Shared>>,
+    headers: HeaderMap,
+    body: Result<Json<SteeringBody>, JsonRejection>,
+) -> Response {
+    if let Err(e) = authorize(&shared, &headers) {
+        return e.into_response();
+    }
+    match json_body(body) {
+        Ok(SteeringBody { along_road }) => act(&shared, Action::RoadSteering(along_road)).await,
         Err(e) => e.into_response(),
     }
 }

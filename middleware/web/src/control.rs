@@ -45,6 +45,8 @@ pub enum Action {
     },
     /// Take the standing virtual car back to its start line.
     RoadStart,
+    /// The simulator steers the virtual car along its road (`true`), or the person does.
+    RoadSteering(bool),
     /// Control a replay.
     Replay(ReplayAction),
     /// Open a recording in a replay dashboard of its own (a second page, beside the live

@@ -361,6 +361,9 @@ pub struct VirtualCar {
     timeline: Timeline,
     /// A person driving instead of the timeline, once one took the wheel.
     manual: Option<ManualDriver>,
+    /// The simulator steers the person's car along its road (the person keeps the pedals
+    /// and the rest): the lateral half of the road driver, as a desk simulator offers.
+    steers_along_road: bool,
     controls: DriverControls,
     /// The bus's time (the emulated MCUs' too), µs: the scenario's time plus `start_us`.
     t_us: u64,
@@ -637,6 +640,7 @@ impl VirtualCar {
             controls: *timeline.initial_controls(),
             timeline,
             manual: None,
+            steers_along_road: false,
             t_us: 0,
             start_us: 0,
             log: Vec::with_capacity(1 << 16),
@@ -706,6 +710,22 @@ impl VirtualCar {
     /// The person at the wheel, if one took it.
     pub fn manual_driver(&self) -> Option<&ManualDriver> {
         self.manual.as_ref()
+    }
+
+    /// The simulator steers the person's car along its track (`true`: the steering the
+    /// person holds is ignored until it is turned off), as a desk simulator's lane keeping
+    /// does for a person on the pedals. Refused on the endless plane: there is no road.
+    pub fn set_steering_along_road(&mut self, on: bool) -> Result<(), String> {
+        if on && self.track.is_none() {
+            return Err("the car has no road to steer along (its scenario names no track)".into());
+        }
+        self.steers_along_road = on;
+        Ok(())
+    }
+
+    /// Whether the simulator steers the person's car along its track.
+    pub fn steers_along_road(&self) -> bool {
+        self.steers_along_road
     }
 
     /// Changes the road's friction (the simulator's track, not a driver control): left
@@ -1079,7 +1099,12 @@ impl VirtualCar {
                 .timeline
                 .advance(t_s, |event| road_changes.push(event.clone()));
             match self.manual.as_mut() {
-                Some(person) => self.controls = person.controls_at(t_s),
+                Some(person) => {
+                    self.controls = person.controls_at(t_s);
+                    if self.steers_along_road {
+                        self.steer_to_road();
+                    }
+                }
                 None => self.drive_along(),
             }
             if self.controls.held.brake > 0.0 && previous_brake <= 0.0 {
@@ -1237,22 +1262,12 @@ impl VirtualCar {
     /// The scenario's driver steers along the track and works the pedals to hold its
     /// speed, when the timeline says so (the rest of the controls stay the timeline's).
     fn drive_along(&mut self) {
-        let s = self.vehicle.state();
         let following = self.timeline.follows_road();
         let target = self.timeline.speed_target_kmh();
-        if let (true, Some(on_track)) = (following, &self.track) {
-            let params = self.vehicle.params();
-            let car = CarOnRoad {
-                rear_axle: track::rear_axle(&self.vehicle),
-                station_m: on_track.rear_axle_station(),
-                speed_mps: s.speed_mps,
-                wheelbase_m: params.chassis.wheelbase_m,
-                steering_ratio: params.steering.ratio,
-                understeer_rad_per_mps2: params.tyre.understeer_gradient_rad_per_mps2(),
-            };
-            self.controls.held.steering_deg =
-                RoadDriver::steering_deg(on_track.road(), &car, self.scenario.road.lane_m);
+        if following {
+            self.steer_to_road();
         }
+        let s = self.vehicle.state();
         if let Some(target_kmh) = target {
             let mut target_mps = target_kmh / 3.6;
             if let (true, Some(on_track)) = (following, &self.track) {
@@ -1268,6 +1283,25 @@ impl VirtualCar {
             self.controls.held.accelerator = accelerator;
             self.controls.held.brake = brake;
         }
+    }
+
+    /// The road driver's steering: the wheel turned to keep the car on the scenario's
+    /// lane of its track (no track: the wheel stays as it is).
+    fn steer_to_road(&mut self) {
+        let Some(on_track) = &self.track else {
+            return;
+        };
+        let params = self.vehicle.params();
+        let car = CarOnRoad {
+            rear_axle: track::rear_axle(&self.vehicle),
+            station_m: on_track.rear_axle_station(),
+            speed_mps: self.vehicle.state().speed_mps,
+            wheelbase_m: params.chassis.wheelbase_m,
+            steering_ratio: params.steering.ratio,
+            understeer_rad_per_mps2: params.tyre.understeer_gradient_rad_per_mps2(),
+        };
+        self.controls.held.steering_deg =
+            RoadDriver::steering_deg(on_track.road(), &car, self.scenario.road.lane_m);
     }
 
     /// What the ECUs' outputs command the vehicle to do. Before an ECU's first step its

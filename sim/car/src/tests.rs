@@ -158,7 +158,7 @@ fn a_track_and_its_driver_are_checked_against_each_other() {
         ),
         (
             format!("{on_circuit}start_m = 5000\n"),
-            "road.start_m = 5000 is outside the track (0..=1678.85 m)",
+            "road.start_m = 5000 is outside the track (0..=3221.69 m)",
         ),
         (
             format!("{on_circuit}lane_m = -4.5\n"),

@@ -314,13 +314,13 @@ fn the_shipped_roads_load_and_close() {
     assert_eq!(circuit.name, "handling circuit");
     let road = circuit.road;
     assert!(road.is_closed());
-    assert!(close(road.length_m(), 1678.85, 0.01), "{}", road.length_m());
+    assert!(close(road.length_m(), 3221.69, 0.01), "{}", road.length_m());
     // The split-μ pad on the main straight's right half; the left half dry.
     assert_eq!(road.surface(360.0, -2.0, None).mu, 0.2);
     assert_eq!(road.surface(360.0, 2.0, None).mu, DRY_ASPHALT_MU);
     // The hill's top between its climb and its descent.
-    assert!(close(road.height_at(1000.0), 6.0, 1e-9));
-    assert!(close(road.height_at(1300.0), 0.0, 1e-9));
+    assert!(close(road.height_at(2000.0), 6.0, 1e-9));
+    assert!(close(road.height_at(2200.0), 0.0, 1e-9));
 }
 
 #[test]

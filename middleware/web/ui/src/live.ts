@@ -52,6 +52,8 @@ export interface Session {
     held: DriveState | null;
     mu_left: number;
     mu_right: number;
+    on_track: boolean;
+    steers_along_road: boolean;
   } | null;
   trip: Record<string, number> | null;
   replay_page: { file: string; port: number; listening: boolean } | null;

@@ -64,6 +64,24 @@ async function pagePose(page) {
   return { x: await n('x'), y: await n('y'), heading: await n('heading'), marks: await n('marks'), fps: await n('fps') };
 }
 
+/** The dashboard car's road, from the world channel's description: its centreline
+ *  (a point every 2 m) and width. */
+async function worldRoad() {
+  const world = await (await fetch(`${base}/api/world`)).json();
+  return world.description?.road ?? null;
+}
+
+/** Where a pose lies on `road`: the station of the nearest centreline point, m, and how
+ *  far from the centreline, m. */
+function onRoad(road, p) {
+  let best = { station: 0, off: Infinity };
+  road.centre.forEach(([x, y], i) => {
+    const off = Math.hypot(p.x - x, p.y - y);
+    if (off < best.off) best = { station: 2 * i, off };
+  });
+  return best;
+}
+
 /** Where the car stood when the test began (its start), from the simulator. */
 let startPose = null;
 
@@ -152,6 +170,22 @@ async function flash(page, ecu, image) {
   ok(`flashed ${image} into ${ecu} from the ECUs view (bar seen at ${midway.toFixed(0)} %), inventory shows ${inventory}, ${before} → ${running}`);
 }
 
+/** The simulator steers along the road (the Drive view's switch), so that a person on
+ *  the pedals stays on the circuit at the demonstrations' speeds. */
+async function steerAlongRoad(page) {
+  await view(page, 'drive');
+  if ((await page.getAttribute('[data-testid=steer-along-road]', 'data-on')) !== 'true') {
+    await page.click('[data-testid=steer-along-road]');
+  }
+  await until('the simulator steering', async () => (await state()).session?.driver?.steers_along_road === true, 5_000);
+  assert.equal(await page.getAttribute('[data-testid=steer-along-road]', 'data-on'), 'true');
+}
+
+/** Where the car is on the road, from the simulator. */
+async function station() {
+  return onRoad(await worldRoad(), await simPose()).station;
+}
+
 /** Report scenario 1 from the page: flash the faulty cruise, see it oscillate and the
  *  verdict, flash the fix, see the verdict clear. The car stands when it starts. */
 async function scenario1(desktop) {
@@ -162,6 +196,7 @@ async function scenario1(desktop) {
   await view(desktop, 'drive');
   await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
   await toStart(desktop);
+  await steerAlongRoad(desktop);
   await accelerateTo(desktop, 90);
   await desktop.keyboard.press('c');
   await until('cruise on', async () => (await state()).signals['Vehicle.ADAS.CruiseControl.IsActive'] === 1, 5_000);
@@ -187,6 +222,8 @@ async function scenario1(desktop) {
   await view(desktop, 'drive');
   await desktop.keyboard.press('x');
   await brakeToStop(desktop);
+  const stoppedAt = await station();
+  ok(`scenario 1: the faulty cruise's drive stopped ${stoppedAt} m along the circuit, the simulator steering`);
   await flash(desktop, 'cruise', 'cruise-1.2.0.img');
   await view(desktop, 'drive');
   await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
@@ -267,6 +304,16 @@ await run(async () => {
   }
   const b = { page: await pagePose(desktop), sim: await simPose() };
   await desktop.keyboard.up('ArrowUp');
+  // Along the road: each pose on the road (within its half width of the centreline),
+  // the later ones further along it, on the page as in the simulator.
+  const road = await worldRoad();
+  assert.ok(road, 'the dashboard car has a road');
+  const along = [a.page, b.page, a.sim, b.sim].map((p) => onRoad(road, p));
+  for (const [i, place] of along.entries()) {
+    assert.ok(place.off < road.width_m / 2, `pose ${i} is ${place.off.toFixed(1)} m from the centreline of ${road.name}`);
+  }
+  assert.ok(along[1].station > along[0].station + 10 && along[3].station > along[2].station + 10,
+    `along ${road.name}: the page ${along[0].station} → ${along[1].station} m, the simulator ${along[2].station} → ${along[3].station} m`);
   const movedSim = Math.hypot(b.sim.x - a.sim.x, b.sim.y - a.sim.y);
   const movedPage = Math.hypot(b.page.x - a.page.x, b.page.y - a.page.y);
   const gap = Math.hypot(b.page.x - b.sim.x, b.page.y - b.sim.y);
@@ -280,7 +327,7 @@ await run(async () => {
   await desktop.waitForTimeout(500);
   await desktop.screenshot({ path: `${shots}/desktop-world-chase.png` });
   await desktop.click('[data-testid=world-top]');
-  ok(`the world view follows the simulator: the car moved ${movedPage.toFixed(1)} m on the page as it moved ${movedSim.toFixed(1)} m in the simulator (${gap.toFixed(1)} m apart at the end); ${fps} frames/s at the least while it moved (${rates.join(', ')})`);
+  ok(`the world view follows the simulator along ${road.name} (station ${along[0].station} → ${along[1].station} m on the page, ${along[2].station} → ${along[3].station} m in the simulator): the car moved ${movedPage.toFixed(1)} m on the page as it moved ${movedSim.toFixed(1)} m in the simulator (${gap.toFixed(1)} m apart at the end); ${fps} frames/s at the least while it moved (${rates.join(', ')})`);
 
   // The Car view follows the bus: within 1 km/h of the last VehicleSpeedMsg, within 200 ms.
   const drivingTab = desktop;

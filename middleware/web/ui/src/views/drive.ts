@@ -68,6 +68,15 @@ export function driveView(ctx: Ctx): View {
     try { await post('/api/road/start', {}); ctx.toast('Back at the start'); } catch (e: any) { ctx.toast(e.message, 'error'); }
   } }, 'Back to the start');
 
+  // The simulator's lane keeping: it steers along the track while the person drives the
+  // rest (the session says whether it is on; a car on the endless plane has no road).
+  let alongRoad = false;
+  const setAlongRoad = async (on: boolean) => {
+    try { await post('/api/road/steering', { along_road: on }); ctx.toast(on ? 'The simulator steers along the road' : 'You steer'); } catch (e: any) { ctx.toast(e.message, 'error'); }
+  };
+  const alongRoadButton = h('button', { class: 'btn toggle', 'data-testid': 'steer-along-road', title: 'key R', disabled: true, onclick: () => setAlongRoad(!alongRoad) },
+    'Steer along the road', h('kbd', { text: 'R' }));
+
   const readout = h('div', { class: 'readout' });
   const speedBig = h('div', { class: 'big-speed', 'data-testid': 'drive-speed' });
   const pad = h('div', { class: 'muted small' });
@@ -75,10 +84,10 @@ export function driveView(ctx: Ctx): View {
   const el = h('section', { class: 'drive' },
     world.el,
     h('div', { class: 'card' }, h('div', { class: 'toolbar' }, speedBig, readout), authState, tokenBox,
-      h('p', { class: 'muted small', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
+      h('p', { class: 'muted small', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · R steer along the road (the simulator steers) · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
     h('div', { class: 'card controls' },
       h('div', { class: 'pedals' }, pedal('brake', 'Brake'), pedal('accelerator', 'Accelerator')),
-      h('div', { class: 'wheel-col' }, h('div', { class: 'muted small', text: 'Steering wheel' }), steer,
+      h('div', { class: 'wheel-col' }, h('div', { class: 'muted small', text: 'Steering wheel' }), steer, alongRoadButton,
         h('div', { class: 'buttons' }, btn('Cruise on / set', 'cruise_on', 'C'), btn('Cruise off', 'cruise_off', 'X'), btn('Shift down', 'shift_down', 'Q'), btn('Shift up', 'shift_up', 'E')),
         h('div', { class: 'buttons' }, ...switches),
         h('label', { class: 'knob' }, 'Cabin set point ', knob, knobText))),
@@ -119,6 +128,7 @@ export function driveView(ctx: Ctx): View {
         if (k === 'l') { state.headlights = !state.headlights; engaged = true; }
         if (k === 'm') { state.economy_mode = !state.economy_mode; engaged = true; }
         if (k === 't') { state.manual_mode = !state.manual_mode; engaged = true; }
+        if (k === 'r' && !alongRoadButton.disabled) setAlongRoad(!alongRoad);
       }
       keys.add(k);
       engaged = true;
@@ -170,13 +180,18 @@ export function driveView(ctx: Ctx): View {
     switches[2].classList.toggle('active', state.manual_mode);
     setText(knobText, `${num(state.set_temp_f, 1)} °F`);
     if (engaged && authorized) live.send({ type: 'drive', ...state });
-    setText(readout, `accelerator ${num(accelerator)} % · brake ${num(brake)} % · wheel ${num(state.steering_deg)}°`);
+    setText(readout, `accelerator ${num(accelerator)} % · brake ${num(brake)} % · wheel ${alongRoad ? 'the simulator’s' : `${num(state.steering_deg)}°`}`);
   }, SEND_MS);
 
   function update(): void {
     setText(speedBig, `${num(live.value('Vehicle.Speed'))} km/h`);
     const d = live.session?.driver;
     if (live.session && !live.session.source.drive) setText(authState, 'This bus is not the virtual car: it cannot be driven from here.');
+    alongRoad = d?.steers_along_road ?? false;
+    alongRoadButton.disabled = !d?.on_track;
+    alongRoadButton.classList.toggle('active', alongRoad);
+    alongRoadButton.dataset.on = String(alongRoad);
+    steer.disabled = alongRoad;
     if (d && !engaged && d.held) {
       // Start from what the car's driver holds (another tab may have driven).
       Object.assign(state, d.held);
