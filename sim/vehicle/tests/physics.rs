@@ -959,3 +959,63 @@ fn no_brake_control_beats_the_shortest_braking_distance() {
         }
     }
 }
+
+#[test]
+fn a_locked_car_sliding_along_a_friction_boundary_turns_while_its_energy_falls() {
+    // Split friction in the world, not under the car's sides: the road's left half dry,
+    // its right half icy (the shipped braking straight with the Drive view's "split").
+    // Whichever wheels are on the dry half brake hardest, so the sliding car keeps
+    // turning the same way as it rotates: speed becomes spin. The energy only falls
+    // (the tyres take it; nothing else gives it).
+    let params = VehicleParams::evo_vi();
+    let (mass, inertia) = (params.chassis.mass_kg, params.chassis.yaw_inertia_kgm2);
+    let mut car = new_car(
+        Environment {
+            mu: [1.0, 0.2, 1.0, 0.2],
+            ..Environment::default()
+        },
+        moving_at(100.0, Gear::Neutral),
+    );
+    let full_brake = Actuators {
+        brake: [1.0; 4],
+        ..Actuators::default()
+    };
+    let energy = |s: &VehicleState| {
+        0.5 * mass * (s.speed_mps.powi(2) + s.lateral_velocity_mps.powi(2))
+            + 0.5 * inertia * s.yaw_rate_rad_s.powi(2)
+    };
+    let mut last = energy(car.state());
+    let mut peak_yaw_rate: f64 = 0.0;
+    for step in 0..20_000 {
+        let mut env = *car.environment();
+        for (i, (_, y)) in car.wheel_positions().into_iter().enumerate() {
+            env.mu[i] = if y >= 0.0 { 1.0 } else { 0.2 };
+        }
+        car.set_environment(env);
+        car.step(&full_brake, DT);
+        let s = car.state();
+        peak_yaw_rate = peak_yaw_rate.max(s.yaw_rate_rad_s.abs());
+        if step % 100 == 0 {
+            let now = energy(s);
+            // (1 J of rounding slack.)
+            assert!(
+                now <= last + 1.0,
+                "t = {:.1} s: energy rose from {last:.0} J to {now:.0} J",
+                s.t_s
+            );
+            last = now;
+        }
+    }
+    let s = car.state();
+    println!(
+        "locked on a friction boundary from 100 km/h: turned {:.0}°, peak yaw rate {peak_yaw_rate:.2} rad/s, stopped {:.1} m on",
+        s.heading_rad.to_degrees(),
+        s.x_m
+    );
+    assert!(s.speed_mps.abs() < 0.1 && s.yaw_rate_rad_s.abs() < 0.05);
+    assert!(
+        s.heading_rad.abs() > std::f64::consts::TAU,
+        "{}",
+        s.heading_rad
+    );
+}
