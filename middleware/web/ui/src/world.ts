@@ -128,7 +128,8 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
   const info = h('div', { class: 'world-info muted small', 'data-testid': 'world-info' });
   const fpsText = h('span', { class: 'muted small', 'data-testid': 'world-fps' });
   let mode: Mode = (localStorage.getItem('autoplug.world.mode') as Mode) || 'top';
-  let zoom = Number(localStorage.getItem('autoplug.world.zoom')) || 4;
+  // 7 px/m: the 4.35 m car some 30 px long, 100 m of road across the view.
+  let zoom = Number(localStorage.getItem('autoplug.world.zoom')) || 7;
   const modeButton = (m: Mode, text: string) => {
     const b = h('button', { class: 'btn', 'data-testid': `world-${m}`, onclick: () => { mode = m; localStorage.setItem('autoplug.world.mode', m); buttons(); } }, text);
     return b;
@@ -380,6 +381,18 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
         }
         g.stroke();
       }
+      // The centre line's dashes (4 m in every 12 m), so that the road is seen to pass
+      // under the car on a straight.
+      g.lineWidth = 2;
+      g.beginPath();
+      for (let i = 1; i < road.centre.length; i++) {
+        if (i % 6 >= 2) continue;
+        const [ax, ay] = road.centre[i - 1], [bx, by] = road.centre[i];
+        if (!inFront(ax, ay) || !inFront(bx, by)) continue;
+        const a = project(ax, ay, 0.01), b = project(bx, by, 0.01);
+        if (a && b) { g.moveTo(a[0], a[1]); g.lineTo(b[0], b[1]); }
+      }
+      g.stroke();
     }
     if (!d.road) {
       // Open ground: a 10 m grid, so that the ground is seen to move under the car.

@@ -178,7 +178,8 @@ async function steerAlongRoad(page) {
     await page.click('[data-testid=steer-along-road]');
   }
   await until('the simulator steering', async () => (await state()).session?.driver?.steers_along_road === true, 5_000);
-  assert.equal(await page.getAttribute('[data-testid=steer-along-road]', 'data-on'), 'true');
+  // The page learns it from the session's state, which comes twice a second.
+  await until('the page to show the simulator steering', async () => (await page.getAttribute('[data-testid=steer-along-road]', 'data-on')) === 'true', 5_000);
 }
 
 /** Where the car is on the road, from the simulator. */
