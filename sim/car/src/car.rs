@@ -771,6 +771,12 @@ impl VirtualCar {
                 s.speed_mps.abs() * 3.6
             ));
         }
+        self.put_at_start();
+        Ok(())
+    }
+
+    /// Puts the car, standing, where the scenario started it.
+    fn put_at_start(&mut self) {
         let start = self.scenario.track.as_ref().map_or(
             autoplug_road::Pose {
                 x_m: 0.0,
@@ -789,7 +795,6 @@ impl VirtualCar {
         if let Some(on_track) = &mut self.track {
             *on_track = OnTrack::new(on_track.track().clone(), &self.vehicle);
         }
-        Ok(())
     }
 
     /// The car's track and where on it the car is; `None` on the endless plane.
@@ -1343,6 +1348,9 @@ impl VirtualCar {
             env.mu[3] = mu;
         }
         self.set_environment(env);
+        if event.to_start {
+            self.put_at_start();
+        }
         if let Some(fault) = &event.fault {
             for (name, silenced) in [(&fault.silence, true), (&fault.restore, false)] {
                 if let Some(node) = name

@@ -344,9 +344,27 @@ fn draw_tyre_marks(svg: &mut String, trace: &[TraceRow], body: &Body, view: &Vie
 }
 
 fn draw_path(svg: &mut String, points: &[(f64, f64)], view: &View) {
+    // Farther than this between two rows (10 ms apart) is the simulator's hand (the car
+    // put back at its start), not a drive: the path breaks there.
+    const JUMP_M: f64 = 5.0;
     let mut line = String::with_capacity(points.len() * 8);
     let mut last: Option<(f64, f64)> = None;
+    let mut previous: Option<(f64, f64)> = None;
+    let flush = |line: &mut String, svg: &mut String| {
+        if !line.is_empty() {
+            let _ = writeln!(
+                svg,
+                r##"<polyline points="{line}" fill="none" stroke="#1f5fbf" stroke-width="1.5"/>"##
+            );
+            line.clear();
+        }
+    };
     for &(x, y) in points {
+        if previous.is_some_and(|(px, py)| (x - px).hypot(y - py) > JUMP_M) {
+            flush(&mut line, svg);
+            last = None;
+        }
+        previous = Some((x, y));
         let p = view.px(x, y);
         // Points closer than half a pixel add nothing but bytes.
         if last.is_some_and(|l: (f64, f64)| (l.0 - p.0).hypot(l.1 - p.1) < 0.5) {
@@ -355,10 +373,7 @@ fn draw_path(svg: &mut String, points: &[(f64, f64)], view: &View) {
         let _ = write!(line, "{:.1},{:.1} ", p.0, p.1);
         last = Some(p);
     }
-    let _ = writeln!(
-        svg,
-        r##"<polyline points="{line}" fill="none" stroke="#1f5fbf" stroke-width="1.5"/>"##
-    );
+    flush(&mut line, svg);
 }
 
 /// The rows the car's outline is drawn at: evenly in distance while it moves, at most

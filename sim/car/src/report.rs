@@ -86,7 +86,7 @@ pub struct Stop {
     pub start_s: f64,
     /// Speed then, km/h.
     pub from_kmh: f64,
-    /// Distance to standstill, m.
+    /// Distance to standstill (the car at rest: not moving and not turning), m.
     pub distance_m: f64,
     /// Time to standstill, s.
     pub duration_s: f64,
@@ -436,7 +436,15 @@ fn stops(trace: &[TraceRow], presses: &[BrakePress], mu: f64) -> Vec<Stop> {
         };
         let mut j = i;
         let (mut lock, mut longest_lock) = (0.0f64, 0.0f64);
-        while j < trace.len() && trace[j].speed_kmh > 0.5 && trace[j].brake_pedal > 0.0 {
+        // At rest, not only at no forward speed: a spinning car passes through zero
+        // forward speed each time it slides sideways, and goes on turning and sliding.
+        let at_rest = |k: usize| {
+            let (r, before) = (&trace[k], &trace[k - 1]);
+            r.speed_kmh.abs() <= 0.5
+                && (r.x_m - before.x_m).hypot(r.y_m - before.y_m) <= 0.5 / 3.6 * dt
+                && r.yaw_rate_rad_s.abs() < 0.01
+        };
+        while j < trace.len() && !at_rest(j) && trace[j].brake_pedal > 0.0 {
             let r = &trace[j];
             let locked =
                 r.speed_kmh > 10.0 && r.wheel_speed_kmh.iter().any(|w| *w < 0.1 * r.speed_kmh);
@@ -444,7 +452,7 @@ fn stops(trace: &[TraceRow], presses: &[BrakePress], mu: f64) -> Vec<Stop> {
             longest_lock = longest_lock.max(lock);
             j += 1;
         }
-        if j < trace.len() && trace[j].speed_kmh <= 0.5 {
+        if j < trace.len() && at_rest(j) {
             let end = trace[j];
             let v = start.speed_kmh / 3.6;
             let limit = v * v / (2.0 * mu * G);

@@ -46,6 +46,10 @@
 //! [[at]]
 //! t_s = 20.0
 //! grade_percent = 6.0           # the road can change too
+//!
+//! [[at]]
+//! t_s = 60.0
+//! to_start = true               # the car put back, standing, where it started
 //! ```
 //!
 //! Unknown keys are errors (a typo must not silently do nothing), and every value is
@@ -318,6 +322,11 @@ pub struct Event {
     pub mu_right: Option<f64>,
     /// Bus faults.
     pub fault: Option<Fault>,
+    /// The simulator's hand: the car is put back where it started, standing (on a track:
+    /// its start line), as a person resetting a driving simulator does; for a second run
+    /// of a demonstration on the same stretch of road.
+    #[serde(default)]
+    pub to_start: bool,
 }
 
 /// The friction a road may have: ice to a racing tyre's grip.

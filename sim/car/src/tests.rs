@@ -933,3 +933,41 @@ fn a_world_file_reads_back_and_a_damaged_one_keeps_what_precedes_the_damage() {
     let short = read_world_file(&path).unwrap();
     assert!(short.damaged.unwrap().contains("not a pose"));
 }
+
+#[test]
+fn the_timeline_puts_the_car_back_at_its_start_line() {
+    use crate::car::VirtualCar;
+    let scenario = Scenario::parse(
+        "name = \"twice\"\nduration_s = 30.0\n[road]\ntrack = \"braking-straight\"\nstart_m = 20.0\n\
+         [initial]\nspeed_kmh = 60.0\ngear = \"3\"\n[[at]]\nt_s = 1.0\nsteering_deg = 40.0\n\
+         [[at]]\nt_s = 4.0\nto_start = true\nsteering_deg = 0.0\n",
+        "twice.toml",
+    )
+    .unwrap();
+    assert!(scenario.at[1].to_start && !scenario.at[0].to_start);
+    let mut car = VirtualCar::new(&scenario);
+    while car.time_us() < 3_990_000 {
+        car.tick();
+    }
+    let before = car.vehicle().clone();
+    assert!(
+        before.x_m > 60.0 && before.heading_rad.abs() > 0.3,
+        "{before:?}"
+    );
+    while car.time_us() < 4_020_000 {
+        car.tick();
+    }
+    // Put back on the start line, standing, heading along the road; the odometer keeps
+    // what the car drove.
+    let after = car.vehicle().clone();
+    assert!(
+        (after.x_m - 20.0).abs() < 0.5 && after.y_m.abs() < 0.1,
+        "{after:?}"
+    );
+    assert!(
+        after.heading_rad.abs() < 1e-3 && after.speed_mps.abs() < 0.5,
+        "{after:?}"
+    );
+    assert!(after.distance_m >= before.distance_m);
+    assert!(car.track().unwrap().wheels().iter().all(|w| w.on_road));
+}
