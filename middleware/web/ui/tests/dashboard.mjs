@@ -66,8 +66,8 @@ async function pagePose(page) {
 
 /** The dashboard car's road, from the world channel's description: its centreline
  *  (a point every 2 m) and width. */
-async function worldRoad() {
-  const world = await (await fetch(`${base}/api/world`)).json();
+async function worldRoad(from = base) {
+  const world = await (await fetch(`${from}/api/world`)).json();
   return world.description?.road ?? null;
 }
 
@@ -396,8 +396,20 @@ await run(async () => {
   // Paused after the jump, the page shows the car as it was there.
   await until('the speed at the new position', async () => (await replayPage.getAttribute('[data-testid=speed]', 'data-value')) !== '', 5_000);
   await replayPage.screenshot({ path: `${shots}/desktop-replay.png` });
+  // The replay's world: the recording's world file played with its frames, the car on
+  // the circuit where it was at 1 s.
+  await view(replayPage, 'drive');
+  const replayed = await pagePose(replayPage);
+  const replayedRoad = await worldRoad(new URL(replayPage.url()).origin);
+  assert.ok(replayedRoad, 'the replay has the recording\'s world');
+  const replayedOn = onRoad(replayedRoad, replayed);
+  assert.ok(replayedOn.off < 5, `the replayed car is ${replayedOn.off.toFixed(1)} m from the circuit's centreline`);
+  // A replay cannot be driven: its Drive view shows the world and says so, no controls.
+  await until('the replay\'s Drive view to say it cannot be driven', async () => /replay/i.test(await replayPage.textContent('[data-testid=drive-auth]')), 5_000);
+  assert.ok(!(await replayPage.isVisible('[data-testid=pedal-accelerator]')), 'a replay shows no pedals');
+  await replayPage.screenshot({ path: `${shots}/desktop-replay-world.png` });
   await replayPage.close();
-  ok(`the recording made from the page replays in a dashboard of its own: it played (${p1.toFixed(1)} -> ${p2.toFixed(1)} s), paused at ${p3.toFixed(1)} s, jumped to 1 s`);
+  ok(`the recording made from the page replays in a dashboard of its own: it played (${p1.toFixed(1)} -> ${p2.toFixed(1)} s), paused at ${p3.toFixed(1)} s, jumped to 1 s; its world view shows the car on the circuit at station ${replayedOn.station} m`);
 
   await scenario1(desktop);
 

@@ -81,19 +81,28 @@ export function driveView(ctx: Ctx): View {
   const speedBig = h('div', { class: 'big-speed', 'data-testid': 'drive-speed' });
   const pad = h('div', { class: 'muted small' });
   const world = worldView(live);
+  // Hidden on a bus that cannot be driven (a replay, a real bus): the world view stays.
+  let controlsCard: HTMLElement;
+  let roadCard: HTMLElement;
+  let keysHelp: HTMLElement;
   const el = h('section', { class: 'drive' },
     world.el,
     h('div', { class: 'card' }, h('div', { class: 'toolbar' }, speedBig, readout), authState, tokenBox,
-      h('p', { class: 'muted small', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · R steer along the road (the simulator steers) · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
-    h('div', { class: 'card controls' },
+      keysHelp = h('p', { class: 'muted small', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · R steer along the road (the simulator steers) · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
+    controlsCard = h('div', { class: 'card controls' },
       h('div', { class: 'pedals' }, pedal('brake', 'Brake'), pedal('accelerator', 'Accelerator')),
       h('div', { class: 'wheel-col' }, h('div', { class: 'muted small', text: 'Steering wheel' }), steer, alongRoadButton,
         h('div', { class: 'buttons' }, btn('Cruise on / set', 'cruise_on', 'C'), btn('Cruise off', 'cruise_off', 'X'), btn('Shift down', 'shift_down', 'Q'), btn('Shift up', 'shift_up', 'E')),
         h('div', { class: 'buttons' }, ...switches),
         h('label', { class: 'knob' }, 'Cabin set point ', knob, knobText))),
-    h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2), toStart),
+    roadCard = h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2), toStart),
       h('p', { class: 'muted small', text: 'Dry, wet and split set the friction under the left and right wheels (on a track: of the road’s left and right halves; patches and the verge keep their own). Back to the start takes the standing car back to where it started.' })),
   );
+
+  /** The session's source takes a person's inputs (until the session is known: yes). */
+  function drivable(): boolean {
+    return !live.session || live.session.source.drive;
+  }
 
   function authorize(): void {
     const t = token();
@@ -110,7 +119,7 @@ export function driveView(ctx: Ctx): View {
     if (m.type === 'auth') {
       authorized = m.ok;
       tokenBox.hidden = m.ok;
-      setText(authState, m.ok ? 'You have the wheel: the controls below are the car\'s sensor inputs.' : 'The token was refused.');
+      if (drivable()) setText(authState, m.ok ? 'You have the wheel: the controls below are the car\'s sensor inputs.' : 'The token was refused.');
       authState.dataset.ok = String(m.ok);
     }
     if (m.type === 'error') ctx.toast(m.error, 'error');
@@ -186,7 +195,12 @@ export function driveView(ctx: Ctx): View {
   function update(): void {
     setText(speedBig, `${num(live.value('Vehicle.Speed'))} km/h`);
     const d = live.session?.driver;
-    if (live.session && !live.session.source.drive) setText(authState, 'This bus is not the virtual car: it cannot be driven from here.');
+    if (!drivable()) {
+      setText(authState, live.session?.source.replay
+        ? 'A replay: it cannot be driven; the world view shows the recording\'s.'
+        : 'This bus is not the virtual car: it cannot be driven from here.');
+    }
+    controlsCard.hidden = roadCard.hidden = keysHelp.hidden = readout.hidden = !drivable();
     alongRoad = d?.steers_along_road ?? false;
     alongRoadButton.disabled = !d?.on_track;
     alongRoadButton.classList.toggle('active', alongRoad);
