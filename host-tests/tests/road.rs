@@ -4,6 +4,28 @@
 use autoplug_host_tests::scenario;
 use autoplug_virtual_car::car::VirtualCar;
 
+/// Asserts every wheel of `car` is on its road; the farthest wheel from the centreline, m.
+fn every_wheel_on_the_road(car: &VirtualCar) -> f64 {
+    let mut widest = 0.0f64;
+    for (i, wheel) in car
+        .track()
+        .expect("on its road")
+        .wheels()
+        .iter()
+        .enumerate()
+    {
+        widest = widest.max(wheel.location.lateral_m.abs());
+        assert!(
+            wheel.on_road,
+            "t = {:.2} s: wheel {i} off the road at station {:.1} m, {:.2} m from the centreline",
+            car.time_us() as f64 * 1e-6,
+            wheel.location.station_m,
+            wheel.location.lateral_m
+        );
+    }
+    widest
+}
+
 #[test]
 fn the_path_following_driver_laps_the_handling_circuit_within_its_edges() {
     let s = scenario("circuit-lap");
@@ -19,17 +41,8 @@ fn the_path_following_driver_laps_the_handling_circuit_within_its_edges() {
     let mut on_hill = 0;
     while !car.finished() {
         car.tick();
+        widest = widest.max(every_wheel_on_the_road(&car));
         let on = car.track().expect("on its track");
-        for (i, wheel) in on.wheels().iter().enumerate() {
-            widest = widest.max(wheel.location.lateral_m.abs());
-            assert!(
-                wheel.on_road,
-                "t = {:.2} s: wheel {i} off the road at station {:.1} m, {:.2} m from the centreline",
-                car.time_us() as f64 * 1e-6,
-                wheel.location.station_m,
-                wheel.location.lateral_m
-            );
-        }
         let env = car.wheel_environment();
         if env.mu[1] < 0.5 {
             on_pad += 1;
@@ -79,21 +92,7 @@ fn the_drive_cycle_stays_on_its_country_road() {
     let mut widest = 0.0f64;
     while !car.finished() {
         car.tick();
-        for (i, wheel) in car
-            .track()
-            .expect("on its road")
-            .wheels()
-            .iter()
-            .enumerate()
-        {
-            widest = widest.max(wheel.location.lateral_m.abs());
-            assert!(
-                wheel.on_road,
-                "t = {:.2} s: wheel {i} off the road at station {:.1} m",
-                car.time_us() as f64 * 1e-6,
-                wheel.location.station_m
-            );
-        }
+        widest = widest.max(every_wheel_on_the_road(&car));
     }
     println!("drive cycle: widest wheel {widest:.2} m from the centreline");
     assert!(car.vehicle().distance_m > 3000.0);
@@ -133,15 +132,7 @@ fn the_simulator_steers_a_persons_car_along_the_road_through_the_sweeper() {
         }
         car.tick();
         tick += 1;
-        for (i, wheel) in car.track().unwrap().wheels().iter().enumerate() {
-            widest = widest.max(wheel.location.lateral_m.abs());
-            assert!(
-                wheel.on_road,
-                "t = {:.2} s: wheel {i} off the road at station {:.1} m",
-                car.time_us() as f64 * 1e-6,
-                wheel.location.station_m
-            );
-        }
+        widest = widest.max(every_wheel_on_the_road(&car));
     }
     let heading = car.vehicle().heading_rad.to_degrees();
     println!(

@@ -1731,7 +1731,6 @@ fn demo_on_firmware(
     })
 }
 
-/// Runs a demonstration and reports what it showed.
 /// What plays a recording's world into the dashboard's world channel.
 fn world_feed(
     world: std::sync::Arc<autoplug_web::WorldChannel>,
@@ -1765,6 +1764,7 @@ fn world_publisher(
     })
 }
 
+/// Runs a demonstration and reports what it showed.
 fn demo(
     which: Demo,
     dir: Option<&Path>,

@@ -301,9 +301,6 @@ async fn state(State(shared): State<Arc<Shared>>) -> Response {
     ([(header::CONTENT_TYPE, "application/json")], json).into_response()
 }
 
-/// Whether a browser's `Origin` may open the stream: the server's own host, or one the
-/// user allowed. Tools that send no `Origin` (python, PlotJuggler) are not browsers
-/// running someone else's page, and may.
 /// The world channel's whole content (the description and the poses kept), as the
 /// stream's first `world` message; `{"type":"world","description":null,"poses":[]}` when
 /// the bus has no world (a real bus).
@@ -319,6 +316,9 @@ async fn world(State(shared): State<Arc<Shared>>) -> Response {
     ([(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
+/// Whether a browser's `Origin` may open the stream: the server's own host, or one the
+/// user allowed. Tools that send no `Origin` (python, PlotJuggler) are not browsers
+/// running someone else's page, and may.
 fn origin_allowed(headers: &HeaderMap, config: &WebConfig) -> bool {
     let Some(origin) = headers.get(header::ORIGIN) else {
         return true;

@@ -1276,10 +1276,11 @@ impl VirtualCar {
         if let Some(target_kmh) = target {
             let mut target_mps = target_kmh / 3.6;
             if let (true, Some(on_track)) = (following, &self.track) {
-                target_mps = target_mps.min(RoadDriver::speed_allowed(
+                target_mps = target_mps.min(self.road_driver.speed_allowed_at(
                     on_track.road(),
                     on_track.rear_axle_station(),
                     s.speed_mps,
+                    self.t_us,
                 ));
             }
             let (accelerator, brake) =

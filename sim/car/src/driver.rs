@@ -209,7 +209,15 @@ pub struct CarOnRoad {
 #[derive(Clone, Debug, Default)]
 pub struct RoadDriver {
     integral: f64,
+    /// The speed the road ahead allowed at the last look, m/s, and when the next look is
+    /// due, µs.
+    looked: Option<(f64, u64)>,
 }
+
+/// How often the road driver looks down the road for bends, µs: a driver's glance, not
+/// every 1 ms tick (each look queries the curvature every 2 m of braking distance: at
+/// 100 km/h some 50 queries, a fifth of a lap's run time when done every tick).
+const LOOK_AHEAD_PERIOD_US: u64 = 10_000;
 
 impl RoadDriver {
     /// The steering-wheel angle, degrees (positive left), that keeps `car` (its rear
@@ -252,6 +260,25 @@ impl RoadDriver {
             ahead += STEP_M;
         }
         allowed
+    }
+
+    /// [`RoadDriver::speed_allowed`], looked up again every [`LOOK_AHEAD_PERIOD_US`] of
+    /// simulated time `t_us` and held between.
+    pub fn speed_allowed_at(
+        &mut self,
+        road: &autoplug_road::Road,
+        station_m: f64,
+        speed_mps: f64,
+        t_us: u64,
+    ) -> f64 {
+        match self.looked {
+            Some((allowed, due_us)) if t_us < due_us => allowed,
+            _ => {
+                let allowed = Self::speed_allowed(road, station_m, speed_mps);
+                self.looked = Some((allowed, t_us + LOOK_AHEAD_PERIOD_US));
+                allowed
+            }
+        }
     }
 
     /// Accelerator and brake pedal, %, that bring `speed_mps` to `target_mps`, over a

@@ -270,11 +270,18 @@ fn draw_road(svg: &mut String, road: &Road, view: &View) {
         });
         let lateral = (patch.left_m + patch.right_m) / 2.0;
         let (sin, cos) = mid.heading_rad.sin_cos();
-        let (px, py) = view.px(mid.x_m - lateral * sin, mid.y_m + lateral * cos);
+        let (px, mut py) = view.px(mid.x_m - lateral * sin, mid.y_m + lateral * cos);
+        // Drawn on the patch where the road is wide on the page; where it is a few pixels
+        // (a whole lap) the path and the marks would cover the label: above the road there.
+        let half_width_px = road.width_m() / 2.0 * view.scale;
+        if half_width_px < 15.0 {
+            py -= half_width_px + 4.0;
+        }
         if view.contains(mid.x_m, mid.y_m, 0.0) {
+            // A white halo keeps it legible over the grass or the asphalt.
             let _ = writeln!(
                 svg,
-                r##"<text x="{px:.1}" y="{py:.1}" text-anchor="middle" font-size="11" fill="#1d3b53">{} μ {:.2}</text>"##,
+                r##"<text x="{px:.1}" y="{py:.1}" text-anchor="middle" font-size="11" fill="#1d3b53" stroke="#ffffff" stroke-width="3" stroke-opacity="0.85" paint-order="stroke">{} μ {:.2}</text>"##,
                 escape(&patch.name),
                 patch.mu
             );
