@@ -6,11 +6,15 @@
 //! Nothing is copied, so a start costs the record's one word program at most. A trial that
 //! never confirmed itself (a crash, the watchdog, a power cut) is reverted at the next
 //! reset. A slot whose vector table cannot be an application for it (erased, half written,
-//! linked elsewhere) is never started. An application that started the independent
-//! watchdog leaves it running across the reset (nothing can stop it): the bootloader
-//! stretches its timeout to [`WATCHDOG_TIMEOUT_US`], longer than the slowest sector erase
-//! of the datasheet (2 s), which the two-copy state's switch may need, and feeds it before
-//! every flash operation.
+//! linked elsewhere) is never started.
+//!
+//! The bootloader starts the independent watchdog, with [`WATCHDOG_TIMEOUT_US`] (longer than
+//! the slowest sector erase of the datasheet, 2 s, which the two-copy state's switch may
+//! need), feeds it before every flash operation, and leaves it running for the image it
+//! starts, which sets its own timeout once it runs. A reset stops the watchdog, so without
+//! this an image that locks up or hangs before it starts its own (a trial image that is not
+//! a program for this board, say) would never be reset, and so never reverted: now the
+//! watchdog resets it within the timeout, and the next start reverts the trial.
 //!
 //! Flash once with probe-rs: `cargo flash-boot` (README, "Firmware upgrades over CAN").
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -102,7 +106,8 @@ mod boot {
     fn main() -> ! {
         // Default clocks (16 MHz HSI): the bootloader waits on the flash, not the core.
         let p = embassy_stm32::init(Default::default());
-        let _watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
+        let mut watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
+        watchdog.unleash();
         feed();
 
         let layout = Flash::<Blocking>::new_blocking(p.FLASH).into_blocking_regions();

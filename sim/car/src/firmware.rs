@@ -13,7 +13,7 @@ use autoplug_ecu::pins::{AnalogIn, DigitalIn, DigitalOut, Pull, PwmOut};
 use autoplug_ecu::EcuLogic;
 use autoplug_mcu::chip::rcc::ResetCause;
 use autoplug_mcu::chip::Chip;
-use autoplug_mcu::mcu::Mcu;
+use autoplug_mcu::mcu::{Mcu, Stop};
 use autoplug_mcu::node::{run_together, BusNode};
 use autoplug_mcu::programming::FlashContents;
 use autoplug_mcu::rtt::RttLog;
@@ -117,6 +117,8 @@ pub(crate) struct EmulatedEcu {
     recent: VecDeque<String>,
     /// HardFaults already reported.
     faults_seen: usize,
+    /// Lockups already reported.
+    lockups_seen: usize,
     /// Watchdog resets already reported.
     resets_seen: usize,
     /// The set speed the cruise firmware latched, as its log line "cruise: engaged at X
@@ -213,6 +215,7 @@ impl Firmware {
             logs,
             recent: VecDeque::new(),
             faults_seen: 0,
+            lockups_seen: 0,
             resets_seen: 0,
             logged_set_speed_kmh: None,
         });
@@ -291,6 +294,24 @@ impl Firmware {
                 );
             }
             ecu.faults_seen = node.mcu.faults.len();
+            // A lockup with the watchdog running: the chip waits for its reset, as a board
+            // does (the reset follows as a watchdog reset, below).
+            for (at_ns, halt) in &node.mcu.lockups[ecu.lockups_seen..] {
+                push_line(
+                    &mut self.log,
+                    &mut self.dropped_lines,
+                    FirmwareLogLine {
+                        t_us: scenario_us(at_ns / 1000, start_us),
+                        ecu: ecu_name(ecu.node),
+                        level: Some("ERROR".into()),
+                        text: format!(
+                            "emulator: {}; the independent watchdog (IWDG) runs, so its reset will end the lockup",
+                            Stop::Halted(halt.clone())
+                        ),
+                    },
+                );
+            }
+            ecu.lockups_seen = node.mcu.lockups.len();
             // A watchdog reset says the firmware stopped feeding it: a hang, reported
             // like a fault (the firmware's own log says it only after the restart).
             for (at_ns, cause) in &node.mcu.resets[ecu.resets_seen..] {

@@ -90,6 +90,11 @@ pub struct Mcu {
     pub resets: Vec<(u64, ResetCause)>,
     /// The HardFaults taken, as they were reported.
     pub faults: Vec<ExceptionReport>,
+    /// The lockups a running watchdog ended, with the time each began (ns since power-on).
+    pub lockups: Vec<(u64, Halt)>,
+    /// The core is locked up (a fault it could not take): it executes nothing until a
+    /// reset, while the chip around it runs on.
+    locked_up: bool,
     /// What the program wrote to the console through semihosting.
     pub semihosting_output: Vec<u8>,
     /// CAN1 on a bus of its own where every frame is acknowledged (true), or attached to
@@ -108,6 +113,8 @@ impl Mcu {
             sent: Vec::new(),
             resets: Vec::new(),
             faults: Vec::new(),
+            lockups: Vec::new(),
+            locked_up: false,
             semihosting_output: Vec::new(),
             standalone_can: true,
         };
@@ -115,6 +122,11 @@ impl Mcu {
             .reset(&mut mcu.chip, BOOT_ALIAS)
             .map_err(Stop::Halted)?;
         Ok(mcu)
+    }
+
+    /// Whether the core is locked up, waiting for the watchdog's reset.
+    pub fn is_locked_up(&self) -> bool {
+        self.locked_up
     }
 
     /// Simulated nanoseconds since power-on.
@@ -127,6 +139,7 @@ impl Mcu {
         self.resets.push((now, cause));
         self.chip.reset(cause, now);
         self.on_wire = None;
+        self.locked_up = false;
         self.cpu
             .reset(&mut self.chip, BOOT_ALIAS)
             .map_err(Stop::Halted)
@@ -164,6 +177,12 @@ impl Mcu {
             .filter(|&at| at > now)
             .min()
             .unwrap_or(now + 1);
+            if self.locked_up {
+                // A locked-up core fetches nothing; time passes for the chip (the watchdog
+                // counts down to the reset that ends the lockup).
+                self.cpu.add_cycles(next - now);
+                continue;
+            }
             let exit = self.cpu.run(&mut self.chip, next);
             if let Some(report) = self.cpu.scs.last_fault.take() {
                 if report.exception == crate::cpu::system::exception::HARD_FAULT {
@@ -180,6 +199,14 @@ impl Mcu {
                 }
                 Exit::Yield => self.after_yield()?,
                 Exit::Halted(Halt::Breakpoint { imm: 0xAB, pc }) => self.semihosting(pc)?,
+                // On the chip a lockup is not a reset: the core stays locked until one
+                // comes. A running independent watchdog brings it (the bootloader starts
+                // the IWDG before every start, so a trial image that locks up is reverted);
+                // without one nothing ever will, and the run ends here with the report.
+                Exit::Halted(halt @ Halt::Lockup { .. }) if self.chip.iwdg.expires().is_some() => {
+                    self.lockups.push((self.now_ns(), halt));
+                    self.locked_up = true;
+                }
                 Exit::Halted(halt) => return Err(Stop::Halted(halt)),
             }
         }
@@ -329,5 +356,78 @@ impl Mcu {
             let cycles = (bits * clocks.hclk).div_ceil(bit_rate);
             self.on_wire = Some((frame, now + cycles));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A program that (with `start_watchdog`) starts the IWDG and then executes UDF, whose
+    /// HardFault handler is another UDF: the core locks up.
+    fn locking_up(start_watchdog: bool) -> Mcu {
+        const SP: u32 = 0x2002_0000;
+        let code: [u16; 8] = [
+            0xF243,
+            0x0000, // MOVW r0, #0x3000
+            0xF2C4,
+            0x0000, // MOVT r0, #0x4000: IWDG_KR
+            0xF64C,
+            0x41CC,                                       // MOVW r1, #0xCCCC: start
+            if start_watchdog { 0x6001 } else { 0xBF00 }, // STR r1, [r0] (or NOP)
+            0xDE00, // UDF: a UsageFault, escalated to HardFault
+        ];
+        let mut image = vec![0u8; 0x60];
+        let undefined = FLASH.start + 0x40 + 14;
+        for (i, word) in [SP, FLASH.start + 0x41, 0, undefined | 1]
+            .iter()
+            .enumerate()
+        {
+            image[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
+        }
+        for (i, halfword) in code.iter().enumerate() {
+            image[0x40 + 2 * i..0x42 + 2 * i].copy_from_slice(&halfword.to_le_bytes());
+        }
+        let mut flash = SimFlash::new(1);
+        flash.program(FLASH.start, &image).unwrap();
+        Mcu::power_on(flash, [1, 2, 3]).unwrap()
+    }
+
+    #[test]
+    fn a_running_watchdog_resets_a_locked_up_core() {
+        let mut mcu = locking_up(true);
+        mcu.run_until(1_200_000_000)
+            .expect("the watchdog ends each lockup");
+        // The IWDG's first period at its reset prescaler (/4): 0x1000 LSI counts of 4, 512 ms.
+        let period_ns = 0x1000 * 4 * 1_000_000_000 / crate::chip::rcc::LSI_HZ;
+        let watchdog_resets: Vec<u64> = mcu
+            .resets
+            .iter()
+            .filter(|(_, cause)| *cause == ResetCause::Watchdog)
+            .map(|(at, _)| *at)
+            .collect();
+        assert_eq!(watchdog_resets.len(), 2, "{:?}", mcu.resets);
+        assert!(
+            watchdog_resets[0].abs_diff(period_ns) < 1_000_000,
+            "the first reset {} ns after power-on, the watchdog's period is {period_ns} ns",
+            watchdog_resets[0]
+        );
+        // Locked up after power-on, after the first reset, and after the second.
+        assert_eq!(mcu.lockups.len(), 3, "{:?}", mcu.lockups);
+        assert!(mcu
+            .lockups
+            .iter()
+            .all(|(_, halt)| matches!(halt, Halt::Lockup { .. })));
+        assert!(mcu.is_locked_up());
+    }
+
+    #[test]
+    fn without_a_watchdog_a_lockup_ends_the_run_with_its_report() {
+        let mut mcu = locking_up(false);
+        match mcu.run_until(100_000_000) {
+            Err(Stop::Halted(Halt::Lockup { pc, .. })) => assert_eq!(pc, FLASH.start + 0x4E),
+            other => panic!("{other:?}"),
+        }
+        assert!(mcu.resets.is_empty());
     }
 }

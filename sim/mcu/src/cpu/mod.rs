@@ -497,7 +497,10 @@ impl Cpu {
         if let Some(Some(cached)) = self.code.get(offset) {
             return Ok((cached.op, cached.len as u32));
         }
-        if address >= 0xE000_0000 {
+        // The default memory map's execute-never regions (ARMv7-M B3.1): peripherals,
+        // external devices and the system region. A fetch there faults, as on the chip,
+        // before the bus is asked.
+        if matches!(address, 0x4000_0000..=0x5FFF_FFFF | 0xA000_0000..=0xFFFF_FFFF) {
             return Err(Fault::ExecuteNever.into());
         }
         let hw1 = self.fetch_half(bus, address)?;
