@@ -32,6 +32,7 @@ fuzz_target!(|data: &[u8]| {
             version_floor: Version::new(1, 0, 0),
             max_image_len: 128 * 1024,
             load_address: ImageSlot::B.vector_table(),
+            runs_machine_code: data.get(HEADER_LEN).is_some_and(|b| b & 1 == 0),
         };
         let _ = header.check(&expected);
     }

@@ -60,6 +60,7 @@ impl Backend for Ecu {
             version_floor: Version::new(1, 0, 0),
             max_image_len: SECTOR as u32,
             load_address: ImageSlot::B.vector_table(),
+            runs_machine_code: true,
         }
     }
     fn public_key(&self) -> [u8; 32] {

@@ -1434,6 +1434,9 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
                 BusUrl::Replay(_) => SourceKind::Replay,
             };
             let mut session = Session::new(watch, table, commands, kind, source.describe());
+            if let Some(choice) = &options.firmware {
+                session = session.with_firmware_ecus(&choice.ecus);
+            }
             if let Some(desk) = desk {
                 session = session.with_desk(desk);
             }

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use autoplug_can::Node;
 use autoplug_gateway::{CarState, Observer, RecordingSink, Update};
-use autoplug_image::ImageSet;
+use autoplug_image::{ImageSet, Payload};
 use autoplug_logs::{LogFrame, RotatePolicy};
 use autoplug_virtual_car::driver::clamped;
 use autoplug_virtual_car::scenario::FRICTION_RANGE;
@@ -96,6 +96,9 @@ pub struct Session<'a> {
     replay: Option<Rc<RefCell<ReplayDesk>>>,
     replay_pages: Option<crate::dashboard::ReplayPages>,
     security_secret: Vec<u8>,
+    /// The virtual car's ECUs that run as their firmware on emulated MCUs: they refuse an
+    /// image without machine code, which is said before a flash starts.
+    firmware_ecus: Vec<Node>,
     recordings_dir: Option<PathBuf>,
     rotate: RotatePolicy,
     recording: Option<RecordingSink>,
@@ -127,6 +130,7 @@ impl<'a> Session<'a> {
             replay: None,
             replay_pages: None,
             security_secret: autoplug_tester::DEV_SECURITY_SECRET.to_vec(),
+            firmware_ecus: Vec::new(),
             recordings_dir: None,
             rotate: RotatePolicy::default(),
             recording: None,
@@ -175,6 +179,12 @@ impl<'a> Session<'a> {
     pub fn with_recordings(mut self, dir: PathBuf, rotate: RotatePolicy) -> Self {
         self.recordings_dir = Some(dir);
         self.rotate = rotate;
+        self
+    }
+
+    /// The virtual car's ECUs that run as their firmware (`--firmware`).
+    pub fn with_firmware_ecus(mut self, ecus: &[Node]) -> Self {
+        self.firmware_ecus = ecus.to_vec();
         self
     }
 
@@ -388,6 +398,12 @@ impl<'a> Session<'a> {
                     .map_or_else(|| format!("node 0x{:02X}", header.node), |n| ecu_label(*n));
                 return Err(format!(
                     "'{origin}' is an image for {target}, not for {}: the ECU would refuse it",
+                    ecu_label(node)
+                ));
+            }
+            if header.payload == Payload::HostLogic && self.firmware_ecus.contains(&node) {
+                return Err(format!(
+                    "'{origin}' holds no machine code (it is built for the virtual car's host-logic ECUs) and {} runs its firmware on an emulated STM32F446: flash a firmware release (scripts/firmware-release, or the library's releases from scripts/firmware-demo-images)",
                     ecu_label(node)
                 ));
             }

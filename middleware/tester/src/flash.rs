@@ -3,18 +3,28 @@
 //!
 //! | phase | requests |
 //! |---|---|
-//! | session setup | functional 0x10 03 (extended), 0x85 02 (DTC setting off), 0x28 03 01 (normal communication off); physical 0x10 02 (programming) |
+//! | session setup | functional 0x10 03 (extended); physical 0x10 02 (programming: the ECU's standstill check); functional 0x85 02 (DTC setting off), 0x28 03 01 (normal communication off) |
 //! | security | 0x27 01 (seed), 0x27 02 (key = `key_for(secret, node, seed)`) |
 //! | erase | 0x22 F1A0 (the slot the ECU runs: the image goes to the other one); 0x31 01 FF00 44 (slot address, image length): the sectors the image needs, answered after a series of 0x78 |
 //! | transfer | 0x34 00 44 (slot address, image length); 0x36 blocks of the announced length; 0x37 |
 //! | check | 0x31 01 FF01 (the ECU verifies the signature and marks the image) |
-//! | reset and wait | 0x11 01; TesterPresent (0x3E 00) until the ECU answers again |
-//! | restore | functional 0x28 00 01, 0x85 01, 0x10 01 |
+//! | reset and wait | functional 0x28 00 01 (normal communication on); 0x11 01; TesterPresent (0x3E 00) until the ECU answers again |
+//! | restore | functional 0x85 01, 0x10 01 |
 //!
-//! Switching normal communication and DTC setting off on every ECU frees the bus for the
-//! transfer and keeps the others from recording "lost communication" DTCs while the target
-//! is silent. A functional TesterPresent (0x3E 80) goes every 2 s throughout, so no ECU's
-//! S3 timer ends its session meanwhile.
+//! Switching normal communication off on every ECU frees the bus for the transfer; DTC
+//! setting off keeps the others from recording "lost communication" DTCs while the target
+//! is silent. The order is what keeps a car safe and its fault memory clean:
+//! - The programming session, which the ECU grants only to a car it has seen stand, is
+//!   asked for before DTC setting and communication go off: a refused flash (a moving car)
+//!   never silences the bus, whose messages the car is driving on, nor the fault memory.
+//! - DTC setting goes off before anything falls silent, and comes back on only once the
+//!   target answers again after its reset.
+//! - Communication comes back on before the target's reset: the target starts on a bus
+//!   where every other ECU is sending again, so its own fresh start records no "lost
+//!   communication" with them (its DTC setting is on from its start).
+//!
+//! A functional TesterPresent (0x3E 80) goes every 2 s throughout, so no ECU's S3 timer
+//! ends its session meanwhile.
 //!
 //! The ECU runs its image in place from slot A or slot B and writes an update to the other
 //! slot, so the image must be linked for that one: the file may hold a release's images for
@@ -28,7 +38,7 @@ use std::fmt;
 
 use autoplug_can::Node;
 use autoplug_ecu::Instant;
-use autoplug_image::{BootState, ImageSet, ImageSlot};
+use autoplug_image::{BootState, ImageHeader, ImageSet, ImageSlot, Payload, HEADER_LEN};
 use autoplug_uds::security::{key_for, SEED_LEN};
 use autoplug_uds::server::did;
 
@@ -38,8 +48,8 @@ use crate::names::ecu_name;
 /// The phases of a flash job, in order; each is timed in the [`FlashReport`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Phase {
-    /// Extended session for all, DTC setting and communication off, programming session
-    /// for the target.
+    /// Extended session for all, programming session for the target, DTC setting and
+    /// communication off.
     SessionSetup,
     /// Seed and key.
     Security,
@@ -49,9 +59,9 @@ pub enum Phase {
     Transfer,
     /// The check routine (signature, ECU, version).
     Check,
-    /// ECUReset and the wait until the ECU answers again.
+    /// Communication on, ECUReset and the wait until the ECU answers again.
     ResetAndWait,
-    /// Communication and DTC setting on, default session for all.
+    /// DTC setting on (and communication, after a failure), default session for all.
     Restore,
 }
 
@@ -325,6 +335,28 @@ impl FlashConfig {
 
 /// The NRC an ECU answers a programming request with while the car does not stand.
 const NRC_CONDITIONS_NOT_CORRECT: u8 = 0x22;
+/// The NRC an ECU refuses an image's header with when the image can never be installed
+/// there (another ECU, other hardware, a downgrade, no machine code).
+const NRC_REQUEST_OUT_OF_RANGE: u8 = 0x31;
+
+/// Why the file's images (one, or a release's set) could never start, if so: a machine-code
+/// image whose vector table the bootloader would not start (an image without machine code
+/// is for the virtual car's ECUs, which start none). Checked before anything goes to the
+/// car. A file that is not an image goes as it is: the ECU says what is wrong with it.
+fn unstartable(file: &[u8]) -> Option<String> {
+    let set = ImageSet::parse(file).ok()?;
+    let reason = set.iter().find_map(|(image, header)| {
+        let slot = header.slot()?;
+        if header.payload != Payload::MachineCode {
+            return None;
+        }
+        let table = image.get(HEADER_LEN..).unwrap_or_default();
+        autoplug_image::check_startable(slot, table)
+            .err()
+            .map(|error| format!("the image for slot {}: {error}", slot.letter()))
+    });
+    reason
+}
 
 /// One request of the sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -341,6 +373,7 @@ enum Step {
     TransferData,
     TransferExit,
     Check,
+    ResumeComm,
     Reset,
     AwaitReturn,
     CommOn,
@@ -359,7 +392,7 @@ impl Step {
             Step::ReadSlot | Step::Erase => Phase::Erase,
             Step::RequestDownload | Step::TransferData | Step::TransferExit => Phase::Transfer,
             Step::Check => Phase::Check,
-            Step::Reset | Step::AwaitReturn => Phase::ResetAndWait,
+            Step::ResumeComm | Step::Reset | Step::AwaitReturn => Phase::ResetAndWait,
             Step::CommOn | Step::DtcOn | Step::DefaultSession | Step::Finished => Phase::Restore,
         }
     }
@@ -378,6 +411,7 @@ impl Step {
             Step::TransferData => "0x36 (transfer data)",
             Step::TransferExit => "0x37 (request transfer exit)",
             Step::Check => "0x31 01 FF01 (check programming dependencies)",
+            Step::ResumeComm => "functional 0x28 00 01 (communication on before the reset)",
             Step::Reset => "0x11 01 (hard reset)",
             Step::AwaitReturn => "0x3E 00 (tester present after the reset)",
             Step::CommOn => "functional 0x28 00 01 (communication on)",
@@ -422,6 +456,10 @@ pub struct FlashJob {
     probe_at: Option<Instant>,
     /// Since when the ECU refuses the programming session because the car does not stand.
     refused_since: Option<Instant>,
+    /// Normal communication was switched off and not yet on again.
+    comm_off: bool,
+    /// A request went to the car (a job refused before that leaves nothing to restore).
+    requested: bool,
     return_deadline: Option<Instant>,
     reset_at: Option<Instant>,
     failure: Option<(Phase, Step, FlashFailure)>,
@@ -496,6 +534,8 @@ impl FlashJob {
             retries_left: config.transfer_retries,
             probe_at: None,
             refused_since: None,
+            comm_off: false,
+            requested: false,
             return_deadline: None,
             reset_at: None,
             image: ImageSet::parse(&config.image)
@@ -589,7 +629,10 @@ impl FlashJob {
         let sent = match self.step {
             Step::Extended => tester.request_functional(now, &[0x10, 0x03]),
             Step::DtcOff => tester.request_functional(now, &[0x85, 0x02]),
-            Step::CommOff => tester.request_functional(now, &[0x28, 0x03, 0x01]),
+            Step::CommOff => {
+                self.comm_off = true;
+                tester.request_functional(now, &[0x28, 0x03, 0x01])
+            }
             Step::Programming => tester.request_echoing(now, ecu, &[0x10, 0x02], 1),
             Step::Seed => tester.request_echoing(now, ecu, &[0x27, 0x01], 1),
             Step::Key => {
@@ -634,12 +677,13 @@ impl FlashJob {
             Step::Check => tester.request_echoing(now, ecu, &[0x31, 0x01, 0xFF, 0x01], 3),
             Step::Reset => tester.request_echoing(now, ecu, &[0x11, 0x01], 1),
             Step::AwaitReturn => tester.request_echoing(now, ecu, &[0x3E, 0x00], 1),
-            Step::CommOn => tester.request_functional(now, &[0x28, 0x00, 0x01]),
+            Step::CommOn | Step::ResumeComm => tester.request_functional(now, &[0x28, 0x00, 0x01]),
             Step::DtcOn => tester.request_functional(now, &[0x85, 0x01]),
             Step::DefaultSession => tester.request_functional(now, &[0x10, 0x01]),
             Step::Finished => return Ok(()),
         };
         sent.map_err(FlashFailure::Uds)?;
+        self.requested = true;
         self.in_flight = true;
         Ok(())
     }
@@ -652,12 +696,19 @@ impl FlashJob {
         }
         let step = self.step;
         let next = match (step, outcome) {
-            (Step::Extended | Step::DtcOff | Step::CommOff, Ok(Response::Functional(list))) => {
+            (
+                Step::Extended | Step::DtcOff | Step::CommOff | Step::ResumeComm,
+                Ok(Response::Functional(list)),
+            ) => {
                 self.note_functional(step, &list);
                 Ok(match step {
-                    Step::Extended => Step::DtcOff,
+                    Step::Extended => Step::Programming,
                     Step::DtcOff => Step::CommOff,
-                    _ => Step::Programming,
+                    Step::CommOff => Step::Seed,
+                    _ => {
+                        self.comm_off = false;
+                        Step::Reset
+                    }
                 })
             }
             (Step::CommOn | Step::DtcOn | Step::DefaultSession, outcome) => {
@@ -665,6 +716,9 @@ impl FlashJob {
                     Ok(Response::Functional(list)) => self.note_functional(step, &list),
                     Ok(Response::Positive(_)) => {}
                     Err(error) => self.notes.push(format!("{}: {error}", step.describe())),
+                }
+                if step == Step::CommOn {
+                    self.comm_off = false;
                 }
                 Ok(match step {
                     Step::CommOn => Step::DtcOn,
@@ -679,7 +733,7 @@ impl FlashJob {
                     Err(error) => matches!(error, UdsError::Negative { .. }),
                 };
                 if answered {
-                    Ok(Step::CommOn)
+                    Ok(Step::DtcOn)
                 } else if self.return_deadline.is_some_and(|d| now >= d) {
                     Err(FlashFailure::NoReturnAfterReset {
                         waited_us: self.reset_at.map_or(0, |r| now.micros_since(r)),
@@ -733,6 +787,19 @@ impl FlashJob {
             (_, Ok(Response::Functional(_))) => Err(FlashFailure::Invalid(
                 "internal error: a functional answer to a physical request".into(),
             )),
+            (
+                Step::TransferData,
+                Err(UdsError::Negative {
+                    nrc: NRC_REQUEST_OUT_OF_RANGE,
+                    ..
+                }),
+            ) if ImageHeader::parse(&self.image)
+                .is_ok_and(|h| h.payload == Payload::HostLogic) =>
+            {
+                Err(FlashFailure::Invalid(
+                    "the ECU refused the image's header (NRC 0x31 requestOutOfRange): the image holds no machine code (it is built for the virtual car's host-logic ECUs), and an ECU that runs its firmware takes only a firmware release (scripts/firmware-release)".into(),
+                ))
+            }
             (_, Err(error)) => Err(FlashFailure::Uds(error)),
         };
         match next {
@@ -757,7 +824,7 @@ impl FlashJob {
         };
         match step {
             Step::Programming => match response {
-                [0x50, 0x02, ..] => Ok(Step::Seed),
+                [0x50, 0x02, ..] => Ok(Step::DtcOff),
                 _ => Err(unexpected(0x10, "50 02 ...")),
             },
             Step::Seed => {
@@ -818,7 +885,7 @@ impl FlashJob {
                         Ok(if step == Step::Erase {
                             Step::RequestDownload
                         } else {
-                            Step::Reset
+                            Step::ResumeComm
                         })
                     }
                     _ => Err(unexpected(0x31, &format!("71 01 {}", hex_bytes(id)))),
@@ -904,9 +971,16 @@ impl FlashJob {
             return;
         }
         self.failure = Some((self.step.phase(), self.step, failure));
-        // Leave the car as it was: communication, DTC setting, default session.
+        // Leave the car as it was: communication (if it went off), DTC setting, default
+        // session.
         self.close_phase(now);
-        self.step = Step::CommOn;
+        self.step = if !self.requested {
+            Step::Finished
+        } else if self.comm_off {
+            Step::CommOn
+        } else {
+            Step::DtcOn
+        };
     }
 
     fn finish(&mut self, now: Instant) {
@@ -960,6 +1034,16 @@ impl Job for FlashJob {
         }
         if self.started.is_none() {
             self.started = Some(now);
+            if let Some(reason) = unstartable(&self.config.image) {
+                // Refused before anything goes to the car.
+                self.failure = Some((
+                    Phase::SessionSetup,
+                    Step::Extended,
+                    FlashFailure::Invalid(reason),
+                ));
+                self.finish(now);
+                return;
+            }
             self.tester.set_tester_present(true);
             // The first TesterPresent goes out now, before the first request.
             self.tester.poll(now);

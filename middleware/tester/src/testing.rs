@@ -127,6 +127,7 @@ impl Backend for MemEcu {
             version_floor: Version::new(1, 0, 0),
             max_image_len: SLOT_LEN,
             load_address: RUNNING_SLOT.other().vector_table(),
+            runs_machine_code: true,
         }
     }
 
@@ -524,7 +525,11 @@ pub fn image_for(node: Node, payload_len: usize, seed: [u8; 32]) -> Vec<u8> {
 
 /// A signed image for `node` linked for `slot`.
 pub fn image_for_slot(node: Node, slot: ImageSlot, payload_len: usize, seed: [u8; 32]) -> Vec<u8> {
-    let payload: Vec<u8> = (0..payload_len).map(|i| (i * 7 + i / 251) as u8).collect();
+    let mut payload: Vec<u8> = (0..payload_len).map(|i| (i * 7 + i / 251) as u8).collect();
+    // A vector table the bootloader would start (the ECU checks it).
+    if payload.len() >= 8 {
+        payload[..8].copy_from_slice(&autoplug_image::stand_in_vector_table(slot));
+    }
     let mut builder = ImageBuilder::new(
         node.diag_node_number().expect("an ECU"),
         Version::new(1, 3, 0),

@@ -341,6 +341,7 @@ impl Backend for FirmwareBackend<'_> {
             version_floor: self.flash.floor,
             max_image_len: self.flash.running.other().region().size,
             load_address: self.flash.running.other().vector_table(),
+            runs_machine_code: true,
         }
     }
 

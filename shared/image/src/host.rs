@@ -5,8 +5,8 @@ use std::fmt;
 use zeroize::Zeroize;
 
 use crate::{
-    ImageError, ImageHeader, ImageSlot, PartNumber, SoftwareVariant, Version, BUILD_ID_LEN,
-    HEADER_LEN, MAX_PAYLOAD_LEN, NUCLEO_F446RE, PUBLIC_KEY_LEN, SIGNATURE_LEN,
+    ImageError, ImageHeader, ImageSlot, PartNumber, Payload, SoftwareVariant, Version,
+    BUILD_ID_LEN, HEADER_LEN, MAX_PAYLOAD_LEN, NUCLEO_F446RE, PUBLIC_KEY_LEN, SIGNATURE_LEN,
 };
 
 /// First word of a secret key file.
@@ -323,6 +323,8 @@ pub struct ImageBuilder {
     pub node: u8,
     /// Standard or faulty demonstration software.
     pub variant: SoftwareVariant,
+    /// Machine code (the default), or a stand-in for the virtual car's host logic.
+    pub payload_kind: Payload,
     /// The board the image is for.
     pub hardware_id: u32,
     /// The software version.
@@ -345,6 +347,7 @@ impl ImageBuilder {
         Self {
             node,
             variant: SoftwareVariant::Standard,
+            payload_kind: Payload::MachineCode,
             hardware_id: NUCLEO_F446RE,
             version,
             build_id: [0; BUILD_ID_LEN],
@@ -367,6 +370,7 @@ impl ImageBuilder {
         Ok(ImageHeader {
             node: self.node,
             variant: self.variant,
+            payload: self.payload_kind,
             hardware_id: self.hardware_id,
             version: self.version,
             payload_len,

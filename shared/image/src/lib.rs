@@ -27,7 +27,7 @@
 //! | 10 | 2 | header size (u16) | 512 |
 //! | 12 | 1 | target node (u8) | the ECU's diagnostic node number |
 //! | 13 | 1 | software variant (u8) | 0 standard, 1 faulty demonstration |
-//! | 14 | 2 | flags (u16) | 0 |
+//! | 14 | 2 | flags (u16) | 0, or [`flags::HOST_LOGIC`] |
 //! | 16 | 4 | hardware id (u32) | e.g. [`NUCLEO_F446RE`] |
 //! | 20 | 1 | version major (u8) | |
 //! | 21 | 1 | version minor (u8) | |
@@ -78,6 +78,26 @@ pub use host::{
 // The tests build images, which takes the host half.
 #[cfg(all(test, feature = "std"))]
 mod tests;
+
+/// The header's flags.
+pub mod flags {
+    /// The payload is no machine code: the image is for the virtual car's ECUs, whose
+    /// logic runs on the host and which take from the header only what software it names.
+    /// An ECU that runs its firmware refuses such an image ([`ImageError::NoMachineCode`]):
+    /// its bootloader would start bytes that are not a program.
+    pub const HOST_LOGIC: u16 = 0x0001;
+    /// Every flag this format defines.
+    pub const KNOWN: u16 = HOST_LOGIC;
+}
+
+/// What an image's payload is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Payload {
+    /// An application for the MCU, its vector table first.
+    MachineCode,
+    /// No program: a stand-in for the virtual car's host-logic ECUs ([`flags::HOST_LOGIC`]).
+    HostLogic,
+}
 
 /// The first eight bytes of every image.
 pub const MAGIC: [u8; 8] = *b"APLGIMG1";
@@ -406,7 +426,7 @@ pub enum ImageError {
     },
     /// The software variant byte is not one this format defines.
     UnknownVariant(u8),
-    /// The flags field is not zero (no flag is defined yet).
+    /// The flags field holds a flag this format does not define.
     NonZeroFlags(u16),
     /// The part number is not printable ASCII followed by NUL padding.
     BadPartNumber {
@@ -472,6 +492,17 @@ pub enum ImageError {
     /// The signature does not match the image and key: altered, corrupted, signed with
     /// another key, or not signed at all.
     BadSignature,
+    /// The image holds no machine code (it is for the virtual car's host-logic ECUs) and
+    /// this ECU runs its firmware.
+    NoMachineCode,
+    /// The payload's vector table cannot start the core where the image runs: its initial
+    /// stack pointer is not in SRAM, or its reset handler not Thumb code inside the slot.
+    NotStartable {
+        /// The vector table's first word.
+        initial_sp: u32,
+        /// Its second: the reset handler.
+        reset: u32,
+    },
     /// The 32 bytes given as the public key are not an Ed25519 public key.
     BadPublicKey,
 }
@@ -500,9 +531,11 @@ impl fmt::Display for ImageError {
                 f,
                 "unknown software variant {v} (0 = standard, 1 = faulty demonstration)"
             ),
-            Self::NonZeroFlags(flags) => {
-                write!(f, "header flags are 0x{flags:04X}, expected 0 (no flag is defined)")
-            }
+            Self::NonZeroFlags(flags) => write!(
+                f,
+                "header flags are 0x{flags:04X}: flags 0x{:04X} are not defined",
+                flags & !flags::KNOWN
+            ),
             Self::BadPartNumber { position, byte } => write!(
                 f,
                 "part number byte {position} is 0x{byte:02X}: expected printable ASCII followed by NUL padding"
@@ -551,6 +584,13 @@ impl fmt::Display for ImageError {
                 "signature does not match: the image was altered, or signed with another key, or not signed",
             ),
             Self::BadPublicKey => f.write_str("the public key is not a valid Ed25519 public key"),
+            Self::NoMachineCode => f.write_str(
+                "the image holds no machine code (it is built for the virtual car's host-logic ECUs) and this ECU runs its firmware: flash a firmware release (scripts/firmware-release)",
+            ),
+            Self::NotStartable { initial_sp, reset } => write!(
+                f,
+                "the payload's vector table cannot start the core (initial SP 0x{initial_sp:08X}, reset handler 0x{reset:08X}): the bootloader would never run it"
+            ),
         }
     }
 }
@@ -597,6 +637,8 @@ pub struct ImageHeader {
     pub node: u8,
     /// Standard or faulty demonstration software.
     pub variant: SoftwareVariant,
+    /// Machine code, or a stand-in for host logic (the header's flags).
+    pub payload: Payload,
     /// The board the image is for, e.g. [`NUCLEO_F446RE`].
     pub hardware_id: u32,
     /// The software version, compared with the ECU's anti-rollback floor.
@@ -659,14 +701,20 @@ impl ImageHeader {
             });
         }
         let flags = le_u16(header, offsets::FLAGS);
-        if flags != 0 {
+        if flags & !flags::KNOWN != 0 {
             return Err(ImageError::NonZeroFlags(flags));
         }
+        let payload = if flags & flags::HOST_LOGIC != 0 {
+            Payload::HostLogic
+        } else {
+            Payload::MachineCode
+        };
         let variant = SoftwareVariant::try_from(header[offsets::VARIANT])?;
         let part_number = PartNumber::from_bytes(array(header, offsets::PART_NUMBER))?;
         Ok(ImageHeader {
             node: header[offsets::NODE],
             variant,
+            payload,
             hardware_id: le_u32(header, offsets::HARDWARE_ID),
             version: Version::new(
                 header[offsets::VERSION_MAJOR],
@@ -689,7 +737,10 @@ impl ImageHeader {
         put(offsets::HEADER_SIZE, &(HEADER_LEN as u16).to_le_bytes());
         put(offsets::NODE, &[self.node]);
         put(offsets::VARIANT, &[self.variant.as_u8()]);
-        // Flags (offset 14) and the reserved bytes stay zero.
+        if self.payload == Payload::HostLogic {
+            put(offsets::FLAGS, &flags::HOST_LOGIC.to_le_bytes());
+        }
+        // The reserved bytes stay zero.
         put(offsets::HARDWARE_ID, &self.hardware_id.to_le_bytes());
         put(offsets::VERSION_MAJOR, &[self.version.major]);
         put(offsets::VERSION_MINOR, &[self.version.minor]);
@@ -723,6 +774,9 @@ impl ImageHeader {
     /// hardware, load address, size and anti-rollback floor. A version equal to the floor
     /// is accepted (re-installing the running software is allowed).
     pub fn check(&self, expected: &Expectations) -> Result<(), ImageError> {
+        if self.payload == Payload::HostLogic && expected.runs_machine_code {
+            return Err(ImageError::NoMachineCode);
+        }
         if self.node != expected.node {
             return Err(ImageError::WrongEcu {
                 expected: expected.node,
@@ -766,6 +820,12 @@ impl fmt::Display for ImageHeader {
             None => writeln!(f, " (unknown)")?,
         }
         writeln!(f, "Variant:        {}", self.variant)?;
+        if self.payload == Payload::HostLogic {
+            writeln!(
+                f,
+                "Payload:        host logic (no machine code: for the virtual car's ECUs)"
+            )?;
+        }
         write!(f, "Hardware:       0x{:08X}", self.hardware_id)?;
         match hardware_name(self.hardware_id) {
             Some(name) => writeln!(f, " ({name})")?,
@@ -799,6 +859,40 @@ pub struct Expectations {
     /// Where the payload will run on this ECU: the start of the slot it is written to
     /// + 512 ([`ImageSlot::vector_table`]).
     pub load_address: u32,
+    /// The ECU runs its firmware from the slot: an image without machine code
+    /// ([`Payload::HostLogic`]) is refused. `false` only for the virtual car's host-logic
+    /// ECUs.
+    pub runs_machine_code: bool,
+}
+
+/// The first two words of a vector table that [`check_startable`] accepts for `slot`: the
+/// top of the F446's SRAM as the initial stack pointer and a Thumb reset handler just past
+/// a full vector table (452 bytes). For payloads that stand in for an application (tests,
+/// the virtual car's images); a real one comes from the linker.
+pub const fn stand_in_vector_table(slot: ImageSlot) -> [u8; 8] {
+    let sp = (autoplug_flash::SRAM_START + autoplug_flash::SRAM_SIZE).to_le_bytes();
+    let reset = (slot.vector_table() + 0x1C5).to_le_bytes();
+    [
+        sp[0], sp[1], sp[2], sp[3], reset[0], reset[1], reset[2], reset[3],
+    ]
+}
+
+/// Whether a payload beginning with `vector_table` (its first 8 bytes or more) can start
+/// the core when it runs from `slot`: what the bootloader checks before it starts a slot,
+/// checked before an image is accepted so that one it would never start is refused with a
+/// reason instead of reverted without one.
+pub fn check_startable(slot: ImageSlot, vector_table: &[u8]) -> Result<(), ImageError> {
+    let word = |at: usize| {
+        vector_table
+            .get(at..at + 4)
+            .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let (initial_sp, reset) = (word(0), word(4));
+    if autoplug_flash::ab::plausible_vector_table(slot, initial_sp, reset) {
+        Ok(())
+    } else {
+        Err(ImageError::NotStartable { initial_sp, reset })
+    }
 }
 
 // ---------------------------------------------------------------------------------------

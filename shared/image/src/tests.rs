@@ -41,6 +41,7 @@ fn expectations() -> Expectations {
         version_floor: Version::new(1, 2, 3),
         max_image_len: SLOT,
         load_address: ImageSlot::A.vector_table(),
+        runs_machine_code: true,
     }
 }
 
@@ -662,7 +663,18 @@ fn errors_name_the_field_and_values() {
         ),
         (ImageError::ReservedNotZero { offset: 77 }, "offset 77"),
         (ImageError::UnknownVariant(9), "unknown software variant 9"),
-        (ImageError::NonZeroFlags(1), "flags are 0x0001"),
+        (
+            ImageError::NonZeroFlags(0x8001),
+            "flags 0x8000 are not defined",
+        ),
+        (ImageError::NoMachineCode, "no machine code"),
+        (
+            ImageError::NotStartable {
+                initial_sp: 0xFFFF_FFFF,
+                reset: 0xFFFF_FFFF,
+            },
+            "bootloader would never run it",
+        ),
         (
             ImageError::WrongHardware {
                 expected: 1,
@@ -887,4 +899,60 @@ fn signing_matches_rfc_8032() {
         key.sign(&[0x72]).to_vec(),
         hex("92a009a9f0d4cab8720e820b5f642540a2b27b5416503f8fb3762223ebdb69da085ac1e43e15996e458f3613d0f11d8c387b2eaeb4302aeeb00d291612bb0c00")
     );
+}
+
+#[test]
+fn a_host_logic_image_is_refused_by_an_ecu_that_runs_firmware() {
+    let mut b = builder();
+    b.payload_kind = Payload::HostLogic;
+    let host_logic = b.sign(&key()).unwrap();
+    let header = ImageHeader::parse(&host_logic).unwrap();
+    assert_eq!(header.payload, Payload::HostLogic);
+    assert_eq!(host_logic[14..16], flags::HOST_LOGIC.to_le_bytes());
+    assert!(header.to_string().contains("host logic"), "{header}");
+    let public = key().public_key();
+    assert_eq!(
+        verify(&host_logic, &public).map(|v| *v.header()),
+        Ok(header)
+    );
+    assert_eq!(
+        header.check(&expectations()),
+        Err(ImageError::NoMachineCode)
+    );
+    let host_logic_ecu = Expectations {
+        runs_machine_code: false,
+        ..expectations()
+    };
+    assert_eq!(header.check(&host_logic_ecu), Ok(()));
+    // A machine-code image suits both.
+    let header = ImageHeader::parse(&image()).unwrap();
+    assert_eq!(header.payload, Payload::MachineCode);
+    assert_eq!(header.check(&expectations()), Ok(()));
+    assert_eq!(header.check(&host_logic_ecu), Ok(()));
+}
+
+#[test]
+fn only_a_vector_table_the_bootloader_would_start_is_startable() {
+    let table = |sp: u32, reset: u32| {
+        let mut bytes = sp.to_le_bytes().to_vec();
+        bytes.extend_from_slice(&reset.to_le_bytes());
+        bytes
+    };
+    let a = ImageSlot::A;
+    assert_eq!(check_startable(a, &table(0x2002_0000, 0x0802_0401)), Ok(()));
+    for (sp, reset) in [
+        (0xFFFF_FFFF, 0xFFFF_FFFF), // erased
+        (0x2002_0000, 0x0804_0401), // linked for slot B
+        (0x2002_0000, 0x0802_0400), // not Thumb
+        (0x0800_0000, 0x0802_0401), // the stack in flash
+    ] {
+        assert_eq!(
+            check_startable(a, &table(sp, reset)),
+            Err(ImageError::NotStartable {
+                initial_sp: sp,
+                reset
+            })
+        );
+    }
+    assert!(check_startable(a, &[0x00, 0x00, 0x02]).is_err());
 }

@@ -8,7 +8,8 @@ use std::vec::Vec;
 
 use autoplug_ecu::{Dtc, DtcSystem, Dtcs, Instant};
 use autoplug_image::{
-    BootState, Expectations, ImageBuilder, ImageSlot, SigningKey, Version, NUCLEO_F446RE,
+    BootState, Expectations, ImageBuilder, ImageError, ImageSlot, SigningKey, Version,
+    NUCLEO_F446RE,
 };
 use proptest::prelude::*;
 
@@ -114,6 +115,7 @@ impl Backend for TestEcu {
             version_floor: self.floor,
             max_image_len: SLOT as u32,
             load_address: ImageSlot::A.vector_table(),
+            runs_machine_code: true,
         }
     }
     fn public_key(&self) -> [u8; 32] {
@@ -282,7 +284,10 @@ impl Bench {
 }
 
 fn image_with(node: u8, version: Version, key: &SigningKey, len: usize) -> Vec<u8> {
-    let payload: Vec<u8> = (0..len).map(|i| (i * 7 + 3) as u8).collect();
+    let mut payload: Vec<u8> = (0..len).map(|i| (i * 7 + 3) as u8).collect();
+    if len >= 8 {
+        payload[..8].copy_from_slice(&autoplug_image::stand_in_vector_table(ImageSlot::A));
+    }
     let mut builder = ImageBuilder::new(node, version, payload);
     builder.build_id = [0xB1; 16];
     builder.sign(key).expect("a valid image")
@@ -654,6 +659,45 @@ fn a_refused_image_leaves_a_good_one_installable() {
     bench.download(&good_image()).unwrap();
     assert_eq!(bench.check(), [0x71, 0x01, 0xFF, 0x01, 0x00]);
     assert!(bench.ecu.marked);
+}
+
+#[test]
+fn a_signed_image_the_bootloader_would_not_start_fails_the_check() {
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    // Signed, for this ECU and slot, but its vector table is erased flash.
+    let mut builder = ImageBuilder::new(NODE, Version::new(1, 3, 0), vec![0xFF; 20_000]);
+    builder.build_id = [0xB1; 16];
+    bench
+        .download(&builder.sign(&SigningKey::from_seed([7; 32])).unwrap())
+        .unwrap();
+    assert_eq!(bench.check(), [0x7F, 0x31, 0x72]);
+    assert!(!bench.ecu.marked);
+    assert_eq!(
+        bench.server.last_image_error(),
+        Some(&ImageError::NotStartable {
+            initial_sp: 0xFFFF_FFFF,
+            reset: 0xFFFF_FFFF
+        })
+    );
+}
+
+#[test]
+fn an_image_without_machine_code_is_refused_at_its_header_by_firmware() {
+    let mut bench = Bench::new();
+    bench.enter_programming();
+    bench.erase();
+    let mut builder = ImageBuilder::new(NODE, Version::new(1, 3, 0), vec![0x5A; 20_000]);
+    builder.payload_kind = autoplug_image::Payload::HostLogic;
+    let image = builder.sign(&SigningKey::from_seed([7; 32])).unwrap();
+    // requestOutOfRange at the first block: it can never be installed here.
+    assert_eq!(bench.download(&image), Err(vec![0x7F, 0x36, 0x31]));
+    assert_eq!(
+        bench.server.last_image_error(),
+        Some(&ImageError::NoMachineCode)
+    );
+    assert!(!bench.ecu.marked);
 }
 
 #[test]

@@ -22,8 +22,8 @@ use autoplug_flash::ab::{self, BootAction, BootState, ImageSlot};
 use autoplug_flash::sim::{state_twin, SimFlash, SlotPartition};
 use autoplug_flash::{SLOT_ERASE_SIZE, WRITE_SIZE};
 use autoplug_image::{
-    dev, floor, Expectations, ImageBuilder, ImageHeader, PartNumber, SigningKey, SoftwareVariant,
-    Version, HEADER_LEN, NUCLEO_F446RE,
+    dev, floor, Expectations, ImageBuilder, ImageHeader, PartNumber, Payload, SigningKey,
+    SoftwareVariant, Version, HEADER_LEN, NUCLEO_F446RE,
 };
 use autoplug_uds::security::SeedSource;
 use autoplug_uds::{Backend, DiagNode, FlashError, Identification, DEV_SECURITY_SECRET};
@@ -78,8 +78,9 @@ pub fn build_image(
 
 /// A signed image for `node` linked for `slot`: a deterministic payload of `payload_len`
 /// bytes (at least 8) that starts like an application linked there (initial stack pointer,
-/// a reset handler in the slot), which is all a host can check of it; the rest does not
-/// matter on a host.
+/// a reset handler in the slot); the rest does not matter on a host. The header says it
+/// holds no machine code ([`Payload::HostLogic`]), so that an ECU running its firmware
+/// refuses it instead of starting bytes that are not a program.
 pub fn build_slot_image(
     node: Node,
     slot: ImageSlot,
@@ -92,10 +93,11 @@ pub fn build_slot_image(
     let mut payload: Vec<u8> = (0..payload_len.max(8))
         .map(|i| (i as u32).wrapping_mul(2_654_435_761).to_le_bytes()[3] ^ number)
         .collect();
-    payload[..4].copy_from_slice(&INITIAL_STACK_POINTER.to_le_bytes());
-    payload[4..8].copy_from_slice(&(slot.vector_table() + RESET_HANDLER_OFFSET).to_le_bytes());
+    payload[..8].copy_from_slice(&autoplug_image::stand_in_vector_table(slot));
     let mut builder = ImageBuilder::new(number, version, payload);
     builder.variant = variant;
+    // Marked as no machine code: an ECU that runs its firmware refuses it.
+    builder.payload_kind = Payload::HostLogic;
     builder.part_number = part_number(node);
     builder.load_address = slot.vector_table();
     builder.build_id[0] = number;
@@ -103,11 +105,6 @@ pub fn build_slot_image(
     builder.build_id[5] = slot.number();
     builder.sign(key).expect("a valid image")
 }
-
-/// The vector table of a virtual image: the top of the F446's 128 KiB SRAM as the initial
-/// stack pointer, and a Thumb reset handler just past the vector table (452 bytes).
-const INITIAL_STACK_POINTER: u32 = autoplug_flash::SRAM_START + autoplug_flash::SRAM_SIZE;
-const RESET_HANDLER_OFFSET: u32 = 0x1C5;
 
 /// What a virtual ECU runs after a (re)start.
 #[derive(Debug)]
@@ -567,6 +564,7 @@ impl Backend for EcuBackend<'_> {
             version_floor: self.floor,
             max_image_len: self.dfu_slot().region().size,
             load_address: self.dfu_slot().vector_table(),
+            runs_machine_code: false,
         }
     }
 
