@@ -689,3 +689,103 @@ fn every_flash_operation_of_an_update_cut_in_turn_leaves_a_board_that_starts_a_c
         started.elapsed().as_secs_f64()
     );
 }
+
+/// The virtual car's demonstration image of the cruise ECU: signed with the development
+/// key, for the right ECU and board, linked for slot B, but with no machine code inside.
+fn host_logic_image() -> Vec<u8> {
+    let key = autoplug_image::SigningKey::from_seed(autoplug_image::dev::SIGNING_SEED);
+    autoplug_virtual_car::diag::build_slot_image(
+        ECU,
+        ImageSlot::B,
+        autoplug_image::Version::new(1, 1, 0),
+        autoplug_image::SoftwareVariant::Faulty,
+        autoplug_virtual_car::diag::FACTORY_PAYLOAD_LEN,
+        &key,
+    )
+}
+
+/// The dashboard's demonstration image for the virtual car, flashed into the ECU running
+/// its firmware: refused at its header, with the reason, and the ECU runs on as it was.
+#[test]
+#[ignore = "needs the firmware and the releases: scripts/firmware-demo-images target/demo-images"]
+fn an_image_without_machine_code_is_refused_by_the_firmware() {
+    let mut bench = Bench::factory();
+    bench.idle(1000).unwrap();
+    let refused = match bench.download(&host_logic_image()) {
+        Ended::Done(Err(e)) => e.to_string(),
+        Ended::Done(Ok(report)) => panic!("the firmware took an image without code: {report}"),
+        Ended::Stopped(stop) => panic!("the MCU stopped: {stop}"),
+    };
+    println!("the virtual car's image into the firmware: {refused}");
+    assert!(refused.contains("no machine code"), "{refused}");
+    assert!(refused.contains("phase 'transfer'"), "{refused}");
+    bench.idle(1000).unwrap();
+    assert_eq!(
+        bench.running(),
+        Some(Running::Factory),
+        "{:#?}",
+        bench.lines
+    );
+}
+
+/// Forced past every check (written into slot B and marked for a trial as a download
+/// would, without the ECU's checks), the image's bytes start and the core locks up; the
+/// independent watchdog the bootloader started resets the chip within its timeout, and the
+/// bootloader goes back to the confirmed image.
+#[test]
+#[ignore = "needs the firmware and the releases: scripts/firmware-demo-images target/demo-images"]
+fn a_trial_image_that_locks_up_is_reverted_by_the_watchdog() {
+    use std::cell::RefCell;
+
+    let mut bench = Bench::factory();
+    bench.idle(1000).unwrap();
+    let image = host_logic_image();
+    let cell = RefCell::new(bench.flash().clone());
+    {
+        let mut flash = cell.borrow_mut();
+        let slot = ImageSlot::B.region();
+        flash.erase(slot.start, slot.start + slot.size).unwrap();
+        let mut padded = image.clone();
+        padded.resize(image.len().next_multiple_of(4), 0xFF);
+        flash.program(slot.start, &padded).unwrap();
+    }
+    {
+        let mut twin = autoplug_flash::sim::state_twin(&cell).unwrap();
+        autoplug_flash::ab::mark_trial(&mut twin, ImageSlot::A, ImageSlot::B).unwrap();
+    }
+    let mut bench = bench.power_on_with(cell.into_inner());
+    bench.idle(6000).unwrap();
+    let mcu = &bench.board[0].mcu;
+    let log = bench.lines.join("\n");
+    println!("{log}");
+    assert!(
+        log.contains("boot: starting slot B on trial (new image)"),
+        "{log}"
+    );
+    let (locked_at, halt) = mcu.lockups.first().cloned().unwrap_or_else(|| {
+        panic!(
+            "no lockup; resets {:?}, faults {:?}\n{log}",
+            mcu.resets, mcu.faults
+        )
+    });
+    let (reset_at, _) = *mcu
+        .resets
+        .iter()
+        .find(|(_, cause)| *cause == autoplug_mcu::chip::rcc::ResetCause::Watchdog)
+        .unwrap_or_else(|| panic!("no watchdog reset after {halt:?}\n{log}"));
+    println!(
+        "trial image locked up at {:.3} s ({halt:?}), the watchdog reset the chip at {:.3} s",
+        locked_at as f64 / 1e9,
+        reset_at as f64 / 1e9
+    );
+    // The bootloader's watchdog timeout (4 s) bounds the time from the start to the reset.
+    assert!(
+        reset_at - locked_at <= 4_000_000_000,
+        "{locked_at} → {reset_at}"
+    );
+    assert!(
+        log.contains("boot: the image on trial did not confirm itself: back to slot A"),
+        "{log}"
+    );
+    assert_eq!(bench.running(), Some(Running::Factory), "{log}");
+}

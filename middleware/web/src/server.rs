@@ -426,7 +426,23 @@ impl ClientMessage {
             "auth" => ClientMessage::Auth {
                 token: serde_json::from_value::<Auth>(rest)?.token,
             },
-            "drive" => ClientMessage::Drive(serde_json::from_value::<HeldControls>(rest)?),
+            "drive" => {
+                let held = serde_json::from_value::<HeldControls>(rest)?;
+                // A number beyond f64 (1e999) reads as infinity: as malformed as a string.
+                for (name, value) in [
+                    ("accelerator", held.accelerator),
+                    ("brake", held.brake),
+                    ("steering_deg", held.steering_deg),
+                    ("set_temp_f", held.set_temp_f),
+                ] {
+                    if !value.is_finite() {
+                        return Err(serde_json::Error::custom(format!(
+                            "`{name}` is {value}: not a finite number"
+                        )));
+                    }
+                }
+                ClientMessage::Drive(held)
+            }
             "press" => ClientMessage::Press {
                 button: serde_json::from_value::<Press>(rest)?.button,
             },
@@ -704,5 +720,29 @@ mod client_message_tests {
             .to_string()
             .contains("missing field `type`"));
         assert!(ClientMessage::parse("[1]").is_err());
+    }
+
+    #[test]
+    fn a_drive_message_with_a_number_beyond_f64_is_refused() {
+        let drive = |accelerator: &str| {
+            format!(
+                r#"{{"type":"drive","accelerator":{accelerator},"brake":0,"steering_deg":0,"headlights":false,"economy_mode":true,"manual_mode":false,"set_temp_f":70}}"#
+            )
+        };
+        assert!(matches!(
+            ClientMessage::parse(&drive("12.5")),
+            Ok(ClientMessage::Drive(held)) if held.accelerator == 12.5
+        ));
+        // Refused whether serde_json reads it as out of range or (with `arbitrary_precision`,
+        // on in the workspace's build) as infinity.
+        for number in ["1e999", "-1e999"] {
+            let error = ClientMessage::parse(&drive(number))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                error.contains("`accelerator`") || error.contains("out of range"),
+                "{number}: {error}"
+            );
+        }
     }
 }
