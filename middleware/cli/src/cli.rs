@@ -271,7 +271,7 @@ pub enum Command {
     /// Log files.
     #[command(subcommand)]
     Log(LogCommand),
-    /// Judge every ECU from a recorded log: verdict (ok, suspect, faulty, no data), number,
+    /// Judge every ECU from a recorded log: verdict (ok, not exercised, suspect, faulty, no data), number,
     /// unit, thresholds and evidence window; first, whether the bus is an AutoPlug car at
     /// all. Exit status 0 when no ECU is faulty, 3 when one is, 4 when the log could not be
     /// read to its end (what precedes the damage is judged), 5 when the bus is not an
@@ -959,6 +959,39 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
                 let emulated = firmware.as_ref().map_or(&[][..], |c| &c.ecus[..]);
                 for name in folder.add_demo_images(emulated).map_err(CliError::Log)? {
                     writeln!(out, "firmware library: added {name}")?;
+                }
+                // The ECUs run as firmware: what they need, built from this checkout if
+                // missing (nothing to prepare by hand). A build that fails is said; the
+                // car then reports the missing ELF, the library the missing release.
+                let cwd = std::env::current_dir().map_err(|e| CliError::Log(e.to_string()))?;
+                let default_dir = Path::new(autoplug_virtual_car::firmware::DEFAULT_FIRMWARE_DIR);
+                if let (Some(choice), Some(build)) = (
+                    firmware.as_ref().filter(|c| c.dir == default_dir),
+                    autoplug_dashboard::dashboard::FirmwareBuild::at(&cwd),
+                ) {
+                    let names: Vec<&str> = choice.ecus.iter().map(|n| n.name()).collect();
+                    writeln!(
+                        out,
+                        "firmware: building what is missing of {} in {}",
+                        names.join(", "),
+                        choice.dir.display()
+                    )?;
+                    out.flush()?;
+                    match build.firmware(&choice.ecus, &choice.dir) {
+                        Ok(built) if built.is_empty() => {}
+                        Ok(built) => writeln!(out, "firmware: built {}", built.join(", "))?,
+                        Err(e) => writeln!(out, "firmware: {e}")?,
+                    }
+                    if choice.dir.join("boot").is_file() {
+                        match build.demo_releases(&choice.ecus, &folder) {
+                            Ok(written) => {
+                                for name in written {
+                                    writeln!(out, "firmware library: built {name} (scripts/firmware-demo-images, the development key)")?;
+                                }
+                            }
+                            Err(e) => writeln!(out, "firmware library: {e}")?,
+                        }
+                    }
                 }
                 for (ecu, variant, version) in autoplug_dashboard::dashboard::DEMO_IMAGES {
                     let name =

@@ -79,6 +79,127 @@ impl DataFolder {
     }
 }
 
+/// What the dashboard builds for ECUs it runs as their firmware, from the checkout it runs
+/// in, so that `--firmware` needs nothing prepared by hand: the firmware ELF files the car
+/// loads (cargo, as `cargo build-fw-<ecu>` does, and the bootloader in a build of its own:
+/// its HAL features differ) and the signed demonstration releases of cruise and ABS for the
+/// library (scripts/firmware-demo-images: the faulty build 1.1.0 and the fix 1.2.0, each
+/// for both slots, the development key). Only what is missing is built.
+pub struct FirmwareBuild<'a> {
+    /// The checkout: `Cargo.toml` and `scripts/` of AutoPlug.
+    pub root: &'a Path,
+    /// The cargo to build with.
+    pub cargo: PathBuf,
+}
+
+impl<'a> FirmwareBuild<'a> {
+    /// The checkout at `root`, if it is one (a dashboard run elsewhere builds nothing).
+    pub fn at(root: &'a Path) -> Option<Self> {
+        let script = root.join("scripts/firmware-demo-images");
+        (root.join("Cargo.toml").is_file() && script.is_file()).then(|| Self {
+            root,
+            cargo: std::env::var_os("CARGO").map_or_else(|| PathBuf::from("cargo"), PathBuf::from),
+        })
+    }
+
+    /// Builds the ELF files of `ecus` and the bootloader that `dir` lacks; the packages
+    /// built, none if nothing was missing.
+    pub fn firmware(&self, ecus: &[Node], dir: &Path) -> Result<Vec<String>, String> {
+        let missing: Vec<String> = ecus
+            .iter()
+            .filter(|&&ecu| {
+                !dir.join(format!("{}-fw", autoplug_can::firmware_name(ecu)))
+                    .is_file()
+            })
+            .map(|&ecu| format!("ecu-{}", autoplug_can::firmware_name(ecu)))
+            .collect();
+        let mut built = Vec::new();
+        if !missing.is_empty() {
+            let mut args = vec!["build", "--release", "--target", FIRMWARE_TARGET];
+            for package in &missing {
+                args.extend(["-p", package.as_str()]);
+            }
+            self.run(self.cargo.as_os_str(), &args)?;
+            built.extend(missing);
+        }
+        if !dir.join("boot").is_file() {
+            let args = [
+                "build",
+                "--release",
+                "--target",
+                FIRMWARE_TARGET,
+                "-p",
+                "autoplug-boot",
+            ];
+            self.run(self.cargo.as_os_str(), &args)?;
+            built.push("autoplug-boot".into());
+        }
+        Ok(built)
+    }
+
+    /// Builds the demonstration releases of those of `ecus` that have them into `folder`'s
+    /// library, when it lacks any of them; the names written.
+    pub fn demo_releases(&self, ecus: &[Node], folder: &DataFolder) -> Result<Vec<String>, String> {
+        let wanted: Vec<String> = DEMO_IMAGES
+            .iter()
+            .filter(|(ecu, ..)| ecus.contains(ecu))
+            .map(|&(ecu, variant, version)| demo_image_name(ecu, variant, version))
+            .collect();
+        if wanted
+            .iter()
+            .all(|name| folder.images().join(name).exists())
+        {
+            return Ok(Vec::new());
+        }
+        // Built aside and moved in one by one: never a half release in the library.
+        let building = folder.images().join(".building");
+        std::fs::create_dir_all(&building)
+            .map_err(|e| format!("cannot create '{}': {e}", building.display()))?;
+        let script = self.root.join("scripts/firmware-demo-images");
+        let result = self.run(script.as_os_str(), &[&building.to_string_lossy()]);
+        let mut written = Vec::new();
+        if result.is_ok() {
+            for name in &wanted {
+                let path = folder.images().join(name);
+                if path.exists() {
+                    continue;
+                }
+                std::fs::rename(building.join(name), &path)
+                    .map_err(|e| format!("cannot move '{name}' into the library: {e}"))?;
+                written.push(name.clone());
+            }
+        }
+        let _ = std::fs::remove_dir_all(&building);
+        result.map(|()| written)
+    }
+
+    /// Runs `program` with `args` in the checkout, its output on this program's standard
+    /// error (cargo's progress), and says why it failed.
+    fn run(&self, program: &std::ffi::OsStr, args: &[&str]) -> Result<(), String> {
+        let shown = format!("{} {}", Path::new(program).display(), args.join(" "));
+        let mut command = Command::new(program);
+        // The releases are signed by this program, not by a build of the checkout's.
+        if let Ok(me) = std::env::current_exe() {
+            command.env("AUTOPLUG_BIN", me);
+        }
+        let status = command
+            .args(args)
+            .current_dir(self.root)
+            .stdin(Stdio::null())
+            .stdout(std::io::stderr())
+            .status()
+            .map_err(|e| format!("cannot run {shown}: {e}"))?;
+        if status.success() {
+            Ok(())
+        } else {
+            Err(format!("{shown} failed ({status})"))
+        }
+    }
+}
+
+/// The firmware's target: the Nucleo-F446RE's Cortex-M4F.
+const FIRMWARE_TARGET: &str = "thumbv7em-none-eabihf";
+
 /// The report's demonstrations: the faulty software, then the fix (a newer version: the
 /// ECUs refuse to go back).
 pub const DEMO_IMAGES: [(Node, SoftwareVariant, Version); 4] = [
