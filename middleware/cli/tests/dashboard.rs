@@ -237,6 +237,30 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
         std::thread::sleep(Duration::from_millis(100));
     }
     assert_eq!(steering.0, 200, "{}", steering.1);
+    // A verdict is reset per ECU (the token needed, the ECU named rightly).
+    let (status, _) = request(addr, "POST", "/api/ecus/abs/reset-verdict", None, b"");
+    assert_eq!(status, 401);
+    let (status, answer) = request(
+        addr,
+        "POST",
+        "/api/ecus/abs/reset-verdict",
+        Some(TOKEN),
+        b"",
+    );
+    assert_eq!(
+        (status, json(&answer)["ecus"][0].as_str()),
+        (200, Some("abs")),
+        "{answer}"
+    );
+    let (status, answer) = request(
+        addr,
+        "POST",
+        "/api/ecus/brakes/reset-verdict",
+        Some(TOKEN),
+        b"",
+    );
+    assert_eq!(status, 409, "{answer}");
+    assert!(answer.contains("brakes"), "{answer}");
     // The session shows them: the recording grows, the clear is reported, the road changed.
     let mut session = serde_json::Value::Null;
     for _ in 0..100 {

@@ -255,6 +255,7 @@ impl<'a> Session<'a> {
         match action {
             Action::Flash { ecu, image, origin } => self.start_flash(&ecu, image, origin),
             Action::ClearDtcs { ecu } => self.clear_dtcs(ecu.as_deref()),
+            Action::ResetVerdict { ecu } => self.reset_verdict(ecu.as_deref()),
             Action::Record(on) => self.record(on),
             Action::Road { mu_left, mu_right } => {
                 let Some(desk) = &self.desk else {
@@ -439,6 +440,22 @@ impl<'a> Session<'a> {
             "file_bytes": file_bytes,
             "images": images,
         }))
+    }
+
+    fn reset_verdict(&mut self, ecu: Option<&str>) -> Answer {
+        let ecus = match ecu {
+            Some(name) => vec![parse_ecu(name).map_err(|e| e.to_string())?],
+            None => ECUS.to_vec(),
+        };
+        for &node in &ecus {
+            self.watch.diagnostics.reset(node);
+        }
+        let names: Vec<&str> = ecus.iter().map(|n| ecu_name(*n)).collect();
+        self.event(format!(
+            "verdicts reset: {} judged again from now on",
+            names.join(", ")
+        ));
+        Ok(json!({ "ecus": names }))
     }
 
     fn clear_dtcs(&mut self, ecu: Option<&str>) -> Answer {

@@ -162,7 +162,7 @@ impl Routine for Abs {
         };
         if self.braking_s == 0.0 {
             return vec![finding(
-                Verdict::Ok,
+                Verdict::NotExercised,
                 None,
                 None,
                 format!("not exercised: no braking above {BRAKING_PCT:.0} % from over {MIN_SPEED_KMH:.0} km/h"),

@@ -180,7 +180,7 @@ impl Routine for Cruise {
         };
         match me.worst {
             None => vec![finding(
-                Verdict::Ok,
+                Verdict::NotExercised,
                 None,
                 None,
                 format!(

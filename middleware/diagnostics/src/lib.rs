@@ -2,7 +2,8 @@
 //! alone, live or on a recorded log alike (they are [`Observer`]s of the one pipeline and
 //! use only frame timestamps, so the same frames give the same verdicts).
 //!
-//! Each routine gives a [`Finding`]: a [`Verdict`] (ok, suspect, faulty, no data) with its
+//! Each routine gives a [`Finding`]: a [`Verdict`] (ok, not exercised, suspect, faulty, no
+//! data) with its
 //! number, unit, thresholds and the time window that justifies it. Each routine's module
 //! documentation says what it measures and why its thresholds are where they are. Every
 //! ECU also gets the [`presence`] routine (its messages at their periods); an ECU whose
@@ -150,6 +151,13 @@ impl Diagnostics {
         &self.restarts
     }
 
+    /// Forgets what `ecu`'s routines judged so far: they start over from the next frame,
+    /// as after the ECU's restart (a person's reset of a verdict that no longer holds).
+    pub fn reset(&mut self, ecu: Node) {
+        self.routines.retain(|r| r.ecu() != ecu);
+        self.routines.extend(routines_for(ecu));
+    }
+
     /// The diagnosis of every ECU at this moment.
     pub fn report(&self, state: &CarState) -> Vec<EcuDiagnosis> {
         ecus()
@@ -161,30 +169,41 @@ impl Diagnostics {
                     .flat_map(|r| r.findings(state))
                     .collect();
                 let silent = findings.iter().any(|f| f.verdict == Verdict::NoData);
-                // No data first (it overrides), then the worst.
-                // Among equals, the ECU's own routines before the checks every ECU gets:
-                // they say more about it.
+                let common =
+                    |f: &Finding| f.routine == presence::ROUTINE || f.routine == ranges::ROUTINE;
+                // Suspect or faulty anywhere decides. Otherwise the ECU is OK only if one of
+                // its own routines judged something and found it right; if none had anything
+                // to judge, the ECU's function is not exercised (its messages being present
+                // and in range proves nothing about it).
+                let worst = findings
+                    .iter()
+                    .map(|f| f.verdict)
+                    .max()
+                    .unwrap_or(Verdict::Ok);
+                let own_ok = findings
+                    .iter()
+                    .any(|f| !common(f) && f.verdict == Verdict::Ok);
+                let verdict = if silent {
+                    Verdict::NoData
+                } else if worst == Verdict::NotExercised && own_ok {
+                    Verdict::Ok
+                } else {
+                    worst
+                };
+                // The finding that decides first: no data (it overrides), then the worst,
+                // then what the verdict says. Among equals, the ECU's own routines before
+                // the checks every ECU gets: they say more about it.
                 findings.sort_by_key(|f| {
                     let rank = match f.verdict {
                         Verdict::NoData => 0,
                         Verdict::Faulty => 1,
                         Verdict::Suspect => 2,
-                        Verdict::Ok => 3,
+                        Verdict::NotExercised if verdict == Verdict::NotExercised => 3,
+                        Verdict::Ok => 4,
+                        Verdict::NotExercised => 5,
                     };
-                    (
-                        rank,
-                        f.routine == presence::ROUTINE || f.routine == ranges::ROUTINE,
-                    )
+                    (rank, common(f))
                 });
-                let verdict = if silent {
-                    Verdict::NoData
-                } else {
-                    findings
-                        .iter()
-                        .map(|f| f.verdict)
-                        .max()
-                        .unwrap_or(Verdict::Ok)
-                };
                 EcuDiagnosis {
                     ecu,
                     verdict,
@@ -200,8 +219,7 @@ impl Observer for Diagnostics {
         self.tally.note(frame, update);
         if update == Update::Diagnostic {
             if let Some(node) = ecus().find(|n| is_reset_response(*n, frame)) {
-                self.routines.retain(|r| r.ecu() != node);
-                self.routines.extend(routines_for(node));
+                self.reset(node);
                 self.restarts.push(Restart {
                     ecu: node,
                     at_us: frame.t_us,

@@ -77,7 +77,11 @@ impl SpanRule {
         let value = span.seconds();
         Finding {
             routine: self.routine,
-            verdict: Verdict::of(value, self.suspect_s, self.faulty_s),
+            verdict: if span.judged == 0 {
+                Verdict::NotExercised
+            } else {
+                Verdict::of(value, self.suspect_s, self.faulty_s)
+            },
             value: (span.judged > 0).then_some(value),
             unit: "s",
             suspect_above: self.suspect_s,

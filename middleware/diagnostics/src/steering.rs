@@ -160,7 +160,9 @@ impl Steering {
         let rate = self.fastest.map(|(r, _)| r);
         Finding {
             routine: "steering angle rate",
-            verdict: Verdict::of(rate.unwrap_or(0.0), RATE_SUSPECT_DEG_S, RATE_FAULTY_DEG_S),
+            verdict: rate.map_or(Verdict::NotExercised, |rate| {
+                Verdict::of(rate, RATE_SUSPECT_DEG_S, RATE_FAULTY_DEG_S)
+            }),
             value: rate,
             unit: "deg/s",
             suspect_above: RATE_SUSPECT_DEG_S,

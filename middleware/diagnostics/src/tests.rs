@@ -908,3 +908,55 @@ fn missing_messages_count_only_once_there_was_time_for_them() {
     // Nothing at all is nothing against it.
     assert!(recognise(Vec::new()).autoplug);
 }
+
+#[test]
+fn a_routine_never_exercised_says_so_and_a_reset_judges_again() {
+    use autoplug_can::Node;
+    // Cruise frames with cruise never engaged: the tracking error has nothing to judge.
+    let mut frames = every(20, 3000, |_| {
+        CruiseModeMsg {
+            cruise_mode: CruiseMode::Off,
+        }
+        .frame()
+    });
+    frames.extend(every(10, 3000, |_| {
+        VehicleSpeedMsg {
+            vehicle_speed: 50.0,
+        }
+        .frame()
+    }));
+    frames.extend(every(20, 3000, |_| {
+        CruiseAccelMsg { cruise_accel: 0.0 }.frame()
+    }));
+    let tracking = run(frames.clone(), "tracking error");
+    assert_eq!(tracking.verdict, Verdict::NotExercised, "{tracking:?}");
+    assert_eq!(tracking.value, None);
+    assert!(
+        tracking.evidence.starts_with("not exercised"),
+        "{tracking:?}"
+    );
+    assert_eq!(Verdict::NotExercised.name(), "not exercised");
+    // The ECU is not shown as proven: its headline is the routine that had nothing to judge.
+    frames.sort_by_key(|f| f.t_us);
+    let (pipeline, mut diagnostics) = diagnosed(frames);
+    let cruise = |d: &Diagnostics| {
+        d.report(pipeline.state())
+            .into_iter()
+            .find(|d| d.ecu == Node::Cruise)
+            .unwrap()
+    };
+    let before = cruise(&diagnostics);
+    assert_eq!(before.verdict, Verdict::NotExercised, "{before:?}");
+    assert_eq!(before.headline().unwrap().routine, "tracking error");
+    // A reset forgets what was seen: presence has nothing yet (no data) until frames come.
+    diagnostics.reset(Node::Cruise);
+    assert_eq!(cruise(&diagnostics).verdict, Verdict::NoData);
+    // The other ECUs keep their findings.
+    let others = diagnostics.report(pipeline.state());
+    let abs = others.iter().find(|d| d.ecu == Node::ABS).unwrap();
+    assert_eq!(
+        abs.verdict,
+        Verdict::NoData,
+        "no ABS frames were sent: {abs:?}"
+    );
+}

@@ -13,6 +13,10 @@ pub enum Verdict {
     NoData,
     /// Works as specified, as far as the traffic shows.
     Ok,
+    /// The situation the routine judges never arose (no cruise engagement held long
+    /// enough, no hard braking...): nothing to say either way. Above OK, so that an ECU
+    /// whose own routine has had nothing to judge does not look proven.
+    NotExercised,
     /// Past the first threshold: worth a look, not proof of a fault.
     Suspect,
     /// Past the fault threshold.
@@ -20,11 +24,12 @@ pub enum Verdict {
 }
 
 impl Verdict {
-    /// `ok`, `suspect`, `faulty`, `no data`.
+    /// `ok`, `not exercised`, `suspect`, `faulty`, `no data`.
     pub fn name(self) -> &'static str {
         match self {
             Verdict::NoData => "no data",
             Verdict::Ok => "ok",
+            Verdict::NotExercised => "not exercised",
             Verdict::Suspect => "suspect",
             Verdict::Faulty => "faulty",
         }

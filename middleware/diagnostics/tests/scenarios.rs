@@ -68,8 +68,19 @@ fn every_shipped_scenario_gets_the_right_verdicts() {
             _ => &[],
         };
         for d in &report {
+            // A scenario that never brakes hard judges no ABS: "not exercised", never a
+            // green OK it did not earn, and never worse.
             let expected = if faulty.contains(&d.ecu) {
                 Verdict::Faulty
+            } else if d.verdict == Verdict::NotExercised {
+                let headline = d.headline().unwrap();
+                assert!(headline.value.is_none(), "{}: {headline:?}", scenario.name);
+                assert!(
+                    headline.evidence.starts_with("not exercised"),
+                    "{}: {headline:?}",
+                    scenario.name
+                );
+                Verdict::NotExercised
             } else {
                 Verdict::Ok
             };

@@ -409,7 +409,12 @@ pub fn status_text(state: &CarState, diagnostics: &Diagnostics, trips: &TripTrac
     let report = diagnostics.report(state);
     let flagged: Vec<String> = report
         .iter()
-        .filter(|d| d.verdict != autoplug_diagnostics::Verdict::Ok)
+        .filter(|d| {
+            !matches!(
+                d.verdict,
+                autoplug_diagnostics::Verdict::Ok | autoplug_diagnostics::Verdict::NotExercised
+            )
+        })
         .map(|d| {
             let number = d
                 .headline()

@@ -25,7 +25,7 @@ pub struct NewTrip {
 pub struct VerdictRecord {
     /// The ECU the routine judges.
     pub ecu: String,
-    /// `ok`, `suspect`, `faulty` or `no data`.
+    /// `ok`, `not exercised`, `suspect`, `faulty` or `no data`.
     pub verdict: String,
     /// The routine's name.
     pub routine: String,

@@ -7,6 +7,7 @@
 //! | `POST /api/auth` | 204 if the bearer token is right, else 401 | checks it |
 //! | `POST /api/ecus/{ecu}/flash` | flash the body (a signed image), or `?image=NAME` from the library | yes |
 //! | `POST /api/ecus/{ecu}/clear-dtcs` | clear one ECU's trouble codes (`all`: every ECU's) | yes |
+//! | `POST /api/ecus/{ecu}/reset-verdict` | the gateway's routines for that ECU start over (`all`: every ECU's) | yes |
 //! | `POST /api/recording` | `{"on": true}` starts recording all traffic, `false` stops | yes |
 //! | `POST /api/road` | `{"mu_left": 1.0, "mu_right": 0.2}`: the virtual road's friction | yes |
 //! | `POST /api/road/start` | `{}`: the standing virtual car back to its start line | yes |
@@ -73,6 +74,7 @@ pub(crate) fn routes() -> Router<Arc<Shared>> {
             post(flash).layer(DefaultBodyLimit::max(MAX_IMAGE_BYTES)),
         )
         .route("/api/ecus/{ecu}/clear-dtcs", post(clear_dtcs))
+        .route("/api/ecus/{ecu}/reset-verdict", post(reset_verdict))
         .route("/api/recording", post(recording))
         .route("/api/road", post(road))
         .route("/api/road/start", post(road_start))
@@ -240,6 +242,18 @@ async fn clear_dtcs(
     }
     let ecu = (ecu != "all").then_some(ecu);
     act(&shared, Action::ClearDtcs { ecu }).await
+}
+
+async fn reset_verdict(
+    State(shared): State<Arc<Shared>>,
+    headers: HeaderMap,
+    UrlPath(ecu): UrlPath<String>,
+) -> Response {
+    if let Err(e) = authorize(&shared, &headers) {
+        return e.into_response();
+    }
+    let ecu = (ecu != "all").then_some(ecu);
+    act(&shared, Action::ResetVerdict { ecu }).await
 }
 
 /// A JSON body, or the 400 that names what was wrong with it.

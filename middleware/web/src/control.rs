@@ -34,6 +34,12 @@ pub enum Action {
         /// The ECU, or all.
         ecu: Option<String>,
     },
+    /// Start the gateway's routines for one ECU, or for all nine (`None`), over: a verdict
+    /// that no longer holds (the fault fixed, or judged in a moment that proves nothing).
+    ResetVerdict {
+        /// The ECU, or all.
+        ecu: Option<String>,
+    },
     /// Start (`true`) or stop the recording of all traffic.
     Record(bool),
     /// Change the road's friction (virtual car only), left and right wheels.
