@@ -16,9 +16,9 @@ use autoplug_virtual_car::scenario::Button;
 /// time; a browser sends a few dozen per second).
 const MAX_WAITING: usize = 256;
 
-/// With no input from the page that drives for this long, the accelerator is released:
-/// a closed laptop or a lost network must not leave the virtual foot down. (Wall time: this
-/// is about the person, not the simulation.)
+/// With no input from the page that drives for this long, the pedals are released: a
+/// closed laptop or a lost network must not leave the virtual foot down, on either pedal.
+/// (Wall time: this is about the person, not the simulation.)
 pub const DEAD_MAN: Duration = Duration::from_secs(1);
 
 /// One input of the person at the wheel.
@@ -28,7 +28,7 @@ pub enum DeskInput {
     Hold(HeldControls),
     /// A steering-wheel button.
     Press(Button),
-    /// The page went away: accelerator released.
+    /// The page went away: pedals released.
     Release,
     /// The road's friction, left and right (already checked against its range).
     Friction(f64, f64),
@@ -131,8 +131,11 @@ impl DriverDesk {
     fn release(&mut self, car: &mut VirtualCar) {
         self.released = true;
         if let Some(driver) = car.manual_driver() {
+            // Both pedals: a brake left on is as stuck as an accelerator (the brake lights
+            // on, the car held) when nobody holds it any more.
             let held = HeldControls {
                 accelerator: 0.0,
+                brake: 0.0,
                 ..*driver.held()
             };
             let _ = car.take_wheel().hold(held);
@@ -142,5 +145,37 @@ impl DriverDesk {
     /// What the car's side last reported.
     pub fn report(&self) -> DeskReport {
         self.report
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use autoplug_virtual_car::scenario::Scenario;
+
+    #[test]
+    fn a_release_lets_go_of_both_pedals() {
+        let scenario = Scenario::parse("name = \"desk\"\nduration_s = 60.0\n", "test").unwrap();
+        let mut car = VirtualCar::new(&scenario);
+        let mut desk = DriverDesk::new();
+        let held = HeldControls {
+            accelerator: 30.0,
+            brake: 80.0,
+            steering_deg: 12.0,
+            headlights: true,
+            economy_mode: false,
+            manual_mode: false,
+            set_temp_f: 70.0,
+        };
+        desk.push(DeskInput::Hold(held)).unwrap();
+        desk.apply(&mut car);
+        assert_eq!(car.manual_driver().unwrap().held().brake, 80.0);
+        desk.push(DeskInput::Release).unwrap();
+        desk.apply(&mut car);
+        let after = *car.manual_driver().unwrap().held();
+        assert_eq!((after.accelerator, after.brake), (0.0, 0.0));
+        // What the person set stays: the wheel, the switches.
+        assert_eq!(after.steering_deg, 12.0);
+        assert!(after.headlights);
     }
 }

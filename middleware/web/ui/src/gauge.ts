@@ -59,7 +59,8 @@ export class Gauge {
     this.figure = svg('text', { x: 100, y: 112, class: 'gauge-figure', 'text-anchor': 'middle' });
     this.el.append(this.figure);
     const unitText = svg('text', { x: 100, y: 132, class: 'gauge-unit', 'text-anchor': 'middle' });
-    unitText.textContent = max >= 1000 && unit === 'rpm' ? '× 1000 rpm' : unit;
+    // The figure is the whole value; only the scale's numbers are in thousands.
+    unitText.textContent = max >= 1000 ? `${unit} (scale × 1000)` : unit;
     this.el.append(unitText);
     const labelText = svg('text', { x: 100, y: 160, class: 'gauge-label', 'text-anchor': 'middle' });
     labelText.textContent = label;

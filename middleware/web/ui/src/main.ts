@@ -13,6 +13,7 @@ import { recordingsView } from './views/recordings';
 import { driveView } from './views/drive';
 import { fleetView } from './views/fleet';
 import { offerBanner } from './offer';
+import { DriveInput } from './drive-input';
 
 const VIEWS: [string, string, (ctx: Ctx) => View][] = [
   ['car', 'Car', carView],
@@ -53,6 +54,8 @@ const ctx: Ctx = {
     setTimeout(() => t.remove(), kind === 'error' ? 8000 : 4000);
   },
 };
+
+if (info.live !== false) ctx.drive = new DriveInput(live, ctx.toast);
 
 const nav = document.getElementById('nav')!;
 for (const [path, label] of shown) {

@@ -6,23 +6,23 @@
 // the faulty ABS's spin with its tyre marks), the phone layout fits, and screenshots of
 // every view at desktop and phone size are written for a person to look at.
 //
-// node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR [--scenario-1]
+// node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR [--firmware]
 //
-// --scenario-1: report scenario 1 alone (a dashboard whose cruise ECU runs its firmware on
-// an emulated MCU, its library holding the real signed releases: scripts/dashboard-test
-// --firmware); its screenshots are named firmware-*.png.
+// --firmware: the report's two scenarios alone, on a dashboard whose nine ECUs run their
+// firmware on emulated MCUs, its library holding the real signed releases it built itself
+// (scripts/dashboard-test --firmware); its screenshots are named firmware-*.png.
 
 import assert from 'node:assert/strict';
 import { mkdirSync } from 'node:fs';
 import { launchChromium, steps, until } from './harness.mjs';
 
 const [base, token, shots, mode] = process.argv.slice(2);
-if (!base || !token || !shots || (mode !== undefined && mode !== '--scenario-1')) {
-  console.error('usage: node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR [--scenario-1]');
+if (!base || !token || !shots || (mode !== undefined && mode !== '--firmware')) {
+  console.error('usage: node tests/dashboard.mjs BASE_URL TOKEN SCREENSHOT_DIR [--firmware]');
   process.exit(2);
 }
-const onlyScenario1 = mode === '--scenario-1';
-const shotPrefix = onlyScenario1 ? 'firmware-' : 'desktop-';
+const onFirmware = mode === '--firmware';
+const shotPrefix = onFirmware ? 'firmware-' : 'desktop-';
 mkdirSync(shots, { recursive: true });
 
 const VIEWS = {
@@ -246,14 +246,92 @@ async function scenario1(desktop) {
 
 }
 
+/** Report scenario 2 from the page: flash the faulty ABS, brake hard on split friction
+ *  (the car spins, the verdict flags the ABS), flash the fix, the same stop is straight. */
+async function scenario2(desktop) {
+  await flash(desktop, 'abs', 'abs-1.1.0-faulty.img');
+  async function hardStopOnSplit() {
+    await view(desktop, 'drive');
+    await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+    await toStart(desktop);
+    await desktop.click('[data-testid=road-split]');
+    await accelerateTo(desktop, 100);
+    await brakeToStop(desktop);
+    await desktop.click('[data-testid=road-dry]');
+  }
+  await hardStopOnSplit();
+  // The spin on the world view: the heading the simulator reports, and tyre marks.
+  await view(desktop, 'drive');
+  // The bus's speed is the car's forward speed: a spinning car can show 0 while it still
+  // turns and slides. Wait for the simulator's car to come to rest.
+  // (A spin from 100 km/h on the split takes several turns: up to a minute.)
+  const restFrom = Date.now();
+  let lastSeen = null;
+  await until('the car at rest', async () => {
+    const first = await simPose();
+    await desktop.waitForTimeout(300);
+    const then = await simPose();
+    lastSeen = { speed: then.speed, turned: then.heading - first.heading, moved: Math.hypot(then.x - first.x, then.y - first.y) };
+    return Math.abs(then.heading - first.heading) < 0.1 && Math.hypot(then.x - first.x, then.y - first.y) < 0.02;
+  }, 60_000).catch((e) => { throw new Error(`${e.message}; last 0.3 s: ${JSON.stringify(lastSeen)}`); });
+  const restAfter = (Date.now() - restFrom) / 1000;
+  await desktop.waitForTimeout(300);
+  const spun = { page: await pagePose(desktop), sim: await simPose() };
+  assert.ok(Math.abs(spun.page.heading - spun.sim.heading) <= 3, `the world view shows heading ${spun.page.heading}°, the simulator ${spun.sim.heading.toFixed(1)}°`);
+  assert.ok(Math.abs(spun.sim.heading) > 20, `the faulty ABS should turn the car (heading ${spun.sim.heading.toFixed(1)}°)`);
+  assert.ok(spun.page.marks > 20, `tyre marks on the world view: ${spun.page.marks} points`);
+  await desktop.screenshot({ path: `${shots}/${shotPrefix}world-spin.png` });
+  ok(`scenario 2 on the world view: the car stopped turned ${spun.page.heading.toFixed(1)}° (the simulator: ${spun.sim.heading.toFixed(1)}°), ${spun.page.marks} tyre-mark points; at rest ${restAfter.toFixed(1)} s after the bus showed it stopped`);
+  await view(desktop, 'diagnostics');
+  const absFaulty = await until('the ABS ECU flagged', async () => ((await verdict(desktop, 'abs')) === 'faulty' ? 'faulty' : null), 10_000);
+  const absNumber = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
+  ok(`scenario 2: the faulty ABS locks a wheel braking on split friction, Diagnostics flags abs ${absFaulty} with ${Number(absNumber).toFixed(2)} s`);
+  await flash(desktop, 'abs', 'abs-1.2.0.img');
+  await hardStopOnSplit();
+  await view(desktop, 'diagnostics');
+  const absFixed = await until('the ABS verdict back to ok', async () => {
+    const v = await verdict(desktop, 'abs');
+    const n = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
+    return v === 'ok' && n ? n : null;
+  }, 10_000);
+  ok(`scenario 2: with the fix flashed the same stop is ok (${Number(absFixed).toFixed(2)} s locked)`);
+}
+
+/** A flash the gateway refuses shows its reason on the ECUs view, and keeps it there. */
+async function refusedFlash(desktop) {
+  const logged = problems.length;
+  await view(desktop, 'ecus');
+  await desktop.selectOption('[data-testid=flash-image]', 'abs-1.2.0.img');
+  await desktop.selectOption('[data-testid=flash-ecu]', 'cruise');
+  await desktop.click('[data-testid=flash-start]');
+  const shown = await until('the refusal on the page', async () => {
+    const text = await desktop.textContent('[data-testid=flash-status]');
+    return text?.startsWith('Refused: ') ? text : null;
+  }, 5_000);
+  assert.match(shown, /not for cruise/);
+  // Two session updates later (they come twice a second) the reason is still there.
+  await desktop.waitForTimeout(1500);
+  assert.equal(await desktop.textContent('[data-testid=flash-status]'), shown);
+  // Chromium logs the refused request (409) as a console error: this one was asked for.
+  const asked = problems.slice(logged).filter((p) => /status of 409/.test(p));
+  assert.equal(asked.length, 1, `the refusal's console line: ${problems.slice(logged).join('\n')}`);
+  problems.splice(problems.indexOf(asked[0]), 1);
+  ok(`a refused flash says why on the page, and keeps saying it: "${shown}"`);
+}
+
 await run(async () => {
   startPose = await until('the car in the simulator\'s world', simPose, 15_000);
-  if (onlyScenario1) {
+  if (onFirmware) {
     const desktop = await browser.newPage({ viewport: { width: 1280, height: 900 } });
     watch(desktop);
     await desktop.goto(`${base}/car#token=${token}`);
     await desktop.waitForSelector('[data-testid=speed][data-value]', { timeout: 15_000 });
+    // The library holds the releases the dashboard built, nothing prepared by hand.
+    const library = (await (await fetch(`${base}/api/images`)).json()).map((i) => i.name).sort();
+    assert.deepEqual(library, ['abs-1.1.0-faulty.img', 'abs-1.2.0.img', 'cruise-1.1.0-faulty.img', 'cruise-1.2.0.img']);
+    ok(`the library holds the releases the dashboard built: ${library.join(', ')}`);
     await scenario1(desktop);
+    await scenario2(desktop);
     await view(desktop, 'ecus');
     await desktop.waitForTimeout(500);
     await desktop.screenshot({ path: `${shots}/firmware-ecus.png` });
@@ -281,6 +359,13 @@ await run(async () => {
     await desktop.screenshot({ path: `${shots}/desktop-${name}.png` });
   }
   ok('every view renders (desktop screenshots written)');
+
+  // A routine that has had nothing to judge says so: cruise was never engaged yet.
+  await view(desktop, 'diagnostics');
+  const unexercised = await until('cruise judged not exercised', async () => ((await verdict(desktop, 'cruise')) === 'not exercised' ? 'not exercised' : null), 5_000);
+  const why = await desktop.textContent('[data-testid=verdict-cruise] td:nth-child(6)');
+  assert.match(why, /^not exercised/);
+  ok(`a routine never exercised shows "${unexercised}", not OK (cruise: ${why})`);
 
   // Record what follows, from the page.
   await view(desktop, 'recordings');
@@ -366,6 +451,42 @@ await run(async () => {
   await watcher.close();
   await brakeToStop(desktop);
 
+  // Held controls cannot stick. A key held while the person switches views stays held
+  // (the brake while flashing); the page losing the keyboard releases it on the bus at
+  // once, and so does a driving page that goes away.
+  const busBrake = async () => (await state()).signals['Vehicle.Chassis.Brake.PedalPosition'] ?? null;
+  await until('the brake on the bus', async () => (await busBrake()) > 50, 3_000);
+  await view(desktop, 'ecus');
+  await desktop.waitForTimeout(1500);
+  assert.ok((await busBrake()) > 50, 'a key held while switching views stays held');
+  await desktop.evaluate(() => window.dispatchEvent(new Event('blur')));
+  const blurredAt = Date.now();
+  await until('the brake released on the bus', async () => (await busBrake()) < 1, 2_000);
+  const blurRelease = Date.now() - blurredAt;
+  await desktop.keyboard.up('ArrowDown');
+  await view(desktop, 'drive');
+  const told = await until('the Drive view to say why', async () => {
+    const text = await desktop.textContent('[data-testid=drive-released]');
+    return text ? text : null;
+  }, 2_000);
+  assert.match(told, /released: the window lost the keyboard/);
+  // Out of the Drive view with nothing held, this page sends nothing: the other drives.
+  await view(desktop, 'ecus');
+  const other = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+  watch(other);
+  await other.goto(`${base}/drive#token=${token}`);
+  await until('the second page\'s wheel', async () => (await other.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
+  await other.keyboard.down('ArrowDown');
+  await until('the second page\'s brake on the bus', async () => (await busBrake()) > 50, 3_000);
+  await other.close();
+  const closedAt = Date.now();
+  await until('the brake released when the page went away', async () => (await busBrake()) < 1, 3_000);
+  const closeRelease = Date.now() - closedAt;
+  ok(`held controls are released on the bus: ${blurRelease} ms after the page lost the keyboard ("${told}"), ${closeRelease} ms after a driving page closed; a key held across a change of view stayed held`);
+  await desktop.bringToFront();
+  await view(desktop, 'drive');
+  await brakeToStop(desktop);
+
   // The recording replays in a dashboard of its own: play, pause, seek.
   await view(desktop, 'recordings');
   await desktop.click('[data-testid=record]');
@@ -411,50 +532,21 @@ await run(async () => {
   await replayPage.close();
   ok(`the recording made from the page replays in a dashboard of its own: it played (${p1.toFixed(1)} -> ${p2.toFixed(1)} s), paused at ${p3.toFixed(1)} s, jumped to 1 s; its world view shows the car on the circuit at station ${replayedOn.station} m`);
 
+  await refusedFlash(desktop);
   await scenario1(desktop);
 
-  // Report scenario 2: the ABS, braking hard on split friction.
-  await flash(desktop, 'abs', 'abs-1.1.0-faulty.img');
-  async function hardStopOnSplit() {
-    await view(desktop, 'drive');
-    await until('the wheel', async () => (await desktop.getAttribute('[data-testid=drive-auth]', 'data-ok')) === 'true', 10_000);
-    await toStart(desktop);
-    await desktop.click('[data-testid=road-split]');
-    await accelerateTo(desktop, 100);
-    await brakeToStop(desktop);
-    await desktop.click('[data-testid=road-dry]');
-  }
-  await hardStopOnSplit();
-  // The spin on the world view: the heading the simulator reports, and tyre marks.
-  await view(desktop, 'drive');
-  // The bus's speed is the car's forward speed: a spinning car can show 0 while it still
-  // turns and slides. Wait for the simulator's car to come to rest.
-  await until('the car at rest', async () => {
-    const first = await simPose();
-    await desktop.waitForTimeout(300);
-    const then = await simPose();
-    return Math.abs(then.heading - first.heading) < 0.1 && Math.hypot(then.x - first.x, then.y - first.y) < 0.02;
-  }, 20_000);
-  await desktop.waitForTimeout(300);
-  const spun = { page: await pagePose(desktop), sim: await simPose() };
-  assert.ok(Math.abs(spun.page.heading - spun.sim.heading) <= 3, `the world view shows heading ${spun.page.heading}°, the simulator ${spun.sim.heading.toFixed(1)}°`);
-  assert.ok(Math.abs(spun.sim.heading) > 20, `the faulty ABS should turn the car (heading ${spun.sim.heading.toFixed(1)}°)`);
-  assert.ok(spun.page.marks > 20, `tyre marks on the world view: ${spun.page.marks} points`);
-  await desktop.screenshot({ path: `${shots}/desktop-world-spin.png` });
-  ok(`scenario 2 on the world view: the car stopped turned ${spun.page.heading.toFixed(1)}° (the simulator: ${spun.sim.heading.toFixed(1)}°), ${spun.page.marks} tyre-mark points`);
+  await scenario2(desktop);
+
+  // A verdict can be reset per ECU: the ABS is judged again from now on, and with no hard
+  // braking since, it is not exercised.
   await view(desktop, 'diagnostics');
-  const absFaulty = await until('the ABS ECU flagged', async () => ((await verdict(desktop, 'abs')) === 'faulty' ? 'faulty' : null), 10_000);
-  const absNumber = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
-  ok(`scenario 2: the faulty ABS locks a wheel braking on split friction, Diagnostics flags abs ${absFaulty} with ${Number(absNumber).toFixed(2)} s`);
-  await flash(desktop, 'abs', 'abs-1.2.0.img');
-  await hardStopOnSplit();
-  await view(desktop, 'diagnostics');
-  const absFixed = await until('the ABS verdict back to ok', async () => {
+  await desktop.click('[data-testid=reset-verdict-abs]');
+  const afterReset = await until('the ABS judged again', async () => {
     const v = await verdict(desktop, 'abs');
-    const n = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
-    return v === 'ok' && n ? n : null;
-  }, 10_000);
-  ok(`scenario 2: with the fix flashed the same stop is ok (${Number(absFixed).toFixed(2)} s locked)`);
+    return v === 'not exercised' ? v : null;
+  }, 5_000);
+  assert.equal(await verdict(desktop, 'cruise'), 'ok', 'a reset of the ABS leaves the cruise verdict');
+  ok(`a verdict is reset per ECU from the page: abs ${afterReset} after its reset, cruise still ok`);
 
   // A phone: the Car view fits without horizontal scrolling; every view renders.
   const phone = await browser.newPage({ viewport: { width: 390, height: 844 }, deviceScaleFactor: 2, isMobile: true, hasTouch: true });

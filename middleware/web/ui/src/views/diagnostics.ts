@@ -23,7 +23,7 @@ export function diagnosticsView(ctx: Ctx): View {
   const el = h('section', { class: 'diagnostics' },
     h('div', { class: 'card table-wrap' }, h('h3', { text: 'Verdicts (from the bus alone)' }),
       h('table', { class: 'grid' },
-        h('thead', {}, h('tr', {}, ...['ECU', 'Verdict', 'Number', 'Suspect / faulty above', 'Routine', 'Evidence'].map((t) => h('th', { text: t })))),
+        h('thead', {}, h('tr', {}, ...['ECU', 'Verdict', 'Number', 'Suspect / faulty above', 'Routine', 'Evidence', ''].map((t) => h('th', { text: t })))),
         verdicts)),
     h('div', { class: 'card' }, h('div', { class: 'toolbar' }, h('h3', { text: 'Trouble codes (UDS 0x19)' }), clearAll), codes),
   );
@@ -36,7 +36,20 @@ export function diagnosticsView(ctx: Ctx): View {
     for (const d of s.diagnostics) {
       let cells = rows.get(d.ecu);
       if (!cells) {
-        cells = [0, 1, 2, 3, 4, 5].map(() => h('td'));
+        cells = [0, 1, 2, 3, 4, 5, 6].map(() => h('td'));
+        // Judge this ECU again from now on: a verdict that no longer holds (the fault
+        // fixed, or judged in a moment that proves nothing) does not stay forever.
+        const ecu = d.ecu;
+        const reset = h('button', { class: 'btn small', 'data-testid': `reset-verdict-${ecu}`, title: 'the gateway\'s routines for this ECU start over', text: 'Reset' });
+        reset.addEventListener('click', async () => {
+          try {
+            await post(`/api/ecus/${ecu}/reset-verdict`);
+            ctx.toast(`${ecu}: judged again from now on`);
+          } catch (e: any) {
+            ctx.toast(e.message, 'error');
+          }
+        });
+        cells[6].append(reset);
         verdicts.append(h('tr', { 'data-testid': `verdict-${d.ecu}` }, ...cells));
         rows.set(d.ecu, cells);
       }

@@ -2,63 +2,48 @@
 // controller or steering wheel through the browser's Gamepad API. What is sent are the
 // car's sensor inputs (pedals, wheel, switches, buttons); the dashboard then shows only
 // what the ECUs put on the bus.
-import { post, setToken, token } from '../api';
-import type { DriveState } from '../live';
+import { post, token } from '../api';
+import { STEER_MAX, type Button } from '../drive-input';
 import type { Ctx, View } from '../view';
 import { h, num, setText } from '../util';
 import { worldView } from '../world';
 
-/** How often the controls are sent while the view is open (the gateway's dead man's
- *  release comes after 1 s without them). */
-const SEND_MS = 50;
-/** Pedal travel per second under the keyboard, %. */
-const PEDAL_RATE = 250;
-/** Steering wheel travel per second under the keyboard, degrees. */
-const STEER_RATE = 180;
-const STEER_MAX = 135;
-
-type Button = 'cruise_on' | 'cruise_off' | 'shift_up' | 'shift_down';
-
 export function driveView(ctx: Ctx): View {
   const { live } = ctx;
-  const state: DriveState = { accelerator: 0, brake: 0, steering_deg: 0, headlights: false, economy_mode: false, manual_mode: false, set_temp_f: 72 };
-  let engaged = false;
-  let authorized = false;
-  const keys = new Set<string>();
-  let touch = { accelerator: 0, brake: 0 };
+  // The controls live with the page (see drive-input.ts); this view shows and works them.
+  const input = ctx.drive!;
+  const state = input.state;
+  input.active = true;
 
   const authState = h('div', { class: 'muted small', 'data-testid': 'drive-auth' });
   const tokenInput = h('input', { type: 'password', placeholder: 'token printed by autoplug dashboard', 'aria-label': 'write token' });
-  const tokenBox = h('div', { class: 'form', hidden: true }, tokenInput, h('button', { class: 'btn', onclick: () => { setToken(tokenInput.value.trim()); authorize(); } }, 'Use token'));
+  const tokenBox = h('div', { class: 'form', hidden: true }, tokenInput, h('button', { class: 'btn', onclick: () => { input.authorize(tokenInput.value.trim()); authorize(); } }, 'Use token'));
 
   const pedal = (name: 'accelerator' | 'brake', label: string) => {
-    const input = h('input', { type: 'range', min: 0, max: 100, value: 0, class: `pedal ${name}`, orient: 'vertical', 'aria-label': label, 'data-testid': `pedal-${name}` });
-    const release = () => { input.value = '0'; touch[name] = 0; };
-    input.addEventListener('input', () => { touch[name] = Number(input.value); engaged = true; });
-    input.addEventListener('pointerup', release);
-    input.addEventListener('pointercancel', release);
-    input.addEventListener('touchend', release);
-    return h('label', { class: 'pedal-box' }, input, h('span', { text: label }));
+    const slider = h('input', { type: 'range', min: 0, max: 100, value: 0, class: `pedal ${name}`, orient: 'vertical', 'aria-label': label, 'data-testid': `pedal-${name}` });
+    const release = () => { slider.value = '0'; input.touch[name] = 0; };
+    slider.addEventListener('input', () => { input.touch[name] = Number(slider.value); input.engaged = true; });
+    slider.addEventListener('pointerup', release);
+    slider.addEventListener('pointercancel', release);
+    slider.addEventListener('touchend', release);
+    return h('label', { class: 'pedal-box' }, slider, h('span', { text: label }));
   };
   const steer = h('input', { type: 'range', min: -STEER_MAX, max: STEER_MAX, value: 0, step: 1, class: 'steer', 'aria-label': 'steering wheel', 'data-testid': 'steer' });
-  steer.addEventListener('input', () => { state.steering_deg = -Number(steer.value); engaged = true; });
+  steer.addEventListener('input', () => { state.steering_deg = -Number(steer.value); input.engaged = true; });
   steer.addEventListener('dblclick', () => { steer.value = '0'; state.steering_deg = 0; });
 
-  const press = (button: Button) => {
-    engaged = true;
-    if (!live.send({ type: 'press', button })) ctx.toast('not connected', 'error');
-  };
+  const press = (button: Button) => input.press(button);
   const btn = (text: string, button: Button, key: string) =>
     h('button', { class: 'btn', 'data-testid': `press-${button}`, title: `key ${key}`, onclick: () => press(button) }, text, h('kbd', { text: key }));
   const toggle = (text: string, field: 'headlights' | 'economy_mode' | 'manual_mode', key: string) => {
     const b = h('button', { class: 'btn toggle', 'data-testid': `switch-${field}`, title: `key ${key}` }, text, h('kbd', { text: key }));
-    b.addEventListener('click', () => { state[field] = !state[field]; engaged = true; });
+    b.addEventListener('click', () => { state[field] = !state[field]; input.engaged = true; });
     return b;
   };
   const switches = [toggle('Headlights', 'headlights', 'L'), toggle('Economy', 'economy_mode', 'M'), toggle('Manual shift', 'manual_mode', 'T')];
   const knob = h('input', { type: 'range', min: 60, max: 85, step: 0.5, value: 72, 'aria-label': 'cabin set temperature', 'data-testid': 'cabin-knob' });
   const knobText = h('span');
-  knob.addEventListener('input', () => { state.set_temp_f = Number(knob.value); engaged = true; });
+  knob.addEventListener('input', () => { state.set_temp_f = Number(knob.value); input.engaged = true; });
 
   const road = (label: string, id: string, left: number, right: number) => h('button', { class: 'btn', 'data-testid': `road-${id}`, onclick: async () => {
     try { await post('/api/road', { mu_left: left, mu_right: right }); ctx.toast(`Road: ${label}`); } catch (e: any) { ctx.toast(e.message, 'error'); }
@@ -76,10 +61,12 @@ export function driveView(ctx: Ctx): View {
   };
   const alongRoadButton = h('button', { class: 'btn toggle', 'data-testid': 'steer-along-road', title: 'key R', disabled: true, onclick: () => setAlongRoad(!alongRoad) },
     'Steer along the road', h('kbd', { text: 'R' }));
+  input.onSteerAlongRoad = () => { if (!alongRoadButton.disabled) void setAlongRoad(!alongRoad); };
 
   const readout = h('div', { class: 'readout' });
   const speedBig = h('div', { class: 'big-speed', 'data-testid': 'drive-speed' });
   const pad = h('div', { class: 'muted small' });
+  const released = h('div', { class: 'small warn', 'data-testid': 'drive-released', role: 'status' });
   const world = worldView(live);
   // Hidden on a bus that cannot be driven (a replay, a real bus): the world view stays.
   let controlsCard: HTMLElement;
@@ -87,7 +74,7 @@ export function driveView(ctx: Ctx): View {
   let keysHelp: HTMLElement;
   const el = h('section', { class: 'drive' },
     world.el,
-    h('div', { class: 'card' }, h('div', { class: 'toolbar' }, speedBig, readout), authState, tokenBox,
+    h('div', { class: 'card' }, h('div', { class: 'toolbar' }, speedBig, readout), authState, released, tokenBox,
       keysHelp = h('p', { class: 'muted small', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · R steer along the road (the simulator steers) · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
     controlsCard = h('div', { class: 'card controls' },
       h('div', { class: 'pedals' }, pedal('brake', 'Brake'), pedal('accelerator', 'Accelerator')),
@@ -105,92 +92,17 @@ export function driveView(ctx: Ctx): View {
   }
 
   function authorize(): void {
-    const t = token();
-    if (!t) {
-      authorized = false;
+    if (!token()) {
       tokenBox.hidden = false;
       setText(authState, 'Driving needs the token printed by autoplug dashboard (open the address it printed, or paste the token).');
       return;
     }
-    live.send({ type: 'auth', token: t });
+    input.authorize();
   }
   const unlisten = live.listen((m) => {
-    if (m.type === 'catalog') authorize();
-    if (m.type === 'auth') {
-      authorized = m.ok;
-      tokenBox.hidden = m.ok;
-      if (drivable()) setText(authState, m.ok ? 'You have the wheel: the controls below are the car\'s sensor inputs.' : 'The token was refused.');
-      authState.dataset.ok = String(m.ok);
-    }
     if (m.type === 'error') ctx.toast(m.error, 'error');
   });
   authorize();
-
-  const KEYMAP: Record<string, Button> = { c: 'cruise_on', x: 'cruise_off', e: 'shift_up', q: 'shift_down' };
-  const onKey = (e: KeyboardEvent) => {
-    if ((e.target as HTMLElement)?.tagName === 'INPUT' && (e.target as HTMLInputElement).type !== 'range') return;
-    const k = e.key.length === 1 ? e.key.toLowerCase() : e.key;
-    if (e.type === 'keydown') {
-      if (['ArrowUp', 'ArrowDown', 'ArrowLeft', 'ArrowRight', ' '].includes(k)) e.preventDefault();
-      if (!e.repeat) {
-        if (KEYMAP[k]) press(KEYMAP[k]);
-        if (k === 'l') { state.headlights = !state.headlights; engaged = true; }
-        if (k === 'm') { state.economy_mode = !state.economy_mode; engaged = true; }
-        if (k === 't') { state.manual_mode = !state.manual_mode; engaged = true; }
-        if (k === 'r' && !alongRoadButton.disabled) setAlongRoad(!alongRoad);
-      }
-      keys.add(k);
-      engaged = true;
-    } else {
-      keys.delete(k);
-    }
-  };
-  window.addEventListener('keydown', onKey);
-  window.addEventListener('keyup', onKey);
-  const onBlur = () => keys.clear();
-  window.addEventListener('blur', onBlur);
-
-  const padButtons: boolean[] = [];
-  let keyPedal = { accelerator: 0, brake: 0 };
-  let last = performance.now();
-  const timer = window.setInterval(() => {
-    const now = performance.now();
-    const dt = Math.min(0.2, (now - last) / 1000);
-    last = now;
-    const held = (...names: string[]) => names.some((n) => keys.has(n));
-    const ramp = (v: number, up: boolean) => Math.max(0, Math.min(100, v + (up ? 1 : -1.5) * PEDAL_RATE * dt));
-    keyPedal = { accelerator: ramp(keyPedal.accelerator, held('ArrowUp', 'w')), brake: ramp(keyPedal.brake, held('ArrowDown', 's')) };
-    let accelerator = Math.max(keyPedal.accelerator, touch.accelerator);
-    let brake = Math.max(keyPedal.brake, touch.brake);
-    if (held('ArrowLeft', 'a')) state.steering_deg = Math.min(STEER_MAX, state.steering_deg + STEER_RATE * dt);
-    else if (held('ArrowRight', 'd')) state.steering_deg = Math.max(-STEER_MAX, state.steering_deg - STEER_RATE * dt);
-    // Gamepad API: the standard mapping (triggers 6/7, bumpers 4/5, A/B 0/1, stick 0).
-    const gp = (navigator.getGamepads?.() ?? []).find((g) => g && g.connected);
-    if (gp) {
-      setText(pad, `Controller: ${gp.id}`);
-      const axis = gp.axes[0] ?? 0;
-      if (Math.abs(axis) > 0.05) { state.steering_deg = -axis * STEER_MAX; engaged = true; }
-      const trigger = (i: number) => gp.buttons[i]?.value ?? 0;
-      if (trigger(7) > 0.02 || trigger(6) > 0.02) engaged = true;
-      accelerator = Math.max(accelerator, 100 * trigger(7));
-      brake = Math.max(brake, 100 * trigger(6));
-      const edges: [number, Button][] = [[5, 'shift_up'], [4, 'shift_down'], [0, 'cruise_on'], [1, 'cruise_off']];
-      for (const [i, button] of edges) {
-        const down = gp.buttons[i]?.pressed ?? false;
-        if (down && !padButtons[i]) press(button);
-        padButtons[i] = down;
-      }
-    }
-    state.accelerator = accelerator;
-    state.brake = brake;
-    steer.value = String(-state.steering_deg);
-    switches[0].classList.toggle('active', state.headlights);
-    switches[1].classList.toggle('active', state.economy_mode);
-    switches[2].classList.toggle('active', state.manual_mode);
-    setText(knobText, `${num(state.set_temp_f, 1)} °F`);
-    if (engaged && authorized) live.send({ type: 'drive', ...state });
-    setText(readout, `accelerator ${num(accelerator)} % · brake ${num(brake)} % · wheel ${alongRoad ? 'the simulator’s' : `${num(state.steering_deg)}°`}`);
-  }, SEND_MS);
 
   function update(): void {
     setText(speedBig, `${num(live.value('Vehicle.Speed'))} km/h`);
@@ -202,24 +114,46 @@ export function driveView(ctx: Ctx): View {
     }
     controlsCard.hidden = roadCard.hidden = keysHelp.hidden = readout.hidden = !drivable();
     alongRoad = d?.steers_along_road ?? false;
-    alongRoadButton.disabled = !d?.on_track;
     alongRoadButton.classList.toggle('active', alongRoad);
     alongRoadButton.dataset.on = String(alongRoad);
-    steer.disabled = alongRoad;
-    if (d && !engaged && d.held) {
+    if (d && !input.engaged && d.held) {
       // Start from what the car's driver holds (another tab may have driven).
       Object.assign(state, d.held);
       knob.value = String(d.held.set_temp_f);
     }
+    if (input.authAnswer !== null) {
+      tokenBox.hidden = input.authAnswer;
+      if (drivable()) setText(authState, input.authAnswer ? 'You have the wheel: the controls below are the car\'s sensor inputs.' : 'The token was refused.');
+      authState.dataset.ok = String(input.authAnswer);
+    }
+    // Without the gateway nothing here reaches the car: the controls say so by being off.
+    controlsCard.classList.toggle('offline', !live.connected);
+    for (const control of controlsCard.querySelectorAll<HTMLInputElement | HTMLButtonElement>('input, button')) {
+      if (control === alongRoadButton) continue;
+      control.disabled = !live.connected || (control === steer && alongRoad);
+    }
+    alongRoadButton.disabled = !live.connected || !d?.on_track;
+    const pedals = input.pedals();
+    setText(readout, `accelerator ${num(pedals.accelerator)} % · brake ${num(pedals.brake)} % · wheel ${alongRoad ? 'the simulator’s' : `${num(state.steering_deg)}°`}`);
+    readout.dataset.accelerator = String(pedals.accelerator);
+    readout.dataset.brake = String(pedals.brake);
+    setText(pad, input.gamepad ? `Controller: ${input.gamepad}` : '');
+    steer.value = String(-state.steering_deg);
+    switches[0].classList.toggle('active', state.headlights);
+    switches[1].classList.toggle('active', state.economy_mode);
+    switches[2].classList.toggle('active', state.manual_mode);
+    setText(knobText, `${num(state.set_temp_f, 1)} °F`);
+    const why = input.released && performance.now() - input.released.at < 5000 ? `Controls released: ${input.released.why}.` : '';
+    setText(released, why);
   }
   return {
     el,
     update,
     destroy() {
-      window.clearInterval(timer);
-      window.removeEventListener('keydown', onKey);
-      window.removeEventListener('keyup', onKey);
-      window.removeEventListener('blur', onBlur);
+      // Keys held stay held until released (the brake while flashing); new presses wait
+      // for the Drive view.
+      input.active = false;
+      input.onSteerAlongRoad = null;
       unlisten();
       world.destroy();
     },

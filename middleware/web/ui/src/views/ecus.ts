@@ -17,6 +17,7 @@ export function ecusView(ctx: Ctx): View {
   const progress = h('progress', { max: 100, value: 0, 'data-testid': 'flash-progress' });
   const status = h('div', { class: 'flash-status', 'data-testid': 'flash-status' });
   const phases = h('div', { class: 'small' });
+  const libraryHint = h('p', { class: 'small muted', 'data-testid': 'library-hint' });
   const el = h('section', { class: 'ecus' },
     h('div', { class: 'card table-wrap' }, h('h3', { text: 'Inventory (UDS 0x22: F187, F189, F191, F18C, F1A0)' }),
       h('table', { class: 'grid' }, h('thead', {}, h('tr', {}, ...['ECU', 'Part number', 'Software', 'Running', 'Hardware', 'Serial'].map((t) => h('th', { text: t })))), inventory)),
@@ -26,13 +27,17 @@ export function ecusView(ctx: Ctx): View {
         h('label', {}, 'Image ', image),
         h('label', {}, 'or upload ', file),
         start),
-      progress, status, phases),
+      libraryHint, progress, status, phases),
   );
 
   async function loadLibrary(): Promise<void> {
     try {
       const list: any[] = await get('/api/images');
       image.replaceChildren(h('option', { value: '', text: list.length ? '— choose —' : '(library empty)' }));
+      // An empty library says how it fills: the dashboard writes the virtual car's
+      // demonstration images at its start and builds the releases of ECUs it runs as
+      // firmware; anything else is uploaded here or put in the data folder's images/.
+      setText(libraryHint, list.length ? '' : 'The library is the data folder\'s images/ folder. The dashboard puts the demonstration images there at its start (for ECUs running their firmware it builds the signed releases, which needs this checkout and the firmware target: see its output). Upload a signed image here, or copy one there (scripts/firmware-release builds one).');
       for (const item of list) {
         const target = item.node !== null ? NODE_ECU[item.node] ?? `node ${item.node}` : '?';
         image.append(h('option', { value: item.name, 'data-ecu': target, text: `${item.name} — ${target} ${item.version ?? ''} ${item.variant ?? ''} (${bytes(item.bytes)})` }));
@@ -46,6 +51,9 @@ export function ecusView(ctx: Ctx): View {
     if (target && ECUS.includes(target)) ecu.value = target;
   });
 
+  // A refusal (the gateway's 4xx answer) stays shown until a flash starts: the session's
+  // state, which says "no flash yet", must not hide it.
+  let refusal: string | null = null;
   start.addEventListener('click', async () => {
     start.setAttribute('disabled', '');
     try {
@@ -57,16 +65,23 @@ export function ecusView(ctx: Ctx): View {
       } else {
         throw new Error('choose an image from the library or upload one');
       }
+      refusal = null;
       ctx.toast(`Flashing ${ecu.value}…`);
     } catch (e: any) {
       ctx.toast(e.message, 'error');
-      setText(status, `Refused: ${e.message}`);
-      status.className = 'flash-status failed';
+      refusal = e.message;
+      showRefusal();
     } finally {
       start.removeAttribute('disabled');
       file.value = '';
     }
   });
+
+  function showRefusal(): void {
+    setText(status, `Refused: ${refusal}`);
+    status.className = 'flash-status failed';
+    status.dataset.state = 'failed';
+  }
 
   let lastInventory = '';
   function update(): void {
@@ -84,6 +99,10 @@ export function ecusView(ctx: Ctx): View {
       if (s.inventory.length === 0) inventory.append(h('tr', {}, h('td', { colspan: 6, class: 'muted', text: s.source.transmit ? 'Reading…' : 'The gateway only listens on this bus.' })));
     }
     const f = s.flash;
+    if (refusal !== null) {
+      showRefusal();
+      return;
+    }
     if (!f) {
       setText(status, s.source.transmit ? 'No flash yet.' : 'The gateway only listens on this bus: no flashing.');
       return;
