@@ -335,9 +335,9 @@ impl FlashConfig {
 
 /// The NRC an ECU answers a programming request with while the car does not stand.
 const NRC_CONDITIONS_NOT_CORRECT: u8 = 0x22;
-/// The NRC an ECU refuses an image's header with when the image can never be installed
-/// there (another ECU, other hardware, a downgrade, no machine code).
-const NRC_REQUEST_OUT_OF_RANGE: u8 = 0x31;
+/// The NRC an ECU refuses an image's header with when the download is not what it takes
+/// (a length or format it does not accept, or no machine code for an ECU running firmware).
+const NRC_UPLOAD_DOWNLOAD_NOT_ACCEPTED: u8 = 0x70;
 
 /// Why the file's images (one, or a release's set) could never start, if so: a machine-code
 /// image whose vector table the bootloader would not start (an image without machine code
@@ -790,14 +790,14 @@ impl FlashJob {
             (
                 Step::TransferData,
                 Err(UdsError::Negative {
-                    nrc: NRC_REQUEST_OUT_OF_RANGE,
+                    nrc: NRC_UPLOAD_DOWNLOAD_NOT_ACCEPTED,
                     ..
                 }),
             ) if ImageHeader::parse(&self.image)
                 .is_ok_and(|h| h.payload == Payload::HostLogic) =>
             {
                 Err(FlashFailure::Invalid(
-                    "the ECU refused the image's header (NRC 0x31 requestOutOfRange): the image holds no machine code (it is built for the virtual car's host-logic ECUs), and an ECU that runs its firmware takes only a firmware release (scripts/firmware-release)".into(),
+                    "the ECU refused the image's header (NRC 0x70 uploadDownloadNotAccepted): the image holds no machine code (it is built for the virtual car's host-logic ECUs), and an ECU that runs its firmware takes only a firmware release (scripts/firmware-release)".into(),
                 ))
             }
             (_, Err(error)) => Err(FlashFailure::Uds(error)),
