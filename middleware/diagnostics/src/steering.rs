@@ -132,7 +132,9 @@ impl Routine for Steering {
                 self.first_direct.unwrap_or(0) as f64 * 1e-6
             )
         } else if span.longest.is_none() {
-            "no paddle request seen".to_string()
+            // No request to judge: nothing shows the paddles work.
+            verdict = Verdict::NotExercised;
+            "not exercised: no paddle request seen".to_string()
         } else {
             format!("longest paddle request {:.3} s", value)
         };
@@ -140,7 +142,7 @@ impl Routine for Steering {
             Finding {
                 routine: "paddle requests as pulses",
                 verdict,
-                value: (span.judged > 0).then_some(value),
+                value: (verdict != Verdict::NotExercised).then_some(value),
                 unit: "s",
                 suspect_above: SUSPECT_S,
                 faulty_above: FAULTY_S,
