@@ -237,11 +237,7 @@ async fn clear_dtcs(
     headers: HeaderMap,
     UrlPath(ecu): UrlPath<String>,
 ) -> Response {
-    if let Err(e) = authorize(&shared, &headers) {
-        return e.into_response();
-    }
-    let ecu = (ecu != "all").then_some(ecu);
-    act(&shared, Action::ClearDtcs { ecu }).await
+    for_ecus(&shared, &headers, ecu, |ecu| Action::ClearDtcs { ecu }).await
 }
 
 async fn reset_verdict(
@@ -249,11 +245,20 @@ async fn reset_verdict(
     headers: HeaderMap,
     UrlPath(ecu): UrlPath<String>,
 ) -> Response {
-    if let Err(e) = authorize(&shared, &headers) {
+    for_ecus(&shared, &headers, ecu, |ecu| Action::ResetVerdict { ecu }).await
+}
+
+/// An authorised action on one ECU, or on all nine (`all` in the path: `None`).
+async fn for_ecus(
+    shared: &Shared,
+    headers: &HeaderMap,
+    ecu: String,
+    action: impl FnOnce(Option<String>) -> Action,
+) -> Response {
+    if let Err(e) = authorize(shared, headers) {
         return e.into_response();
     }
-    let ecu = (ecu != "all").then_some(ecu);
-    act(&shared, Action::ResetVerdict { ecu }).await
+    act(shared, action((ecu != "all").then_some(ecu))).await
 }
 
 /// A JSON body, or the 400 that names what was wrong with it.
