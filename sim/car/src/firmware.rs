@@ -282,33 +282,21 @@ impl Firmware {
                     "emulator: HardFault at PC {:#010x}, LR {:#010x}, CFSR {:#010x}, HFSR {:#010x}, BFAR {:#010x} ({:?})",
                     fault.pc, fault.lr, fault.cfsr, fault.hfsr, fault.bfar, fault.fault
                 );
-                push_line(
-                    &mut self.log,
-                    &mut self.dropped_lines,
-                    FirmwareLogLine {
-                        t_us,
-                        ecu: ecu_name(ecu.node),
-                        level: Some("ERROR".into()),
-                        text,
-                    },
-                );
+                emulator_error(&mut self.log, &mut self.dropped_lines, t_us, ecu.node, text);
             }
             ecu.faults_seen = node.mcu.faults.len();
             // A lockup with the watchdog running: the chip waits for its reset, as a board
             // does (the reset follows as a watchdog reset, below).
             for (at_ns, halt) in &node.mcu.lockups[ecu.lockups_seen..] {
-                push_line(
+                emulator_error(
                     &mut self.log,
                     &mut self.dropped_lines,
-                    FirmwareLogLine {
-                        t_us: scenario_us(at_ns / 1000, start_us),
-                        ecu: ecu_name(ecu.node),
-                        level: Some("ERROR".into()),
-                        text: format!(
-                            "emulator: {}; the independent watchdog (IWDG) runs, so its reset will end the lockup",
-                            Stop::Halted(halt.clone())
-                        ),
-                    },
+                    scenario_us(at_ns / 1000, start_us),
+                    ecu.node,
+                    format!(
+                        "emulator: {}; the independent watchdog (IWDG) runs, so its reset will end the lockup",
+                        Stop::Halted(halt.clone())
+                    ),
                 );
             }
             ecu.lockups_seen = node.mcu.lockups.len();
@@ -316,15 +304,12 @@ impl Firmware {
             // like a fault (the firmware's own log says it only after the restart).
             for (at_ns, cause) in &node.mcu.resets[ecu.resets_seen..] {
                 if *cause == ResetCause::Watchdog {
-                    push_line(
+                    emulator_error(
                         &mut self.log,
                         &mut self.dropped_lines,
-                        FirmwareLogLine {
-                            t_us: scenario_us(at_ns / 1000, start_us),
-                            ecu: ecu_name(ecu.node),
-                            level: Some("ERROR".into()),
-                            text: "emulator: reset by the independent watchdog (IWDG): the firmware stopped feeding it".into(),
-                        },
+                        scenario_us(at_ns / 1000, start_us),
+                        ecu.node,
+                        "emulator: reset by the independent watchdog (IWDG): the firmware stopped feeding it".into(),
                     );
                 }
             }
@@ -404,6 +389,27 @@ fn logged_set_speed(text: &str) -> Option<f32> {
 /// A time on the bus's clock as the scenario's (negative before it began).
 fn scenario_us(bus_us: u64, start_us: u64) -> i64 {
     bus_us as i64 - start_us as i64
+}
+
+/// What the emulator itself reports about an ECU's chip (a fault, a lockup, a watchdog
+/// reset), as an error line of that ECU's log.
+fn emulator_error(
+    log: &mut VecDeque<FirmwareLogLine>,
+    dropped: &mut u64,
+    t_us: i64,
+    node: Node,
+    text: String,
+) {
+    push_line(
+        log,
+        dropped,
+        FirmwareLogLine {
+            t_us,
+            ecu: ecu_name(node),
+            level: Some("ERROR".into()),
+            text,
+        },
+    );
 }
 
 fn push_line(log: &mut VecDeque<FirmwareLogLine>, dropped: &mut u64, line: FirmwareLogLine) {
