@@ -59,9 +59,14 @@ export class Gauge {
     this.figure = svg('text', { x: 100, y: 112, class: 'gauge-figure', 'text-anchor': 'middle' });
     this.el.append(this.figure);
     const unitText = svg('text', { x: 100, y: 132, class: 'gauge-unit', 'text-anchor': 'middle' });
-    // The figure is the whole value; only the scale's numbers are in thousands.
-    unitText.textContent = max >= 1000 ? `${unit} (scale × 1000)` : unit;
+    unitText.textContent = unit;
     this.el.append(unitText);
+    if (max >= 1000) {
+      // The figure is the whole value; only the scale's numbers are in thousands.
+      const factor = svg('text', { x: 100, y: 80, class: 'gauge-scale', 'text-anchor': 'middle' });
+      factor.textContent = 'scale × 1000';
+      this.el.append(factor);
+    }
     const labelText = svg('text', { x: 100, y: 160, class: 'gauge-label', 'text-anchor': 'middle' });
     labelText.textContent = label;
     this.el.append(labelText);
