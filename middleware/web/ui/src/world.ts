@@ -193,6 +193,7 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
     if (mode === 'top') drawTop(g, w, hgt, d, pose);
     else drawChase(g, w, hgt, d, pose);
     // What the tests compare with the simulator's own numbers.
+    el.dataset.t = pose[0].toFixed(3);
     el.dataset.x = pose[1].toFixed(2);
     el.dataset.y = pose[2].toFixed(2);
     el.dataset.heading = (pose[3] * 180 / Math.PI).toFixed(2);
