@@ -22,7 +22,9 @@ pub mod state;
 pub use pipeline::{Observer, Pipeline, PipelineError, Strictness};
 pub use sinks::RecordingSink;
 pub use source::{FrameSource, LogSource, Paced, Pacer, Poll, SourceError, VecSource};
-pub use state::{BusCounters, CarState, MessageStats, SignalName, SignalState, Update};
+pub use state::{
+    BusCounters, CarState, MessageStats, SignalName, SignalState, Update, RECENT_INTERVALS,
+};
 
 #[cfg(test)]
 mod tests;

@@ -65,7 +65,7 @@ impl SignalState {
 }
 
 /// Reception statistics of one message.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct MessageStats {
     /// Frames received with the right length.
     pub count: u64,
@@ -87,6 +87,36 @@ pub struct MessageStats {
     /// Data of the latest frame of the right length (the catalogue's length of bytes of
     /// it), as it came: the raw view's "last data".
     pub last_data: [u8; 8],
+    /// The last [`RECENT_INTERVALS`] intervals, µs (a ring; `recent_len` of them filled),
+    /// for the period and jitter a live view shows: over the whole run, one gap (an ECU
+    /// being flashed) would weigh on the jitter for ever after.
+    recent: [u32; RECENT_INTERVALS],
+    recent_len: u8,
+    recent_next: u8,
+}
+
+/// Intervals the recent period and jitter are measured over.
+pub const RECENT_INTERVALS: usize = 64;
+
+impl Default for MessageStats {
+    fn default() -> Self {
+        Self {
+            count: 0,
+            wrong_length: 0,
+            invalid: 0,
+            first_us: None,
+            last_us: None,
+            intervals: 0,
+            mean_interval_us: 0.0,
+            m2: 0.0,
+            min_interval_us: None,
+            max_interval_us: None,
+            last_data: [0; 8],
+            recent: [0; RECENT_INTERVALS],
+            recent_len: 0,
+            recent_next: 0,
+        }
+    }
 }
 
 impl MessageStats {
@@ -102,6 +132,9 @@ impl MessageStats {
                 let dt = t_us - last;
                 self.min_interval_us = Some(self.min_interval_us.map_or(dt, |m| m.min(dt)));
                 self.max_interval_us = Some(self.max_interval_us.map_or(dt, |m| m.max(dt)));
+                self.recent[usize::from(self.recent_next)] = u32::try_from(dt).unwrap_or(u32::MAX);
+                self.recent_next = ((usize::from(self.recent_next) + 1) % RECENT_INTERVALS) as u8;
+                self.recent_len = (usize::from(self.recent_len) + 1).min(RECENT_INTERVALS) as u8;
             }
         }
         self.first_us.get_or_insert(t_us);
@@ -116,6 +149,26 @@ impl MessageStats {
     /// Jitter: the standard deviation of the interval between frames, ms.
     pub fn jitter_ms(&self) -> Option<f64> {
         (self.intervals > 1).then(|| (self.m2 / (self.intervals - 1) as f64).sqrt() / 1000.0)
+    }
+
+    /// Mean interval over the last [`RECENT_INTERVALS`] intervals, ms.
+    pub fn recent_period_ms(&self) -> Option<f64> {
+        let recent = &self.recent[..usize::from(self.recent_len)];
+        (!recent.is_empty()).then(|| {
+            recent.iter().map(|&d| f64::from(d)).sum::<f64>() / recent.len() as f64 / 1000.0
+        })
+    }
+
+    /// Standard deviation of the last [`RECENT_INTERVALS`] intervals, ms.
+    pub fn recent_jitter_ms(&self) -> Option<f64> {
+        let recent = &self.recent[..usize::from(self.recent_len)];
+        let n = recent.len();
+        if n < 2 {
+            return None;
+        }
+        let mean = recent.iter().map(|&d| f64::from(d)).sum::<f64>() / n as f64;
+        let m2: f64 = recent.iter().map(|&d| (f64::from(d) - mean).powi(2)).sum();
+        Some((m2 / (n - 1) as f64).sqrt() / 1000.0)
     }
 }
 

@@ -6,7 +6,7 @@ use autoplug_logs::LogFrame;
 
 use crate::pipeline::{Observer, Pipeline, Strictness};
 use crate::source::VecSource;
-use crate::state::{CarState, Update, MAX_LISTED_UNKNOWN_IDS};
+use crate::state::{CarState, Update, MAX_LISTED_UNKNOWN_IDS, RECENT_INTERVALS};
 
 fn at(t_ms: u64, frame: Frame) -> LogFrame {
     LogFrame::from_can(t_ms * 1000, 0, &frame)
@@ -192,6 +192,29 @@ fn period_and_jitter_are_measured_per_message() {
         (s.min_interval_us, s.max_interval_us),
         (Some(6_000), Some(14_000))
     );
+}
+
+#[test]
+fn the_recent_jitter_forgets_a_gap_the_whole_runs_keeps() {
+    let mut state = CarState::new();
+    let mut t = 0;
+    for _ in 0..100 {
+        t += 10;
+        state.update(&speed(t, 1.0));
+    }
+    // Two seconds of silence (the ECU being flashed), then regular again.
+    t += 2000;
+    state.update(&speed(t, 1.0));
+    let s = state.stats_of(VehicleSpeedMsg::ID).unwrap();
+    assert!(s.recent_jitter_ms().unwrap() > 100.0);
+    for _ in 0..(RECENT_INTERVALS + 1) {
+        t += 10;
+        state.update(&speed(t, 1.0));
+    }
+    let s = state.stats_of(VehicleSpeedMsg::ID).unwrap();
+    assert_eq!(s.recent_period_ms(), Some(10.0));
+    assert_eq!(s.recent_jitter_ms(), Some(0.0));
+    assert!(s.jitter_ms().unwrap() > 100.0, "the run's own keeps it");
 }
 
 #[derive(Default)]

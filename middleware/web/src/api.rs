@@ -13,6 +13,9 @@
 //! | `POST /api/road/start` | `{}`: the standing virtual car back to its start line | yes |
 //! | `POST /api/road/steering` | `{"along_road": true}`: the simulator steers the virtual car along its road; `false`: the person does | yes |
 //! | `POST /api/replay` | `{"action": "play"}`, `pause`, `{"action":"speed","speed":4}`, `{"action":"seek","t":30}` | yes |
+//! | `GET /api/history?paths=A,B` | each signal's points since the session began (see [`crate::history`]): `{"t0": s, "width_s": s, "signals": {PATH: {"t": [...], "v": [...]}}}` | — |
+//! | `GET /api/trace?after=N&limit=M` | the frames numbered after N (see [`crate::trace`]): `{"last": N, "missed": n, "frames": [[seq, t, id, flags, dlc, data, name, sender], ...]}` | — |
+//! | `GET /api/dbc` | the DBC file the bus is decoded with (`autoplug.dbc`) | — |
 //! | `GET /api/images` | the firmware library: name, bytes, ECU, version of each image | — |
 //! | `GET /api/recordings`, `GET /api/recordings/{name}` | the recordings, and one to download | — |
 //! | `POST /api/recordings/{name}/replay` | open it in a replay dashboard of its own: `{"port": N}` | yes |
@@ -80,6 +83,9 @@ pub(crate) fn routes() -> Router<Arc<Shared>> {
         .route("/api/road/start", post(road_start))
         .route("/api/road/steering", post(road_steering))
         .route("/api/replay", post(replay))
+        .route("/api/history", get(history))
+        .route("/api/trace", get(trace))
+        .route("/api/dbc", get(dbc))
         .route("/api/images", get(images))
         .route("/api/recordings", get(recordings))
         .route("/api/recordings/{name}", get(download))
@@ -637,6 +643,134 @@ async fn series(
         Ok(points)
     })
     .await
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HistoryQuery {
+    paths: String,
+}
+
+/// Signals asked for in one history request at most: the whole catalogue.
+fn max_history_paths() -> usize {
+    crate::LiveTable::catalog().len()
+}
+
+async fn history(
+    State(shared): State<Arc<Shared>>,
+    query: Result<Query<HistoryQuery>, axum::extract::rejection::QueryRejection>,
+) -> Response {
+    let paths = match query {
+        Ok(Query(q)) => q.paths,
+        Err(e) => return error(
+            StatusCode::BAD_REQUEST,
+            format!(
+                "name the signals: ?paths=Vehicle.Speed,Vehicle.Chassis.Brake.PedalPosition ({e})"
+            ),
+        ),
+    };
+    let catalog = crate::LiveTable::catalog();
+    let mut wanted = Vec::new();
+    for path in paths.split(',').filter(|p| !p.is_empty()) {
+        let Some(index) = catalog.iter().position(|s| s.path == path) else {
+            return error(
+                StatusCode::NOT_FOUND,
+                format!(
+                    "no signal {:?} in the catalogue",
+                    crate::server::cut(path, 80)
+                ),
+            );
+        };
+        if !wanted.iter().any(|&(i, _)| i == index) {
+            wanted.push((index, catalog[index].path));
+        }
+    }
+    if wanted.is_empty() || wanted.len() > max_history_paths() {
+        return error(
+            StatusCode::BAD_REQUEST,
+            "name one or more signals of the catalogue: ?paths=Vehicle.Speed",
+        );
+    }
+    let table = shared.table.clone();
+    let body = tokio::task::spawn_blocking(move || {
+        use std::fmt::Write as _;
+        let history = table.history();
+        let (t0, width) = history.span();
+        let mut json = String::from("{\"t0\":");
+        match t0 {
+            Some(t0) => {
+                let _ = write!(json, "{t0}");
+            }
+            None => json.push_str("null"),
+        }
+        let _ = write!(json, ",\"width_s\":{width},\"signals\":{{");
+        for (k, (index, path)) in wanted.iter().enumerate() {
+            if k > 0 {
+                json.push(',');
+            }
+            let points = history.points(*index).unwrap_or_default();
+            // VSS paths are dotted identifiers: nothing to escape.
+            let _ = write!(json, "\"{path}\":{}", crate::history::points_json(&points));
+        }
+        json.push_str("}}");
+        json
+    })
+    .await;
+    match body {
+        Ok(json) => ([(header::CONTENT_TYPE, "application/json")], json).into_response(),
+        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TraceQuery {
+    #[serde(default)]
+    after: u64,
+    #[serde(default = "default_trace_limit")]
+    limit: usize,
+}
+
+fn default_trace_limit() -> usize {
+    500
+}
+
+async fn trace(
+    State(shared): State<Arc<Shared>>,
+    query: Result<Query<TraceQuery>, axum::extract::rejection::QueryRejection>,
+) -> Response {
+    let q =
+        match query {
+            Ok(Query(q)) => q,
+            Err(e) => return error(
+                StatusCode::BAD_REQUEST,
+                format!(
+                    "?after= takes the last frame number you have, ?limit= how many at most ({e})"
+                ),
+            ),
+        };
+    let page = shared.table.trace().after(q.after, q.limit);
+    let mut json = format!(
+        "{{\"last\":{},\"missed\":{},\"frames\":[",
+        page.last, page.missed
+    );
+    json.push_str(&page.frames.join(","));
+    json.push_str("]}");
+    ([(header::CONTENT_TYPE, "application/json")], json).into_response()
+}
+
+async fn dbc() -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, "text/plain; charset=utf-8"),
+            (
+                header::CONTENT_DISPOSITION,
+                "attachment; filename=\"autoplug.dbc\"",
+            ),
+        ],
+        autoplug_can::DBC_FILE,
+    )
+        .into_response()
 }
 
 #[derive(Deserialize)]

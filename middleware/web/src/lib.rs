@@ -2,6 +2,8 @@
 //!
 //! - [`live`]: the live table the gateway's pipeline publishes into, each signal stamped
 //!   with the version that last changed it;
+//! - [`history`]: every signal since the session began, in fixed memory (the plots);
+//! - [`trace`]: the last frames as they came (the Bus view's trace);
 //! - [`server`]: HTTP and WebSocket on a thread of its own (tokio, axum), loopback by
 //!   default.
 //!
@@ -16,8 +18,10 @@
 //!    with every signal: its value in the unit of the catalogue, `null` while stale (no
 //!    valid frame for 3 periods of its message) or never received; `t` is bus time;
 //!    `messages` holds each catalogue message's reception by name (`id`, `count`,
-//!    `wrong_length`, `invalid`, measured `period_ms` and `jitter_ms`, the last `data` in
-//!    hex); `bus` holds `frames`, `error_frames`, `unknown_frames`, `diagnostic_frames`;
+//!    `wrong_length`, `invalid`, `period_ms` and `jitter_ms` measured over the last 64
+//!    intervals, `last_t` the bus time of the latest frame, the last `data` in hex);
+//!    `bus` holds `frames`, `error_frames`, `unknown_frames`, `diagnostic_frames` and
+//!    `load_percent` (the last second's bits on the wire, stuff bits included);
 //! 3. then, at most every 50 ms (20 Hz) and only when something changed, an `update` with
 //!    only the signals that changed since the last one sent to this client (`messages` and
 //!    `bus` only with what changed). A client that reads slowly gets fewer updates with the latest values,
@@ -36,8 +40,10 @@ pub mod assets;
 pub mod connections;
 pub mod control;
 pub mod fleet;
+pub mod history;
 pub mod live;
 pub mod server;
+pub mod trace;
 pub mod world;
 
 pub use control::{Action, Answer, Button, Command, Commands, Control, HeldControls, ReplayAction};

@@ -36,6 +36,10 @@ pub struct BusFigures {
     pub unknown_frames: u64,
     /// Diagnostic transport frames.
     pub diagnostic_frames: u64,
+    /// Bus load over the last second or more of bus time, percent of the bit rate: the
+    /// frames' exact lengths on the wire, stuff bits and intermission included (`None`
+    /// until a second has passed).
+    pub load_percent: Option<f64>,
 }
 
 /// One catalogue message's reception, as the raw bus view shows it.
@@ -49,6 +53,8 @@ struct MessageEntry {
     invalid: u64,
     period_ms: Option<f64>,
     jitter_ms: Option<f64>,
+    /// Bus time of the latest frame, µs.
+    last_us: Option<u64>,
     data: [u8; 8],
     changed: u64,
 }
@@ -65,6 +71,8 @@ struct Table {
     /// written by the session whole; empty until it first does.
     session: String,
     session_changed: u64,
+    /// Where the bus load was last measured from: bus time (µs) and wire bits so far.
+    load_from: Option<(u64, u64)>,
 }
 
 /// The live table (see the module docs).
@@ -75,6 +83,12 @@ pub struct LiveTable {
     /// The simulator's world, streamed beside the signals (never written by the
     /// pipeline: see [`crate::world`]).
     world: std::sync::Arc<crate::world::WorldChannel>,
+    /// Every signal's history since the session began (the plots look back at it).
+    history: crate::history::History,
+    /// The last frames as they came (the Bus view's trace).
+    trace: crate::trace::Trace,
+    /// Bits on the wire of every frame taken so far (for the bus load).
+    wire_bits: std::sync::atomic::AtomicU64,
 }
 
 /// A signal of the catalogue, as the stream's first message describes it.
@@ -102,7 +116,7 @@ impl LiveTable {
     /// A table with every signal of the catalogue, none received yet.
     pub fn new() -> Self {
         let state = CarState::new();
-        let entries = state
+        let entries: Vec<Entry> = state
             .signals()
             .iter()
             .map(|s| Entry {
@@ -120,6 +134,7 @@ impl LiveTable {
                 ..MessageEntry::default()
             })
             .collect();
+        let signals = entries.len();
         Self {
             table: Mutex::new(Table {
                 entries,
@@ -128,7 +143,28 @@ impl LiveTable {
             }),
             version: watch::channel(0).0,
             world: std::sync::Arc::new(crate::world::WorldChannel::new()),
+            history: crate::history::History::new(signals),
+            trace: crate::trace::Trace::new(),
+            wire_bits: std::sync::atomic::AtomicU64::new(0),
         }
+    }
+
+    /// Every signal's history since the session began, in the catalogue's order.
+    pub fn history(&self) -> &crate::history::History {
+        &self.history
+    }
+
+    /// The last frames as they came.
+    pub fn trace(&self) -> &crate::trace::Trace {
+        &self.trace
+    }
+
+    /// Takes one frame in as it came: into the trace and the bus load (the signals come
+    /// from the car state, at [`LiveTable::publish`]).
+    pub fn note_frame(&self, frame: &autoplug_logs::LogFrame) {
+        self.trace.push(frame);
+        self.wire_bits
+            .fetch_add(wire_bits(frame), std::sync::atomic::Ordering::Relaxed);
     }
 
     /// The world channel streamed beside the table: the virtual car's loop publishes the
@@ -162,13 +198,33 @@ impl LiveTable {
     pub fn publish(&self, state: &CarState) -> u64 {
         let now = state.now_us();
         let counters = state.counters();
+        let wire_bits = self.wire_bits.load(std::sync::atomic::Ordering::Relaxed);
+        let mut table = self.lock();
+        let mut load_percent = table.bus.load_percent;
+        match table.load_from {
+            Some((t, bits)) if now >= t && wire_bits >= bits => {
+                if now - t >= 1_000_000 {
+                    let seconds = (now - t) as f64 * 1e-6;
+                    load_percent = Some(
+                        100.0 * (wire_bits - bits) as f64
+                            / (seconds * f64::from(autoplug_can::BAUDRATE)),
+                    );
+                    table.load_from = Some((now, wire_bits));
+                }
+            }
+            // The first publication, or time gone back (a replay started over).
+            _ => {
+                table.load_from = Some((now, wire_bits));
+                load_percent = None;
+            }
+        }
         let bus = BusFigures {
             frames: counters.frames,
             error_frames: counters.error_frames,
             unknown_frames: counters.unknown_frames,
             diagnostic_frames: counters.diagnostic_frames,
+            load_percent,
         };
-        let mut table = self.lock();
         let next = table.version + 1;
         let mut changed = false;
         for (entry, signal) in table.entries.iter_mut().zip(state.signals()) {
@@ -184,8 +240,9 @@ impl LiveTable {
                 entry.count = stats.count;
                 entry.wrong_length = stats.wrong_length;
                 entry.invalid = stats.invalid;
-                entry.period_ms = stats.period_ms();
-                entry.jitter_ms = stats.jitter_ms();
+                entry.period_ms = stats.recent_period_ms();
+                entry.jitter_ms = stats.recent_jitter_ms();
+                entry.last_us = stats.last_us;
                 entry.data = stats.last_data;
                 entry.changed = next;
                 changed = true;
@@ -201,7 +258,11 @@ impl LiveTable {
             table.version = next;
             self.version.send_replace(next);
         }
-        table.version
+        let version = table.version;
+        let values: Vec<Option<f64>> = table.entries.iter().map(|e| e.value).collect();
+        drop(table);
+        self.history.record(now, &values);
+        version
     }
 
     /// Replaces the session's state (a JSON object: see the crate docs). Streamed only
@@ -276,7 +337,7 @@ impl LiveTable {
             // Message names are DBC identifiers: no character needs escaping.
             let _ = write!(
                 json,
-                "\"{}\":{{\"id\":{},\"count\":{},\"wrong_length\":{},\"invalid\":{},\"period_ms\":{},\"jitter_ms\":{},\"data\":\"{}\"}}",
+                "\"{}\":{{\"id\":{},\"count\":{},\"wrong_length\":{},\"invalid\":{},\"period_ms\":{},\"jitter_ms\":{},\"last_t\":{},\"data\":\"{}\"}}",
                 m.name,
                 m.id,
                 m.count,
@@ -284,6 +345,7 @@ impl LiveTable {
                 m.invalid,
                 number(m.period_ms),
                 number(m.jitter_ms),
+                number(m.last_us.map(|t| t as f64 * 1e-6)),
                 data
             );
         }
@@ -362,13 +424,32 @@ impl Publisher {
     }
 }
 
+/// The bits `frame` takes on the wire, intermission included: exact for a standard data
+/// frame (its stuff bits counted from its real bit sequence); a remote, 29-bit or error
+/// frame, which the AutoPlug bus does not send, at its length without stuff bits.
+fn wire_bits(frame: &autoplug_logs::LogFrame) -> u64 {
+    use autoplug_logs::FrameKind;
+    if let Some(can) = frame.as_can_frame() {
+        return u64::from(autoplug_virtual_bus::frame_bits(&can).total_with_ifs);
+    }
+    match frame.kind {
+        // Error flag, its superposition and delimiter, intermission.
+        FrameKind::Error => 6 + 6 + 8 + 3,
+        FrameKind::Remote if frame.extended => 67,
+        FrameKind::Remote => 47,
+        FrameKind::Data if frame.extended => 67 + 8 * frame.len() as u64,
+        FrameKind::Data => 47 + 8 * frame.len() as u64,
+    }
+}
+
 impl autoplug_gateway::Observer for Publisher {
     fn on_frame(
         &mut self,
-        _frame: &autoplug_logs::LogFrame,
+        frame: &autoplug_logs::LogFrame,
         _update: autoplug_gateway::Update,
         state: &CarState,
     ) {
+        self.table.note_frame(frame);
         let now = state.now_us();
         if self
             .last_us

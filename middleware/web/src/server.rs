@@ -693,7 +693,7 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
     }
 }
 
-fn cut(text: &str, max: usize) -> String {
+pub(crate) fn cut(text: &str, max: usize) -> String {
     text.chars().take(max).collect()
 }
 

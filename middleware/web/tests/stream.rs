@@ -609,3 +609,87 @@ fn the_world_goes_on_a_channel_of_its_own() {
     let whole: Value = serde_json::from_str(body).expect("JSON");
     assert_eq!(whole["poses"].as_array().unwrap().len(), 2, "{whole}");
 }
+
+/// The body of an HTTP response, parsed as JSON (the status must be 200).
+fn json_body(response: &str) -> Value {
+    assert!(response.starts_with("HTTP/1.1 200"), "{response}");
+    let body = response.split("\r\n\r\n").nth(1).expect("a body");
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {body}"))
+}
+
+/// The frames a pipeline hands the publisher: the vehicle speed every 10 ms for `seconds`.
+fn drive(publisher: &mut autoplug_web::Publisher, state: &mut CarState, seconds: u64) {
+    use autoplug_gateway::Observer;
+    for i in 0..seconds * 100 {
+        let frame = speed(i * 10, (i % 120) as f32);
+        let update = state.update(&frame);
+        publisher.on_frame(&frame, update, state);
+    }
+}
+
+#[test]
+fn the_history_holds_the_session_from_its_first_second() {
+    let (table, server) = server(8);
+    let mut publisher = autoplug_web::Publisher::new(table.clone());
+    let mut state = CarState::new();
+    drive(&mut publisher, &mut state, 30);
+    let history = json_body(&http_get(
+        &server,
+        "/api/history?paths=Vehicle.Speed,Vehicle.Chassis.SteeringWheel.Angle",
+    ));
+    assert_eq!(history["t0"], 0.0, "{history}");
+    let speed = &history["signals"]["Vehicle.Speed"];
+    let t = speed["t"].as_array().unwrap();
+    let v = speed["v"].as_array().unwrap();
+    assert!(t[0].as_f64().unwrap() < 0.1, "from the start: {}", t[0]);
+    assert!(t.last().unwrap().as_f64().unwrap() > 29.0);
+    assert_eq!(t.len(), v.len());
+    let top = v.iter().filter_map(Value::as_f64).fold(0.0, f64::max);
+    assert_eq!(top, 119.0, "the ramps' tops are kept");
+    let steering = &history["signals"]["Vehicle.Chassis.SteeringWheel.Angle"];
+    assert_eq!(steering["t"], speed["t"], "one time axis for every signal");
+    assert!(steering["v"].as_array().unwrap().iter().all(Value::is_null));
+    // Bad requests name what was wrong.
+    let unknown = http_get(&server, "/api/history?paths=Vehicle.Nothing");
+    assert!(unknown.starts_with("HTTP/1.1 404"), "{unknown}");
+    assert!(unknown.contains("Vehicle.Nothing"), "{unknown}");
+    let none = http_get(&server, "/api/history");
+    assert!(none.starts_with("HTTP/1.1 400"), "{none}");
+}
+
+#[test]
+fn the_trace_gives_every_frame_once_and_the_bus_load_is_measured() {
+    let (table, server) = server(8);
+    let mut publisher = autoplug_web::Publisher::new(table.clone());
+    let mut state = CarState::new();
+    drive(&mut publisher, &mut state, 2);
+    let first = json_body(&http_get(&server, "/api/trace?limit=50"));
+    let frames = first["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 50, "the newest 50");
+    assert_eq!(first["last"], 200);
+    assert_eq!(frames[49][6], "VehicleSpeedMsg");
+    let again = json_body(&http_get(&server, "/api/trace?after=200"));
+    assert!(again["frames"].as_array().unwrap().is_empty());
+    let bad = http_get(&server, "/api/trace?after=-1");
+    assert!(bad.starts_with("HTTP/1.1 400"), "{bad}");
+    // One 1-byte frame every 10 ms: 55 bits plus stuff bits, 100 a second, at 500 kbit/s
+    // about 1.1 to 1.3 % of the bus.
+    let state_json = json_body(&http_get(&server, "/api/state"));
+    let load = state_json["bus"]["load_percent"].as_f64().expect("a load");
+    assert!((1.0..1.4).contains(&load), "{load}");
+    let last_t = state_json["messages"]["VehicleSpeedMsg"]["last_t"]
+        .as_f64()
+        .unwrap();
+    assert!((last_t - 1.99).abs() < 1e-6, "{last_t}");
+}
+
+#[test]
+fn the_dbc_downloads_as_the_file_it_is() {
+    let (_table, server) = server(8);
+    let response = http_get(&server, "/api/dbc");
+    assert!(response.starts_with("HTTP/1.1 200"), "{response}");
+    assert!(response.contains("filename=\"autoplug.dbc\""));
+    let body = response.split("\r\n\r\n").nth(1).unwrap();
+    assert_eq!(body, autoplug_can::DBC_FILE);
+    assert!(body.contains("BO_ 3 VehicleSpeedMsg"), "a DBC");
+}

@@ -38,6 +38,10 @@ pub use ecu_names::{ecu_name, firmware_name, parse_ecu, ECUS, ECU_NAME_LIST};
 pub use frame::{Frame, FrameError};
 pub use spec::{CanMessage, MessageSpec, SignalKind, SignalSpec};
 
+/// The DBC file this catalogue was generated from, as it is: what the dashboard offers for
+/// download, so a user's own tools (cantools, SavvyCAN, CANalyzer) decode the same bus.
+pub const DBC_FILE: &str = include_str!("../autoplug.dbc");
+
 mod catalogue {
     use crate::codec::{self, DecodeError, SignalError};
     use crate::spec::{CanMessage, MessageSpec, SignalKind, SignalSpec};
