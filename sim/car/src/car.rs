@@ -25,6 +25,13 @@ use autoplug_virtual_bus::{AcceptanceFilter, BusConfig, NodeId, Outcome, Virtual
 /// Simulated time per tick.
 pub const TICK_US: u64 = 1_000;
 
+/// How fast the simulator's own hand turns the steering wheel at most, °/s: a quick human
+/// hand. Pure pursuit asks for the angle the road needs at once; in a spin or after a
+/// jump that would turn the wheel faster than any hand, and the gateway (which knows only
+/// the bus) would rightly judge the steering ECU faulty for what the simulator did. A
+/// person's own input is not limited: the gateway's routine is there to judge it.
+pub const HAND_RATE_DEG_S: f64 = 800.0;
+
 /// The name of the bus node through which outside tools (socketcand clients, a tester in
 /// the process) send.
 pub const EXTERNAL_SENDER: &str = "External";
@@ -364,6 +371,9 @@ pub struct VirtualCar {
     /// The simulator steers the person's car along its road (the person keeps the pedals
     /// and the rest): the lateral half of the road driver, as a desk simulator offers.
     steers_along_road: bool,
+    /// The angle the simulator's hand last set, and the tick it set it (see
+    /// [`HAND_RATE_DEG_S`]).
+    hand: Option<(u64, f64)>,
     controls: DriverControls,
     /// The bus's time (the emulated MCUs' too), µs: the scenario's time plus `start_us`.
     t_us: u64,
@@ -641,6 +651,7 @@ impl VirtualCar {
             timeline,
             manual: None,
             steers_along_road: false,
+            hand: None,
             t_us: 0,
             start_us: 0,
             log: Vec::with_capacity(1 << 16),
@@ -1306,8 +1317,16 @@ impl VirtualCar {
             steering_ratio: params.steering.ratio,
             understeer_rad_per_mps2: params.tyre.understeer_gradient_rad_per_mps2(),
         };
-        self.controls.held.steering_deg =
-            RoadDriver::steering_deg(on_track.road(), &car, self.scenario.road.lane_m);
+        let wanted = RoadDriver::steering_deg(on_track.road(), &car, self.scenario.road.lane_m);
+        // From where the hand left the wheel last tick, else from where the wheel is.
+        let from = match self.hand {
+            Some((t, angle)) if t + TICK_US == self.t_us => angle,
+            _ => self.controls.held.steering_deg,
+        };
+        let step = HAND_RATE_DEG_S * TICK_US as f64 * 1e-6;
+        let angle = from + (wanted - from).clamp(-step, step);
+        self.controls.held.steering_deg = angle;
+        self.hand = Some((self.t_us, angle));
     }
 
     /// What the ECUs' outputs command the vehicle to do. Before an ECU's first step its

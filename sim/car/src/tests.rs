@@ -971,3 +971,37 @@ fn the_timeline_puts_the_car_back_at_its_start_line() {
     assert!(after.distance_m >= before.distance_m);
     assert!(car.track().unwrap().wheels().iter().all(|w| w.on_road));
 }
+
+#[test]
+fn the_simulators_hand_turns_the_wheel_no_faster_than_a_hand() {
+    // The dashboard's car on its circuit; a person holds the wheel at full left lock, then
+    // lets the simulator steer along the road: it straightens the wheel, as fast as a
+    // quick hand (the gateway's steering routine judges faster turns a faulty ECU).
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../scenarios/dashboard.toml"
+    ))
+    .unwrap();
+    let scenario = Scenario::parse(&text, "dashboard").unwrap();
+    let mut car = crate::car::VirtualCar::new(&scenario);
+    let lock = crate::driver::MAX_STEERING_DEG;
+    let mut held = *car.take_wheel().held();
+    held.steering_deg = lock;
+    car.take_wheel().hold(held).unwrap();
+    run_ms(&mut car, 50);
+    assert_eq!(car.controls().held.steering_deg, lock);
+    car.set_steering_along_road(true).unwrap();
+    let mut last = lock;
+    let mut fastest: f64 = 0.0;
+    for _ in 0..1000 {
+        car.tick();
+        let angle = car.controls().held.steering_deg;
+        fastest = fastest.max((angle - last).abs() * 1000.0);
+        last = angle;
+    }
+    assert!(
+        fastest <= crate::car::HAND_RATE_DEG_S + 1e-6,
+        "{fastest} °/s"
+    );
+    assert!(last.abs() < 10.0, "the wheel came back straight: {last}°");
+}
