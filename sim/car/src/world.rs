@@ -122,8 +122,8 @@ const CENTRE_STEP_M: f64 = 2.0;
 const PATCH_STEP_M: f64 = 2.0;
 
 /// What the world view needs to draw the road and the car, as JSON: the road's name,
-/// width, whether it is closed, its centreline (`[x, y, heading]` every 2 m and at its
-/// end), its patches (name, μ, outline), the verge's friction, and the car's outline and
+/// width, whether it is closed, its centreline (`[x, y, heading, height]` every 2 m and
+/// at its end; the height from the road's grades, m above its start), its patches (name, μ, outline), the verge's friction, and the car's outline and
 /// wheels. `road` is `null` on the endless plane.
 pub fn description(track: Option<&NamedRoad>, params: &VehicleParams) -> Value {
     let c = &params.chassis;
@@ -144,7 +144,8 @@ pub fn description(track: Option<&NamedRoad>, params: &VehicleParams) -> Value {
             centre.push(json!([
                 round(p.x_m, 3),
                 round(p.y_m, 3),
-                round(p.heading_rad, 5)
+                round(p.heading_rad, 5),
+                round(road.height_at(s.min(length)), 3)
             ]));
             if s >= length {
                 break;
