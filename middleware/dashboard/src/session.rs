@@ -273,6 +273,9 @@ impl<'a> Session<'a> {
                 desk.borrow_mut()
                     .push(DeskInput::Friction(mu_left, mu_right))
                     .map_err(str::to_string)?;
+                self.event(format!(
+                    "road friction: µ {mu_left} under the left wheels, {mu_right} under the right"
+                ));
                 Ok(json!({ "mu_left": mu_left, "mu_right": mu_right }))
             }
             Action::RoadStart => {
