@@ -662,12 +662,14 @@ async fn history(
 ) -> Response {
     let paths = match query {
         Ok(Query(q)) => q.paths,
-        Err(e) => return error(
-            StatusCode::BAD_REQUEST,
-            format!(
+        Err(e) => {
+            return error(
+                StatusCode::BAD_REQUEST,
+                format!(
                 "name the signals: ?paths=Vehicle.Speed,Vehicle.Chassis.Brake.PedalPosition ({e})"
             ),
-        ),
+            )
+        }
     };
     let catalog = crate::LiveTable::catalog();
     let mut wanted = Vec::new();
@@ -699,7 +701,7 @@ async fn history(
         let mut json = String::from("{\"t0\":");
         match t0 {
             Some(t0) => {
-                let _ = write!(json, "{t0}");
+                let _ = write!(json, "{t0:.6}");
             }
             None => json.push_str("null"),
         }
@@ -739,16 +741,17 @@ async fn trace(
     State(shared): State<Arc<Shared>>,
     query: Result<Query<TraceQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Response {
-    let q =
-        match query {
-            Ok(Query(q)) => q,
-            Err(e) => return error(
+    let q = match query {
+        Ok(Query(q)) => q,
+        Err(e) => {
+            return error(
                 StatusCode::BAD_REQUEST,
                 format!(
                     "?after= takes the last frame number you have, ?limit= how many at most ({e})"
                 ),
-            ),
-        };
+            )
+        }
+    };
     let page = shared.table.trace().after(q.after, q.limit);
     let mut json = format!(
         "{{\"last\":{},\"missed\":{},\"frames\":[",

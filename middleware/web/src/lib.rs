@@ -13,7 +13,7 @@
 //! 1. `{"type":"catalog","signals":[{"path":"Vehicle.Speed","name":"VehicleSpeedMsg.VehicleSpeed","unit":"km/h","cycle_ms":10,"labels":[]}, …]}`:
 //!    every signal of the CAN catalogue by its COVESA VSS path, with its DBC name, unit,
 //!    its message's cycle time and, for an enumeration, the value table as `[raw, label]`
-//!    pairs;
+//!    pairs; and every message (`name`, `id`, `dlc`, `cycle_ms`, `senders`);
 //! 2. `{"type":"update","version":N,"t":SECONDS,"signals":{PATH: VALUE, …},"bus":{…}}`
 //!    with every signal: its value in the unit of the catalogue, `null` while stale (no
 //!    valid frame for 3 periods of its message) or never received; `t` is bus time;

@@ -106,6 +106,21 @@ pub struct SignalInfo {
     pub labels: Vec<(i64, &'static str)>,
 }
 
+/// A message of the catalogue, as the stream's first message describes it.
+#[derive(Clone, Debug, Serialize)]
+pub struct MessageInfo {
+    /// Name in the DBC.
+    pub name: &'static str,
+    /// 11-bit identifier.
+    pub id: u16,
+    /// Data length, bytes.
+    pub dlc: u8,
+    /// Cycle time, ms (a message is overdue after 3 of them).
+    pub cycle_ms: u32,
+    /// The nodes that send it (DBC transmitters).
+    pub senders: Vec<&'static str>,
+}
+
 impl Default for LiveTable {
     fn default() -> Self {
         Self::new()
@@ -186,6 +201,29 @@ impl LiveTable {
                 labels: s.spec.values.to_vec(),
             })
             .collect()
+    }
+
+    /// The catalogue's messages.
+    pub fn messages() -> Vec<MessageInfo> {
+        autoplug_can::MESSAGES
+            .iter()
+            .map(|m| MessageInfo {
+                name: m.name,
+                id: m.id,
+                dlc: m.dlc,
+                cycle_ms: m.cycle_time_ms,
+                senders: m.senders.iter().map(|n| n.name()).collect(),
+            })
+            .collect()
+    }
+
+    /// The stream's first message: `{"type":"catalog","signals":[…],"messages":[…]}`.
+    pub fn catalog_message() -> serde_json::Value {
+        serde_json::json!({
+            "type": "catalog",
+            "signals": Self::catalog(),
+            "messages": Self::messages(),
+        })
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Table> {

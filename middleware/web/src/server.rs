@@ -293,7 +293,7 @@ pub(crate) fn token_matches(config: &WebConfig, given: &str) -> bool {
 }
 
 async fn catalog() -> Response {
-    Json(serde_json::json!({ "type": "catalog", "signals": LiveTable::catalog() })).into_response()
+    Json(LiveTable::catalog_message()).into_response()
 }
 
 async fn state(State(shared): State<Arc<Shared>>) -> Response {
@@ -608,7 +608,7 @@ async fn serve_stream(mut socket: WebSocket, slot: ClientSlot) {
     // Subscribed before the first snapshot: a change published while it is taken or sent
     // still wakes this client (subscribing later would mark it seen, and lose it).
     let mut changes = table.subscribe();
-    let catalog = serde_json::json!({ "type": "catalog", "signals": LiveTable::catalog() });
+    let catalog = LiveTable::catalog_message();
     if !send(&mut socket, catalog.to_string()).await {
         return;
     }

@@ -10,6 +10,15 @@ export interface SignalInfo {
   labels: [number, string][];
 }
 
+/** A catalogue message, as the catalogue describes it. */
+export interface MessageSpec {
+  name: string;
+  id: number;
+  dlc: number;
+  cycle_ms: number;
+  senders: string[];
+}
+
 export interface MessageInfo {
   id: number;
   count: number;
@@ -17,6 +26,8 @@ export interface MessageInfo {
   invalid: number;
   period_ms: number | null;
   jitter_ms: number | null;
+  /** Bus time of the latest frame, s. */
+  last_t: number | null;
   data: string;
 }
 
@@ -25,6 +36,8 @@ export interface BusFigures {
   error_frames: number;
   unknown_frames: number;
   diagnostic_frames: number;
+  /** The last second's bits on the wire, percent of the bit rate. */
+  load_percent: number | null;
 }
 
 // The session's state, as the gateway writes it (see middleware/dashboard/src/session.rs).
@@ -124,6 +137,7 @@ type Listener = () => void;
 export class Live {
   catalog: SignalInfo[] = [];
   byPath = new Map<string, SignalInfo>();
+  messageSpecs: MessageSpec[] = [];
   values = new Map<string, number | null>();
   messages = new Map<string, MessageInfo>();
   bus: BusFigures | null = null;
@@ -192,6 +206,7 @@ export class Live {
     if (message.type === 'catalog') {
       this.catalog = message.signals;
       this.byPath = new Map(this.catalog.map((s) => [s.path, s]));
+      this.messageSpecs = message.messages ?? [];
       this.connected = true;
     } else if (message.type === 'update') {
       const now = performance.now();

@@ -1,18 +1,20 @@
 // The world view: the simulator's car on its road, drawn from the stream's `world`
 // messages (a channel apart from the bus's signals: the gateway never sees it). Top-down
-// (north up, following the car) or a chase view from behind; poses come at 20 Hz and are
-// interpolated to the display's frame rate. Plain canvas 2D, written here: a 3D library
-// would cost more of the first-load budget than a road of quads and a box need.
+// (north up, following the car, or the whole road at once), drawn here on a plain 2-D
+// canvas; or the driver's view in 3-D (world3d.ts, three.js, loaded when first chosen) from
+// a chase camera or the driver's seat. Poses come at 20 Hz and are interpolated to the
+// display's frame rate.
 import { h, setText } from './util';
 import type { Live } from './live';
 
 /** A pose as the channel sends it: [t, x, y, heading, speed, steer, marks]. */
-type Pose = [number, number, number, number, number, number, number];
+export type Pose = [number, number, number, number, number, number, number];
 
-interface Patch { name: string; mu: number; outline: [number, number][] }
-interface Road { name: string; width_m: number; closed: boolean; length_m: number; centre: [number, number, number][]; patches: Patch[]; verge_mu: number }
-interface Car { length_m: number; width_m: number; cg_to_front_m: number; wheels: [number, number][]; wheel_radius_m: number }
-interface Description { road: Road | null; car: Car }
+export interface Patch { name: string; mu: number; outline: [number, number][] }
+/** Centreline points: [x, y, heading, height] (height absent in recordings made before it was kept). */
+export interface Road { name: string; width_m: number; closed: boolean; length_m: number; centre: [number, number, number, number?][]; patches: Patch[]; verge_mu: number }
+export interface Car { length_m: number; width_m: number; cg_to_front_m: number; wheels: [number, number][]; wheel_radius_m: number }
+export interface Description { road: Road | null; car: Car }
 
 /** Poses kept for the path (the channel keeps 2 minutes; the path keeps longer, thinned). */
 const MAX_PATH = 6000;
@@ -119,41 +121,117 @@ export class World {
   }
 }
 
-type Mode = 'top' | 'chase';
+/** Where a point is against the road: its distance from the centreline and the road's
+ *  height there. The nearest centreline point is searched from the last one found. */
+export class RoadLocator {
+  private last = 0;
+  constructor(readonly road: Road | null) {}
+
+  private nearest(x: number, y: number): number {
+    const c = this.road!.centre;
+    const d2 = (i: number) => (c[i][0] - x) ** 2 + (c[i][1] - y) ** 2;
+    let best = Math.min(this.last, c.length - 1), bestD = d2(best);
+    // Walk downhill from the last station: the car moves little between two calls...
+    for (const step of [1, -1]) {
+      let i = best;
+      for (let n = 0; n < c.length; n++) {
+        const j = this.road!.closed ? (i + step + c.length) % c.length : i + step;
+        if (j < 0 || j >= c.length || d2(j) >= d2(i)) break;
+        i = j;
+      }
+      if (d2(i) < bestD) { best = i; bestD = d2(i); }
+    }
+    // ...but a walk that ends far away may have stopped in a dip of the distance (a jump,
+    // a road that comes back near itself): a coarse look over the whole road settles it.
+    if (bestD > 30 * 30) {
+      for (let i = 0; i < c.length; i += 4) if (d2(i) < bestD) { best = i; bestD = d2(i); }
+    }
+    this.last = best;
+    return best;
+  }
+
+  /** Distance from the centreline, m, and the road's height there, m. */
+  at(x: number, y: number): { off: number; height: number } {
+    const road = this.road;
+    if (!road || road.centre.length < 2) return { off: Infinity, height: 0 };
+    const c = road.centre;
+    const i = this.nearest(x, y);
+    const j = i + 1 < c.length ? i + 1 : i - 1;
+    const [ax, ay] = c[i], [bx, by] = c[j];
+    const len2 = (bx - ax) ** 2 + (by - ay) ** 2 || 1;
+    const k = Math.max(0, Math.min(1, ((x - ax) * (bx - ax) + (y - ay) * (by - ay)) / len2));
+    const height = (c[i][3] ?? 0) + k * ((c[j][3] ?? 0) - (c[i][3] ?? 0));
+    return { off: Math.hypot(x - (ax + k * (bx - ax)), y - (ay + k * (by - ay))), height };
+  }
+}
+
+/** Beyond this distance from the road's edge the car is off the road, m (a wheel on the grass). */
+const OFF_ROAD_MARGIN_M = 0.5;
+
+type Mode = 'top' | 'chase' | 'cockpit';
 
 /** The world view's element, drawing the live stream's world while it is in the page. */
 export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
   const world = live.world;
   const canvas = h('canvas', { class: 'world-canvas', 'data-testid': 'world-canvas', 'aria-label': 'the car on its road, as the simulator has it' }) as HTMLCanvasElement;
+  const canvas3d = h('canvas', { class: 'world-canvas', 'data-testid': 'world-canvas-3d', 'aria-label': 'the driver\'s view of the road, in 3-D', hidden: true }) as HTMLCanvasElement;
+  const banner = h('div', { class: 'world-banner', 'data-testid': 'off-road', hidden: true });
   const info = h('div', { class: 'world-info muted small', 'data-testid': 'world-info' });
   const fpsText = h('span', { class: 'muted small', 'data-testid': 'world-fps' });
-  let mode: Mode = (localStorage.getItem('autoplug.world.mode') as Mode) || 'top';
+  const saved = localStorage.getItem('autoplug.world.mode');
+  let mode: Mode = saved === 'chase' || saved === 'cockpit' ? saved : 'top';
   // 7 px/m: the 4.35 m car some 30 px long, 100 m of road across the view.
   let zoom = Number(localStorage.getItem('autoplug.world.zoom')) || 7;
-  const modeButton = (m: Mode, text: string) => {
-    const b = h('button', { class: 'btn', 'data-testid': `world-${m}`, onclick: () => { mode = m; localStorage.setItem('autoplug.world.mode', m); buttons(); } }, text);
-    return b;
-  };
-  const top = modeButton('top', 'Top');
-  const chase = modeButton('chase', 'Chase');
+  let overview = false;
+  const modeButton = (m: Mode, text: string, title: string) =>
+    h('button', { class: 'btn', 'data-testid': `world-${m}`, title, onclick: () => { mode = m; overview = false; localStorage.setItem('autoplug.world.mode', m); buttons(); } }, text);
+  const top = modeButton('top', 'Top', 'from above, north up, following the car');
+  const chase = modeButton('chase', 'Chase 3-D', 'in 3-D, from behind the car');
+  const cockpit = modeButton('cockpit', 'Driver 3-D', 'in 3-D, from the driver\'s seat');
+  const whole = h('button', { class: 'btn', 'data-testid': 'world-overview', title: 'the whole road, with the car on it', onclick: () => { mode = 'top'; overview = !overview; buttons(); } }, 'Whole road');
   const zoomIn = h('button', { class: 'btn', title: 'zoom in', onclick: () => setZoom(zoom * 1.5) }, '+');
   const zoomOut = h('button', { class: 'btn', title: 'zoom out', onclick: () => setZoom(zoom / 1.5) }, '−');
-  function setZoom(z: number): void { zoom = Math.max(0.3, Math.min(40, z)); localStorage.setItem('autoplug.world.zoom', String(zoom)); }
+  function setZoom(z: number): void { overview = false; zoom = Math.max(0.3, Math.min(40, z)); localStorage.setItem('autoplug.world.zoom', String(zoom)); buttons(); }
+  let scene: import('./world3d').World3D | null = null;
+  let loading3d = false;
   function buttons(): void {
-    top.classList.toggle('active', mode === 'top');
+    top.classList.toggle('active', mode === 'top' && !overview);
+    whole.classList.toggle('active', mode === 'top' && overview);
     chase.classList.toggle('active', mode === 'chase');
+    cockpit.classList.toggle('active', mode === 'cockpit');
     zoomIn.hidden = zoomOut.hidden = mode !== 'top';
+    canvas.hidden = mode !== 'top';
+    canvas3d.hidden = mode === 'top';
+    el.dataset.mode = overview ? 'overview' : mode;
+    delete el.dataset.triangles;
+    if (mode !== 'top' && !scene && !loading3d) {
+      loading3d = true;
+      import('./world3d').then(
+        (m) => {
+          try {
+            scene = new m.World3D(canvas3d, world);
+          } catch (e: any) {
+            problem3d = `3-D needs WebGL, which this browser did not give: ${e.message ?? e}`;
+          }
+        },
+        (e) => { problem3d = `the 3-D view did not load: ${e.message ?? e}`; },
+      );
+    }
+    if (scene) scene.mode = mode === 'cockpit' ? 'cockpit' : 'chase';
   }
-  buttons();
+  let problem3d: string | null = null;
   const el = h('div', { class: 'card world', 'data-testid': 'world' },
-    h('div', { class: 'toolbar' }, h('h3', { text: 'World (the simulator, not the bus)' }), h('div', { class: 'buttons' }, top, chase, zoomOut, zoomIn), fpsText),
-    h('div', { class: 'world-frame' }, canvas),
+    h('div', { class: 'toolbar' }, h('h3', { text: 'World (the simulator, not the bus)' }), h('div', { class: 'buttons' }, top, whole, chase, cockpit, zoomOut, zoomIn), fpsText),
+    h('div', { class: 'world-frame' }, canvas, canvas3d, banner),
     info);
+  buttons();
 
   // Frame rate over the last second, for the page and the tests.
   const frameTimes: number[] = [];
   let raf = 0;
   let lastInfo = 0;
+  let locator = new RoadLocator(null);
+  let generation = -1;
   const frame = (now: number) => {
     raf = requestAnimationFrame(frame);
     frameTimes.push(now);
@@ -169,6 +247,49 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
   raf = requestAnimationFrame(frame);
 
   function draw(now: number): void {
+    const pose = world.poseAt(now);
+    const d = world.description;
+    if (generation !== world.generation) {
+      generation = world.generation;
+      locator = new RoadLocator(d?.road ?? null);
+    }
+    if (mode !== 'top') {
+      if (scene && scene.mode !== mode) scene.mode = mode === 'cockpit' ? 'cockpit' : 'chase';
+      const drawn = scene?.draw(now, live.session?.driver ?? null) ?? false;
+      if (drawn && scene) el.dataset.triangles = String(scene.triangles);
+      if (!drawn) setText(info, problem3d ?? (d ? 'waiting for the car…' : scene ? 'no world: this bus is not the virtual car’s' : 'loading the 3-D view…'));
+    } else {
+      drawTopCanvas(pose, d);
+    }
+    if (!d || !pose) {
+      banner.hidden = true;
+      return;
+    }
+    // What the tests compare with the simulator's own numbers.
+    el.dataset.t = pose[0].toFixed(3);
+    el.dataset.x = pose[1].toFixed(2);
+    el.dataset.y = pose[2].toFixed(2);
+    el.dataset.heading = (pose[3] * 180 / Math.PI).toFixed(2);
+    el.dataset.marks = String(world.marks.reduce((n, runs) => n + runs.reduce((m, r) => m + r.length, 0), 0));
+    // Off the road: said on the view, with the way back (the car is easily lost at speed
+    // on the grass, a dot when zoomed out).
+    const where = d.road ? locator.at(pose[1], pose[2]) : null;
+    const offBy = where ? where.off - d.road!.width_m / 2 : 0;
+    const off = where !== null && offBy > OFF_ROAD_MARGIN_M;
+    banner.hidden = !off;
+    el.dataset.offRoad = String(off);
+    if (off) {
+      setText(banner, `Off the road: ${offBy < 100 ? offBy.toFixed(0) : (Math.round(offBy / 10) * 10).toFixed(0)} m from its edge, on grass (µ ${d.road!.verge_mu}). ${mode === 'top' && !overview ? 'Whole road shows where.' : ''} Stop, then Back to the start.`);
+    }
+    const road = d.road ? `${d.road.name}` : 'open ground';
+    // The speed is the car's forward speed (negative when it moves backwards).
+    const speed = pose[4] * 3.6;
+    const mu = live.session?.driver;
+    const friction = mu && (mu.mu_left !== 1 || mu.mu_right !== 1) ? ` · road µ ${mu.mu_left} left, ${mu.mu_right} right` : '';
+    if (mode === 'top' || scene) setText(info, `${road} · ${Math.abs(speed) < 0.5 ? '0' : speed.toFixed(0)} km/h${speed < -0.5 ? ' (backwards)' : ''} · heading ${(((pose[3] * 180 / Math.PI) % 360 + 360) % 360).toFixed(0)}° · t ${pose[0].toFixed(1)} s${friction}`);
+  }
+
+  function drawTopCanvas(pose: Pose | null, d: Description | null): void {
     const ratio = window.devicePixelRatio || 1;
     const w = canvas.clientWidth, hgt = canvas.clientHeight;
     if (w === 0 || hgt === 0) return;
@@ -179,8 +300,6 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
     const g = canvas.getContext('2d');
     if (!g) return;
     g.setTransform(ratio, 0, 0, ratio, 0, 0);
-    const pose = world.poseAt(now);
-    const d = world.description;
     if (!d || !pose) {
       g.fillStyle = '#d9dfd2';
       g.fillRect(0, 0, w, hgt);
@@ -190,62 +309,70 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
       setText(info, '');
       return;
     }
-    if (mode === 'top') drawTop(g, w, hgt, d, pose);
-    else drawChase(g, w, hgt, d, pose);
-    // What the tests compare with the simulator's own numbers.
-    el.dataset.t = pose[0].toFixed(3);
-    el.dataset.x = pose[1].toFixed(2);
-    el.dataset.y = pose[2].toFixed(2);
-    el.dataset.heading = (pose[3] * 180 / Math.PI).toFixed(2);
-    el.dataset.marks = String(world.marks.reduce((n, runs) => n + runs.reduce((m, r) => m + r.length, 0), 0));
-    const road = d.road ? `${d.road.name}` : 'open ground';
-    setText(info, `${road} · ${(pose[4] * 3.6).toFixed(0)} km/h · heading ${(((pose[3] * 180 / Math.PI) % 360 + 360) % 360).toFixed(0)}° · t ${pose[0].toFixed(1)} s`);
+    drawTop(g, w, hgt, d, pose);
   }
 
-  // ---- top-down, north up, the car in the middle ----
+  // ---- top-down, north up: the car in the middle, or the whole road ----
   function drawTop(g: CanvasRenderingContext2D, w: number, hgt: number, d: Description, pose: Pose): void {
     g.fillStyle = d.road ? '#b8cf9c' : '#e4e4e4';
     g.fillRect(0, 0, w, hgt);
+    let scale = zoom, cx = pose[1], cy = pose[2];
+    if (overview) {
+      // The road and the car, whole, with a margin.
+      const xs = [pose[1], ...(d.road?.centre.map((p) => p[0]) ?? [])], ys = [pose[2], ...(d.road?.centre.map((p) => p[1]) ?? [])];
+      const x0 = Math.min(...xs) - 20, x1 = Math.max(...xs) + 20, y0 = Math.min(...ys) - 20, y1 = Math.max(...ys) + 20;
+      scale = Math.min(w / (x1 - x0), hgt / (y1 - y0));
+      cx = (x0 + x1) / 2;
+      cy = (y0 + y1) / 2;
+    }
     g.save();
     g.translate(w / 2, hgt / 2);
-    g.scale(zoom, -zoom);
-    g.translate(-pose[1], -pose[2]);
-    const view = Math.hypot(w, hgt) / zoom / 2 + 10;
-    const near = (x: number, y: number) => Math.abs(x - pose[1]) < view && Math.abs(y - pose[2]) < view;
-    if (d.road) drawRoadTop(g, d.road, near);
-    else drawGrid(g, pose, view);
+    g.scale(scale, -scale);
+    g.translate(-cx, -cy);
+    const view = Math.hypot(w, hgt) / scale / 2 + 10;
+    const near = (x: number, y: number) => Math.abs(x - cx) < view && Math.abs(y - cy) < view;
+    if (d.road) drawRoadTop(g, d.road, near, scale);
+    else drawGrid(g, pose, view, scale);
     drawMarks(g);
     g.strokeStyle = 'rgba(31,95,191,0.8)';
-    g.lineWidth = 1.5 / zoom;
+    g.lineWidth = 1.5 / scale;
     polyline(g, world.path);
     g.stroke();
     drawCarTop(g, d.car, pose);
+    // Zoomed out the car is smaller than a pixel: a marker of fixed size shows it.
+    if (scale < 3) drawCarMarker(g, pose, scale);
     g.restore();
-    scaleBar(g, w, hgt);
+    scaleBar(g, w, hgt, scale);
   }
 
-  function drawRoadTop(g: CanvasRenderingContext2D, road: Road, near: (x: number, y: number) => boolean): void {
+  function drawRoadTop(g: CanvasRenderingContext2D, road: Road, near: (x: number, y: number) => boolean, scale: number): void {
     const half = road.width_m / 2;
     const side = (k: number) => road.centre.map(([x, y, hd]) => [x - k * half * Math.sin(hd), y + k * half * Math.cos(hd)] as [number, number]);
-    const left = side(1), right = side(-1);
-    g.fillStyle = '#8f8f8f';
-    // Quads between consecutive centre points, only those near the car.
-    g.beginPath();
-    for (let i = 1; i < road.centre.length; i++) {
-      if (!near(road.centre[i][0], road.centre[i][1])) continue;
-      g.moveTo(left[i - 1][0], left[i - 1][1]);
-      g.lineTo(left[i][0], left[i][1]);
-      g.lineTo(right[i][0], right[i][1]);
-      g.lineTo(right[i - 1][0], right[i - 1][1]);
-      g.closePath();
+    const left = side(1), right = side(-1), mid = side(0);
+    // The friction the person set (Dry, Wet, Split) tints each half of the asphalt.
+    const driver = live.session?.driver;
+    const halves: [[number, number][], [number, number][], number][] = [[left, mid, driver?.mu_left ?? 1], [mid, right, driver?.mu_right ?? 1]];
+    for (const [a, b, mu] of halves) {
+      g.fillStyle = mu >= 0.9 ? '#8f8f8f' : patchColour(mu);
+      // Quads between consecutive centre points, only those near the view.
+      g.beginPath();
+      for (let i = 1; i < road.centre.length; i++) {
+        if (!near(road.centre[i][0], road.centre[i][1])) continue;
+        g.moveTo(a[i - 1][0], a[i - 1][1]);
+        g.lineTo(a[i][0], a[i][1]);
+        g.lineTo(b[i][0], b[i][1]);
+        g.lineTo(b[i - 1][0], b[i - 1][1]);
+        g.closePath();
+      }
+      g.fill();
     }
-    g.fill();
     for (const patch of road.patches) {
       g.fillStyle = patchColour(patch.mu);
       polyline(g, patch.outline);
       g.closePath();
       g.fill();
     }
+    if (scale < 1.5) return;
     g.strokeStyle = '#fff';
     g.lineWidth = 0.15;
     polyline(g, left); g.stroke();
@@ -255,10 +382,10 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
     g.setLineDash([]);
   }
 
-  function drawGrid(g: CanvasRenderingContext2D, pose: Pose, view: number): void {
+  function drawGrid(g: CanvasRenderingContext2D, pose: Pose, view: number, scale: number): void {
     g.strokeStyle = '#cfcfcf';
-    g.lineWidth = 1 / zoom;
-    const step = 10;
+    g.lineWidth = 1 / scale;
+    const step = scale < 1 ? 100 : 10;
     g.beginPath();
     for (let x = Math.floor((pose[1] - view) / step) * step; x < pose[1] + view; x += step) { g.moveTo(x, pose[2] - view); g.lineTo(x, pose[2] + view); }
     for (let y = Math.floor((pose[2] - view) / step) * step; y < pose[2] + view; y += step) { g.moveTo(pose[1] - view, y); g.lineTo(pose[1] + view, y); }
@@ -304,11 +431,27 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
     g.restore();
   }
 
-  function scaleBar(g: CanvasRenderingContext2D, w: number, hgt: number): void {
-    const target = 100 / zoom;
+  function drawCarMarker(g: CanvasRenderingContext2D, pose: Pose, scale: number): void {
+    g.save();
+    g.translate(pose[1], pose[2]);
+    g.rotate(pose[3]);
+    g.scale(1 / scale, 1 / scale);
+    g.fillStyle = '#c0392b';
+    g.strokeStyle = '#fff';
+    g.lineWidth = 2;
+    g.beginPath();
+    g.moveTo(12, 0); g.lineTo(-8, 8); g.lineTo(-4, 0); g.lineTo(-8, -8);
+    g.closePath();
+    g.fill();
+    g.stroke();
+    g.restore();
+  }
+
+  function scaleBar(g: CanvasRenderingContext2D, w: number, hgt: number, scale: number): void {
+    const target = 100 / scale;
     const mag = Math.pow(10, Math.floor(Math.log10(target)));
     const metres = [1, 2, 5, 10].map((k) => k * mag).filter((m) => m <= target).pop() ?? mag;
-    const px = metres * zoom;
+    const px = metres * scale;
     g.strokeStyle = '#222'; g.fillStyle = '#222'; g.lineWidth = 1.5;
     g.beginPath(); g.moveTo(12, hgt - 16); g.lineTo(12, hgt - 10); g.lineTo(12 + px, hgt - 10); g.lineTo(12 + px, hgt - 16); g.stroke();
     g.font = '12px sans-serif';
@@ -316,165 +459,16 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
     g.fillText('N ↑', w - 34, 18);
   }
 
-  // ---- chase view: a camera behind and above the car ----
-  function drawChase(g: CanvasRenderingContext2D, w: number, hgt: number, d: Description, pose: Pose): void {
-    const sky = g.createLinearGradient(0, 0, 0, hgt * 0.45);
-    sky.addColorStop(0, '#8fb8e0'); sky.addColorStop(1, '#dbe8f3');
-    g.fillStyle = sky; g.fillRect(0, 0, w, hgt);
-    const heading = pose[3];
-    const c = Math.cos(heading), s = Math.sin(heading);
-    const cam = { x: pose[1] - 8 * c, y: pose[2] - 8 * s, z: 3.2 };
-    const pitch = 0.16; // looking down a little
-    const f = w / (2 * Math.tan(0.5 * 1.1));
-    const horizon = hgt * 0.42;
-    // World point (x, y, z) to screen; null behind the camera.
-    const project = (x: number, y: number, z: number): [number, number] | null => {
-      const dx = x - cam.x, dy = y - cam.y, dz = z - cam.z;
-      const ahead = dx * c + dy * s;
-      const left = -dx * s + dy * c;
-      const depth = ahead * Math.cos(pitch) - dz * Math.sin(pitch);
-      const up = ahead * Math.sin(pitch) + dz * Math.cos(pitch);
-      if (depth < 0.5) return null;
-      return [w / 2 - f * left / depth, horizon - f * up / depth + f * Math.tan(pitch)];
-    };
-    g.fillStyle = d.road ? '#9fbf86' : '#d8d8d8';
-    const groundTop = Math.max(0, horizon);
-    g.fillRect(0, groundTop, w, hgt - groundTop);
-    const quad = (pts: ([number, number] | null)[], colour: string) => {
-      if (pts.some((p) => p === null)) return;
-      g.fillStyle = colour;
-      g.beginPath();
-      pts.forEach((p, i) => (i ? g.lineTo(p![0], p![1]) : g.moveTo(p![0], p![1])));
-      g.closePath();
-      g.fill();
-    };
-    const range = 400;
-    const inFront = (x: number, y: number) => {
-      const ahead = (x - cam.x) * c + (y - cam.y) * s;
-      return ahead > 0.5 && ahead < range && Math.abs(-(x - cam.x) * s + (y - cam.y) * c) < range;
-    };
-    if (d.road) {
-      const road = d.road, half = road.width_m / 2;
-      const edge = (i: number, k: number) => { const [x, y, hd] = road.centre[i]; return project(x - k * half * Math.sin(hd), y + k * half * Math.cos(hd), 0); };
-      // Far to near, so that what is nearer paints over.
-      const order: number[] = [];
-      for (let i = 1; i < road.centre.length; i++) if (inFront(road.centre[i][0], road.centre[i][1]) || inFront(road.centre[i - 1][0], road.centre[i - 1][1])) order.push(i);
-      const dist = (i: number) => Math.hypot(road.centre[i][0] - cam.x, road.centre[i][1] - cam.y);
-      order.sort((a, b) => dist(b) - dist(a));
-      for (const i of order) {
-        quad([edge(i - 1, 1), edge(i, 1), edge(i, -1), edge(i - 1, -1)], i % 8 < 4 ? '#8c8c8c' : '#888888');
-      }
-      for (const patch of road.patches) {
-        const pts = patch.outline.filter(([x, y]) => inFront(x, y)).map(([x, y]) => project(x, y, 0.01));
-        if (pts.length >= 3) quad(pts, patchColour(patch.mu));
-      }
-      g.strokeStyle = '#ffffff';
-      g.lineWidth = 1.5;
-      for (const k of [1, -1]) {
-        g.beginPath();
-        let open = false;
-        for (let i = 0; i < road.centre.length; i++) {
-          const [x, y] = road.centre[i];
-          const p = inFront(x, y) ? edge(i, k) : null;
-          if (!p) { open = false; continue; }
-          if (open) g.lineTo(p[0], p[1]); else g.moveTo(p[0], p[1]);
-          open = true;
-        }
-        g.stroke();
-      }
-      // The centre line's dashes (4 m in every 12 m), so that the road is seen to pass
-      // under the car on a straight.
-      g.lineWidth = 2;
-      g.beginPath();
-      for (let i = 1; i < road.centre.length; i++) {
-        if (i % 6 >= 2) continue;
-        const [ax, ay] = road.centre[i - 1], [bx, by] = road.centre[i];
-        if (!inFront(ax, ay) || !inFront(bx, by)) continue;
-        const a = project(ax, ay, 0.01), b = project(bx, by, 0.01);
-        if (a && b) { g.moveTo(a[0], a[1]); g.lineTo(b[0], b[1]); }
-      }
-      g.stroke();
-    }
-    if (!d.road) {
-      // Open ground: a 10 m grid, so that the ground is seen to move under the car.
-      g.strokeStyle = 'rgba(120,120,120,0.6)';
-      g.lineWidth = 1;
-      const step = 10, reach = 150;
-      const x0 = Math.floor((cam.x - reach) / step) * step, y0 = Math.floor((cam.y - reach) / step) * step;
-      const line = (ax: number, ay: number, bx: number, by: number) => {
-        // Drawn in 5 m pieces: a piece behind the camera is left out, not projected wrongly.
-        const n = Math.ceil(Math.hypot(bx - ax, by - ay) / 5);
-        g.beginPath();
-        let open = false;
-        for (let k = 0; k <= n; k++) {
-          const x = ax + ((bx - ax) * k) / n, y = ay + ((by - ay) * k) / n;
-          const p = inFront(x, y) ? project(x, y, 0) : null;
-          if (!p) { open = false; continue; }
-          if (open) g.lineTo(p[0], p[1]); else g.moveTo(p[0], p[1]);
-          open = true;
-        }
-        g.stroke();
-      };
-      for (let x = x0; x <= cam.x + reach; x += step) line(x, cam.y - reach, x, cam.y + reach);
-      for (let y = y0; y <= cam.y + reach; y += step) line(cam.x - reach, y, cam.x + reach, y);
-    }
-    g.strokeStyle = 'rgba(20,20,20,0.7)';
-    g.lineWidth = 2;
-    for (const runs of world.marks) for (const run of runs) {
-      g.beginPath();
-      let open = false;
-      for (const [x, y] of run) {
-        const p = inFront(x, y) ? project(x, y, 0.02) : null;
-        if (!p) { open = false; continue; }
-        if (open) g.lineTo(p[0], p[1]); else g.moveTo(p[0], p[1]);
-        open = true;
-      }
-      g.stroke();
-    }
-    drawCarBox(d.car, pose, project, g);
-    g.fillStyle = '#333';
-    g.font = '12px sans-serif';
-    g.fillText('chase view', 10, 18);
-  }
-
-  function drawCarBox(car: Car, pose: Pose, project: (x: number, y: number, z: number) => [number, number] | null, g: CanvasRenderingContext2D): void {
-    const c = Math.cos(pose[3]), s = Math.sin(pose[3]);
-    const at = (ax: number, ay: number, z: number) => project(pose[1] + ax * c - ay * s, pose[2] + ax * s + ay * c, z);
-    const front = car.cg_to_front_m, rear = front - car.length_m, half = car.width_m / 2;
-    const face = (pts: ([number, number] | null)[], colour: string) => {
-      if (pts.some((p) => !p)) return;
-      g.fillStyle = colour;
-      g.beginPath();
-      pts.forEach((p, i) => (i ? g.lineTo(p![0], p![1]) : g.moveTo(p![0], p![1])));
-      g.closePath();
-      g.fill();
-    };
-    // Wheels (dark blocks at the corners), then the body: sides, rear, roof.
-    for (let i = 0; i < 4; i++) {
-      const [wx, wy] = car.wheels[i];
-      const r = car.wheel_radius_m, out = Math.sign(wy) * 0.12;
-      face([at(wx - r, wy + out, 0), at(wx + r, wy + out, 0), at(wx + r, wy + out, 2 * r), at(wx - r, wy + out, 2 * r)], '#151515');
-    }
-    const body = 1.05, roof = 1.4;
-    face([at(rear, half, 0.25), at(front, half, 0.25), at(front, half, body), at(rear, half, body)], '#a8322a');
-    face([at(rear, -half, 0.25), at(front, -half, 0.25), at(front, -half, body), at(rear, -half, body)], '#a8322a');
-    face([at(rear, half, 0.25), at(rear, -half, 0.25), at(rear, -half, body), at(rear, half, body)], '#c0392b');
-    face([at(rear + 0.6, half * 0.8, body), at(rear + 0.6, -half * 0.8, body), at(rear + 2.6, -half * 0.8, roof), at(rear + 2.6, half * 0.8, roof)], '#2b3440');
-    face([at(rear, half, body), at(rear, -half, body), at(rear + 0.6, -half * 0.8, body), at(rear + 0.6, half * 0.8, body)], '#b0352c');
-    // Tail lights.
-    face([at(rear - 0.01, half * 0.95, 0.75), at(rear - 0.01, half * 0.55, 0.75), at(rear - 0.01, half * 0.55, 0.9), at(rear - 0.01, half * 0.95, 0.9)], '#ff4a3d');
-    face([at(rear - 0.01, -half * 0.55, 0.75), at(rear - 0.01, -half * 0.95, 0.75), at(rear - 0.01, -half * 0.95, 0.9), at(rear - 0.01, -half * 0.55, 0.9)], '#ff4a3d');
-  }
-
   return {
     el,
     destroy() {
       cancelAnimationFrame(raf);
+      scene?.dispose();
     },
   };
 }
 
-function patchColour(mu: number): string {
+export function patchColour(mu: number): string {
   if (mu <= 0.3) return 'rgba(190,228,245,0.95)';
   if (mu <= 0.7) return 'rgba(80,110,140,0.85)';
   return 'rgba(120,120,120,0.9)';

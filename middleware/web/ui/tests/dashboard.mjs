@@ -13,7 +13,8 @@
 // (scripts/dashboard-test --firmware); its screenshots are named firmware-*.png.
 
 import assert from 'node:assert/strict';
-import { mkdirSync } from 'node:fs';
+import { mkdirSync, readFileSync } from 'node:fs';
+import { McapIndexedReader, TempBuffer } from '@mcap/core';
 import { launchChromium, steps, until } from './harness.mjs';
 
 const [base, token, shots, mode] = process.argv.slice(2);
@@ -299,7 +300,11 @@ async function scenario2(desktop) {
   await view(desktop, 'diagnostics');
   const absFaulty = await until('the ABS ECU flagged', async () => ((await verdict(desktop, 'abs')) === 'faulty' ? 'faulty' : null), 10_000);
   const absNumber = await desktop.getAttribute('[data-testid=verdict-abs] td:nth-child(3)', 'data-number');
-  ok(`scenario 2: the faulty ABS locks a wheel braking on split friction, Diagnostics flags abs ${absFaulty} with ${Number(absNumber).toFixed(2)} s`);
+  // The spin was the ABS's doing and the simulator steered through it: the steering ECU
+  // only passed on the simulator's hand, which turns the wheel no faster than a hand.
+  const steeringVerdict = await verdict(desktop, 'steering');
+  assert.ok(steeringVerdict !== 'faulty' && steeringVerdict !== 'suspect', `the steering ECU is judged ${steeringVerdict} after the spin the simulator steered through`);
+  ok(`scenario 2: the faulty ABS locks a wheel braking on split friction, Diagnostics flags abs ${absFaulty} with ${Number(absNumber).toFixed(2)} s; the steering the simulator's hand did through the spin leaves the steering ECU ${steeringVerdict}`);
   await flash(desktop, 'abs', 'abs-1.2.0.img');
   await hardStopOnSplit();
   await view(desktop, 'diagnostics');
@@ -312,6 +317,110 @@ async function scenario2(desktop) {
 }
 
 /** A flash the gateway refuses shows its reason on the ECUs view, and keeps it there. */
+/** Clicks `selector` and gives the file it downloads, as bytes. */
+async function downloaded(page, selector) {
+  const [download] = await Promise.all([page.waitForEvent('download', { timeout: 10_000 }), page.click(selector)]);
+  return { name: download.suggestedFilename(), bytes: readFileSync(await download.path()) };
+}
+
+/**
+ * Plots opened late hold the session from its start: the speed chart's first point is at
+ * the session's start and it holds the drive to 30 km/h that happened before the page
+ * opened (read back from its CSV download); a second signal joins the chart with its own
+ * axis; the cursor gives each signal's value at its time; the MCAP download reads back
+ * with Foxglove's reader.
+ */
+async function plotsFromStart(browser) {
+  const page = await browser.newPage({ viewport: { width: 1280, height: 900 } });
+  watch(page);
+  await page.goto(`${base}/plots`);
+  await page.evaluate(() => localStorage.removeItem('autoplug-plots-charts'));
+  await page.reload();
+  const chart = '[data-testid=chart-0]';
+  await page.waitForSelector(`${chart}[data-points]`, { timeout: 10_000 });
+  await page.click('[data-testid=window-session]');
+  await until('the speed chart to have its history', async () => Number(await page.getAttribute(chart, 'data-points')) > 100, 10_000);
+  const first = Number(await page.getAttribute(chart, 'data-first'));
+  const t0 = Number(await page.getAttribute(chart, 'data-start'));
+  const now = (await state()).t;
+  assert.ok(first - t0 < 1 && now - first > 20, `the chart starts at ${first} s, the session at ${t0} s, now ${now} s`);
+  const csv = (await downloaded(page, `${chart} [data-testid=export-csv]`)).bytes.toString();
+  const rows = csv.trim().split('\n');
+  assert.equal(rows[0], 't_s,VehicleSpeedMsg.VehicleSpeed [km/h]');
+  const points = rows.slice(1).map((r) => r.split(',').map(Number));
+  const top = Math.max(...points.map(([, v]) => v).filter(Number.isFinite));
+  assert.ok(points[0][0] - t0 < 1 && top >= 25, `the CSV runs from ${points[0][0]} s (session from ${t0} s), its top speed ${top} km/h`);
+  // A second signal in the same chart: ticked in the picker while chart 1 is the target.
+  await page.check('input[data-path="Vehicle.Chassis.Accelerator.PedalPosition"]');
+  await until('two signals in the chart', async () => (await page.getAttribute(chart, 'data-paths')) === 'Vehicle.Speed,Vehicle.Chassis.Accelerator.PedalPosition', 5_000);
+  await page.waitForSelector(`${chart}[data-points]`);
+  await until('the two-signal chart to have its history', async () => Number(await page.getAttribute(chart, 'data-points')) > 100, 10_000);
+  const axes = await page.$$eval(`${chart} .u-axis`, (a) => a.length);
+  assert.ok(axes >= 3, `time, km/h and % axes: ${axes}`);
+  // The cursor: over the chart, each signal's value at the cursor's time.
+  const box = await (await page.$(`${chart} .u-over`)).boundingBox();
+  await page.mouse.move(box.x + box.width * 0.5, box.y + box.height * 0.5);
+  const cursor = await until('the cursor time', async () => {
+    const text = await page.textContent(`${chart} [data-testid=cursor-t]`);
+    return text.startsWith('t = ') ? text : null;
+  }, 5_000);
+  const values = await page.$$eval(`${chart} [data-testid=legend-value]`, (v) => v.map((e) => e.textContent));
+  assert.equal(values.length, 2);
+  assert.ok(values.every((v) => v !== '' && v !== '--'), `values at the cursor: ${values}`);
+  await page.screenshot({ path: `${shots}/desktop-plots-history.png` });
+  const mcap = await downloaded(page, `${chart} [data-testid=export-mcap]`);
+  const reader = await McapIndexedReader.Initialize({ readable: new TempBuffer(mcap.bytes) });
+  const topics = [...reader.channelsById.values()].map((c) => c.topic).sort();
+  assert.deepEqual(topics, ['/PedalAccel', '/VehicleSpeedMsg']);
+  let messages = 0;
+  for await (const m of reader.readMessages()) {
+    if (messages === 0) assert.ok(JSON.parse(new TextDecoder().decode(m.data)), 'JSON messages');
+    messages += 1;
+  }
+  assert.ok(messages > 100, `${messages} messages in the MCAP`);
+  await page.close();
+  ok(`a plot opened ${(now - t0).toFixed(0)} s into the session holds it from its start (first point ${first.toFixed(2)} s, the earlier ${top.toFixed(0)} km/h in its CSV), two signals share a chart with an axis each, the cursor gives both values at ${cursor} (${values.join(', ')}), and its MCAP reads back with Foxglove's reader (${topics.join(', ')}, ${messages} messages)`);
+}
+
+/** The Bus view: a filter keeps only what matches, in the message list and the trace; the
+ *  trace pauses; statistics reset; the bus load is measured; the DBC downloads. */
+async function busFilters(page) {
+  await view(page, 'bus');
+  await until('the bus load', async () => /%$/.test(await page.textContent('[data-testid=bus-load]')), 5_000);
+  const load = await page.textContent('[data-testid=bus-load]');
+  await page.fill('[data-testid=bus-filter]', 'pedals');
+  const visible = async (name) => page.isVisible(`[data-testid=msg-${name}]`);
+  await until('the filter to apply', async () => !(await visible('EngineMsg')), 5_000);
+  assert.ok(await visible('PedalBrake') && await visible('PedalAccel'), 'the pedals\' messages stay');
+  const shown = await page.$$eval('[data-testid=bus-messages] tbody tr:not([hidden])', (rows) => rows.map((r) => r.dataset.testid));
+  assert.ok(shown.length >= 2 && shown.length < 10, `rows shown for "pedals": ${shown}`);
+  await page.screenshot({ path: `${shots}/desktop-bus-filter.png` });
+  await page.click('[data-testid=tab-trace]');
+  await until('trace rows', async () => (await page.$$('[data-testid=bus-trace] tbody tr:not([hidden])')).length > 10, 5_000);
+  const traced = await page.$$eval('[data-testid=bus-trace] tbody tr:not([hidden])', (rows) => rows.map((r) => r.textContent));
+  assert.ok(traced.every((t) => /pedal/i.test(t)), `every trace row shown matches: ${traced.slice(0, 3)}`);
+  const hidden = await page.$$eval('[data-testid=bus-trace] tbody tr[hidden]', (rows) => rows.length);
+  assert.ok(hidden > 0, 'the trace held other frames the filter hides');
+  await page.click('[data-testid=bus-pause]');
+  await page.waitForTimeout(400);
+  const pausedAt = await page.getAttribute('[data-testid=bus-trace]', 'data-last');
+  await page.waitForTimeout(800);
+  assert.equal(await page.getAttribute('[data-testid=bus-trace]', 'data-last'), pausedAt, 'paused, the trace stands');
+  await page.click('[data-testid=bus-pause]');
+  await until('the trace to go on', async () => (await page.getAttribute('[data-testid=bus-trace]', 'data-last')) !== pausedAt, 5_000);
+  await page.screenshot({ path: `${shots}/desktop-bus-trace.png` });
+  await page.click('[data-testid=tab-messages]');
+  await page.fill('[data-testid=bus-filter]', '');
+  const framesBefore = Number(await page.textContent('[data-testid=bus-frames]'));
+  await page.click('[data-testid=bus-reset]');
+  const framesAfter = Number(await page.textContent('[data-testid=bus-frames]'));
+  assert.ok(framesAfter < framesBefore / 10, `frames ${framesBefore} before the reset, ${framesAfter} after`);
+  const dbc = await downloaded(page, '[data-testid=dbc-download]');
+  assert.equal(dbc.name, 'autoplug.dbc');
+  assert.match(dbc.bytes.toString(), /BO_ 3 VehicleSpeedMsg/);
+  ok(`the Bus view filters ("pedals": ${shown.length} messages, and only their frames in the trace), its trace pauses and goes on, its statistics reset (${framesBefore} → ${framesAfter} frames), the bus load reads ${load}, the DBC downloads (${dbc.bytes.length} bytes)`);
+}
+
 async function refusedFlash(desktop) {
   const logged = problems.length;
   await view(desktop, 'ecus');
@@ -504,6 +613,8 @@ await run(async () => {
   await desktop.bringToFront();
   await view(desktop, 'drive');
   await brakeToStop(desktop);
+  await plotsFromStart(browser);
+  await busFilters(desktop);
 
   // The recording replays in a dashboard of its own: play, pause, seek.
   await view(desktop, 'recordings');
@@ -547,8 +658,14 @@ await run(async () => {
   await until('the replay\'s Drive view to say it cannot be driven', async () => /replay/i.test(await replayPage.textContent('[data-testid=drive-auth]')), 5_000);
   assert.ok(!(await replayPage.isVisible('[data-testid=pedal-accelerator]')), 'a replay shows no pedals');
   await replayPage.screenshot({ path: `${shots}/desktop-replay-world.png` });
+  await replayPage.click('[data-testid=replay-play]');
+  await view(replayPage, 'bus');
+  const replayLoad = await until('the replay\'s bus load', async () => {
+    const text = await replayPage.textContent('[data-testid=bus-load]');
+    return /^[0-9.]+ %$/.test(text) && parseFloat(text) > 1 ? text : null;
+  }, 10_000);
   await replayPage.close();
-  ok(`the recording made from the page replays in a dashboard of its own: it played (${p1.toFixed(1)} -> ${p2.toFixed(1)} s), paused at ${p3.toFixed(1)} s, jumped to 1 s; its world view shows the car on the circuit at station ${replayedOn.station} m`);
+  ok(`the recording made from the page replays in a dashboard of its own: it played (${p1.toFixed(1)} -> ${p2.toFixed(1)} s), paused at ${p3.toFixed(1)} s, jumped to 1 s; its world view shows the car on the circuit at station ${replayedOn.station} m, its Bus view a bus load of ${replayLoad}`);
 
   await refusedFlash(desktop);
   await scenario1(desktop);
@@ -565,6 +682,18 @@ await run(async () => {
   }, 5_000);
   assert.equal(await verdict(desktop, 'cruise'), 'ok', 'a reset of the ABS leaves the cruise verdict');
   ok(`a verdict is reset per ECU from the page: abs ${afterReset} after its reset, cruise still ok`);
+
+  // The trip under way shows the verdicts and codes the Diagnostics view lists.
+  await view(desktop, 'trips');
+  const tripVerdicts = await until('the trip\'s verdicts', async () => {
+    const items = await desktop.$$eval('[data-testid=current-verdicts] li', (li) => li.map((e) => [e.dataset.ecu, e.querySelector('.verdict').textContent]));
+    return items.length === 9 ? items : null;
+  }, 5_000);
+  const tripCruise = tripVerdicts.find(([ecu]) => ecu === 'cruise')?.[1];
+  assert.equal(tripCruise, 'ok', `the trip's verdicts: ${JSON.stringify(tripVerdicts)}`);
+  assert.equal(tripVerdicts.find(([ecu]) => ecu === 'abs')?.[1], 'not exercised');
+  await desktop.screenshot({ path: `${shots}/desktop-trip-verdicts.png` });
+  ok(`the trip under way shows the nine verdicts as Diagnostics has them (cruise ${tripCruise}, abs not exercised) and its trouble codes`);
 
   // A phone: the Car view fits without horizontal scrolling; every view renders.
   const phone = await browser.newPage({ viewport: { width: 390, height: 844 }, deviceScaleFactor: 2, isMobile: true, hasTouch: true });
@@ -589,6 +718,31 @@ await run(async () => {
   assert.ok(canvasWidth > 300 && phoneWidth <= 390, `the world view is ${canvasWidth} px wide on the phone, the page ${phoneWidth} px`);
   await phone.screenshot({ path: `${shots}/phone-world.png` });
   ok(`on a phone the world view fits (${canvasWidth.toFixed(0)} px wide, ${onPhone.fps} frames/s)`);
+  // The phone's whole layout: every view's name in sight, and on Drive the road, the speed
+  // and both pedals on one screen.
+  const links = await phone.$$eval('nav a', (a) => a.map((e) => { const r = e.getBoundingClientRect(); return [e.textContent, r.right, r.bottom]; }));
+  assert.ok(links.every(([, right, bottom]) => right <= 390 && bottom <= 844), `navigation on the phone: ${JSON.stringify(links)}`);
+  const below = await phone.$$eval('[data-testid=pedal-brake], [data-testid=pedal-accelerator], [data-testid=world-canvas], [data-testid=drive-speed]',
+    (els) => els.map((e) => [e.dataset.testid, Math.round(e.getBoundingClientRect().bottom)]).filter(([, bottom]) => bottom > innerHeight));
+  assert.deepEqual(below, [], 'on the phone\'s Drive view nothing of the road, the speed or the pedals is below the fold');
+  // The friction in force, shown on its button.
+  await phone.click('[data-testid=road-split]');
+  await until('Split µ shown in force', async () => (await phone.getAttribute('[data-testid=road-split]', 'aria-pressed')) === 'true', 5_000);
+  assert.equal(await phone.getAttribute('[data-testid=road-dry]', 'aria-pressed'), 'false');
+  // The driver's view in 3-D at the phone's size, chase camera and driver's seat.
+  const rates3d = {};
+  for (const camera of ['chase', 'cockpit']) {
+    await phone.click(`[data-testid=world-${camera}]`);
+    await until(`the ${camera} view drawn in 3-D`, async () => Number(await phone.getAttribute('[data-testid=world]', 'data-triangles')) > 100, 15_000);
+    await phone.waitForTimeout(1500);
+    rates3d[camera] = Number(await phone.getAttribute('[data-testid=world]', 'data-fps'));
+    await phone.screenshot({ path: `${shots}/phone-world-${camera}.png` });
+  }
+  const triangles = await phone.getAttribute('[data-testid=world]', 'data-triangles');
+  assert.ok(rates3d.chase >= 30 && rates3d.cockpit >= 30, `the 3-D view on the phone: ${JSON.stringify(rates3d)} frames/s`);
+  await phone.click('[data-testid=road-dry]');
+  await phone.click('[data-testid=world-top]');
+  ok(`on the phone the navigation is whole and Drive has the road, the speed and the pedals on one screen; Split µ shows in force; the 3-D view draws ${triangles} triangles at ${rates3d.chase} frames/s (chase) and ${rates3d.cockpit} frames/s (driver's seat)`);
 
   // Dark mode.
   await desktop.emulateMedia({ colorScheme: 'dark' });

@@ -43,8 +43,8 @@ export function diagnosticsView(ctx: Ctx): View {
         const reset = h('button', { class: 'btn small', 'data-testid': `reset-verdict-${ecu}`, title: 'the gateway\'s routines for this ECU start over', text: 'Reset' });
         reset.addEventListener('click', async () => {
           try {
+            // The session's event says so, on every open page.
             await post(`/api/ecus/${ecu}/reset-verdict`);
-            ctx.toast(`${ecu}: judged again from now on`);
           } catch (e: any) {
             ctx.toast(e.message, 'error');
           }

@@ -45,19 +45,27 @@ export function driveView(ctx: Ctx): View {
   const knobText = h('span');
   knob.addEventListener('input', () => { state.set_temp_f = Number(knob.value); input.engaged = true; });
 
-  const road = (label: string, id: string, left: number, right: number) => h('button', { class: 'btn', 'data-testid': `road-${id}`, onclick: async () => {
-    try { await post('/api/road', { mu_left: left, mu_right: right }); ctx.toast(`Road: ${label}`); } catch (e: any) { ctx.toast(e.message, 'error'); }
-  } }, label);
+  // The friction buttons show which is in force (the session says what the road has).
+  const frictions: [HTMLElement, number, number][] = [];
+  const road = (label: string, id: string, left: number, right: number) => {
+    const b = h('button', { class: 'btn', 'data-testid': `road-${id}`, 'aria-pressed': 'false', onclick: async () => {
+      // Said by the session's event (once, on every open page), shown by the buttons.
+      try { await post('/api/road', { mu_left: left, mu_right: right }); } catch (e: any) { ctx.toast(e.message, 'error'); }
+    } }, label);
+    frictions.push([b, left, right]);
+    return b;
+  };
+  const frictionNow = h('div', { class: 'muted small', 'data-testid': 'road-friction' });
 
   const toStart = h('button', { class: 'btn', 'data-testid': 'road-start', onclick: async () => {
-    try { await post('/api/road/start', {}); ctx.toast('Back at the start'); } catch (e: any) { ctx.toast(e.message, 'error'); }
+    try { await post('/api/road/start', {}); } catch (e: any) { ctx.toast(e.message, 'error'); }
   } }, 'Back to the start');
 
   // The simulator's lane keeping: it steers along the track while the person drives the
   // rest (the session says whether it is on; a car on the endless plane has no road).
   let alongRoad = false;
   const setAlongRoad = async (on: boolean) => {
-    try { await post('/api/road/steering', { along_road: on }); ctx.toast(on ? 'The simulator steers along the road' : 'You steer'); } catch (e: any) { ctx.toast(e.message, 'error'); }
+    try { await post('/api/road/steering', { along_road: on }); } catch (e: any) { ctx.toast(e.message, 'error'); }
   };
   const alongRoadButton = h('button', { class: 'btn toggle', 'data-testid': 'steer-along-road', title: 'key R', disabled: true, onclick: () => setAlongRoad(!alongRoad) },
     'Steer along the road', h('kbd', { text: 'R' }));
@@ -75,14 +83,14 @@ export function driveView(ctx: Ctx): View {
   const el = h('section', { class: 'drive' },
     world.el,
     h('div', { class: 'card' }, h('div', { class: 'toolbar' }, speedBig, readout), authState, released, tokenBox,
-      keysHelp = h('p', { class: 'muted small', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · R steer along the road (the simulator steers) · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
+      keysHelp = h('p', { class: 'muted small keys-help', text: 'Keys: ↑/W accelerator · ↓/S brake · ←→/A D steer · R steer along the road (the simulator steers) · C cruise on · X cruise off · E/Q shift up/down · L lights · M economy · T manual. A game controller or wheel works too (right trigger accelerator, left trigger brake, stick or wheel steers, bumpers shift, A/B cruise).' }), pad),
     controlsCard = h('div', { class: 'card controls' },
       h('div', { class: 'pedals' }, pedal('brake', 'Brake'), pedal('accelerator', 'Accelerator')),
       h('div', { class: 'wheel-col' }, h('div', { class: 'muted small', text: 'Steering wheel' }), steer, alongRoadButton,
         h('div', { class: 'buttons' }, btn('Cruise on / set', 'cruise_on', 'C'), btn('Cruise off', 'cruise_off', 'X'), btn('Shift down', 'shift_down', 'Q'), btn('Shift up', 'shift_up', 'E')),
         h('div', { class: 'buttons' }, ...switches),
         h('label', { class: 'knob' }, 'Cabin set point ', knob, knobText))),
-    roadCard = h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2), toStart),
+    roadCard = h('div', { class: 'card' }, h('h3', { text: 'Road (the simulator, not the car)' }), h('div', { class: 'buttons' }, road('Dry', 'dry', 1.0, 1.0), road('Wet', 'wet', 0.5, 0.5), road('Split µ (right icy)', 'split', 1.0, 0.2), toStart), frictionNow,
       h('p', { class: 'muted small', text: 'Dry, wet and split set the friction under the left and right wheels (on a track: of the road’s left and right halves; patches and the verge keep their own). Back to the start takes the standing car back to where it started.' })),
   );
 
@@ -113,6 +121,14 @@ export function driveView(ctx: Ctx): View {
         : 'This bus is not the virtual car: it cannot be driven from here.');
     }
     controlsCard.hidden = roadCard.hidden = keysHelp.hidden = readout.hidden = !drivable();
+    if (d) {
+      for (const [b, left, right] of frictions) {
+        const on = d.mu_left === left && d.mu_right === right;
+        b.classList.toggle('active', on);
+        b.setAttribute('aria-pressed', String(on));
+      }
+      setText(frictionNow, `Friction now: µ ${d.mu_left} under the left wheels, ${d.mu_right} under the right (drawn on the world view's road).`);
+    }
     alongRoad = d?.steers_along_road ?? false;
     alongRoadButton.classList.toggle('active', alongRoad);
     alongRoadButton.dataset.on = String(alongRoad);

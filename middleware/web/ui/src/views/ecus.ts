@@ -65,8 +65,8 @@ export function ecusView(ctx: Ctx): View {
       } else {
         throw new Error('choose an image from the library or upload one');
       }
+      // Said once, by the session's event (every open page sees it).
       refusal = null;
-      ctx.toast(`Flashing ${ecu.value}…`);
     } catch (e: any) {
       ctx.toast(e.message, 'error');
       refusal = e.message;

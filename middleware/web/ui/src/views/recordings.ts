@@ -18,8 +18,8 @@ export function recordingsView(ctx: Ctx): View {
   toggle.addEventListener('click', async () => {
     const on = !live.session?.recording;
     try {
+      // The session's event says it started or stopped, on every open page.
       await post('/api/recording', { on });
-      ctx.toast(on ? 'Recording started' : 'Recording stopped');
       if (!on) setTimeout(() => void load(), 300);
     } catch (e: any) {
       ctx.toast(e.message, 'error');
@@ -36,7 +36,6 @@ export function recordingsView(ctx: Ctx): View {
     try {
       const answer = await post(`/api/recordings/${encodeURIComponent(name)}/replay`);
       const url = pageUrl(answer.port);
-      ctx.toast(`Replay of ${name} opening in a new tab`);
       // Its own dashboard, beside this one: wait until this gateway has seen it listen
       // (the session's state says so), rather than knock on a port nobody listens on yet.
       for (let i = 0; i < 40; i++) {

@@ -21,6 +21,23 @@ function stats(s: Record<string, number>): HTMLElement {
   return h('dl', { class: 'stats-grid' }, ...items.flatMap(([k, v]) => [h('dt', { text: k }), h('dd', { text: v })]));
 }
 
+/** Verdicts as a list: the ECU, its verdict, the number and the evidence. */
+function verdictList(verdicts: { ecu: string; verdict: string; number: number | null; unit: string | null; evidence: string | null }[], testid: string): HTMLElement {
+  if (verdicts.length === 0) return h('p', { class: 'muted', 'data-testid': testid, text: 'No verdicts.' });
+  return h('ul', { class: 'verdict-list', 'data-testid': testid }, ...verdicts.map((v) =>
+    h('li', { 'data-ecu': v.ecu },
+      h('strong', { text: `${v.ecu} ` }),
+      h('span', { class: `verdict v-${v.verdict.replace(/ /g, '-')}`, text: v.verdict }),
+      v.number === null ? '' : ` ${num(v.number, 3)} ${v.unit ?? ''}`,
+      v.evidence ? h('span', { class: 'muted', text: ` — ${v.evidence}` }) : '')));
+}
+
+/** Trouble codes as a list: the ECU, the code, what it means. */
+function codeList(codes: { ecu: string; code: string; description: string }[], testid: string): HTMLElement {
+  if (codes.length === 0) return h('p', { class: 'muted', 'data-testid': testid, text: 'No trouble codes.' });
+  return h('ul', { 'data-testid': testid }, ...codes.map((c) => h('li', {}, h('strong', { text: `${c.ecu} ${c.code}` }), ` ${c.description}`)));
+}
+
 export function tripsView(ctx: Ctx): View {
   const { live } = ctx;
   const current = h('div', { 'data-testid': 'trip-current' });
@@ -57,9 +74,20 @@ export function tripsView(ctx: Ctx): View {
       const signal = d.series_signals.includes('Vehicle.Speed') ? 'Vehicle.Speed' : d.series_signals[0];
       const chart = h('div', { class: 'chart' });
       detail.hidden = false;
+      // A trip keeps its verdicts and codes when it ends; one under way shows the
+      // gateway's as they stand, and says so.
+      const open = d.row.status === 'open';
+      const s = live.session;
+      const verdicts = open ? (s?.diagnostics ?? []) : d.verdicts;
+      const codes = open
+        ? (s?.dtcs ?? []).flatMap((r) => r.codes.map((c) => ({ ecu: r.ecu, code: c.code, description: c.description })))
+        : d.dtcs;
+      detail.hidden = false;
       detail.replaceChildren(h('h3', { text: `Trip ${id}` }), stats(d.row.stats),
-        h('h4', { text: 'Verdicts' }), h('ul', {}, ...d.verdicts.map((v: any) => h('li', { text: `${v.ecu}: ${v.verdict} ${v.number === null ? '' : num(v.number, 3)} ${v.unit} — ${v.evidence}` }))),
-        h('h4', { text: `Trouble codes: ${d.dtcs.length || 'none'}` }),
+        h('h4', { text: open ? 'Verdicts so far (kept when the trip ends)' : d.row.status === 'interrupted' ? 'Verdicts (none kept: the gateway stopped during the trip)' : 'Verdicts at the end of the trip' }),
+        verdictList(verdicts, 'trip-verdicts'),
+        h('h4', { text: open ? 'Trouble codes so far' : 'Trouble codes at the end of the trip' }),
+        codeList(codes, 'trip-dtcs'),
         chart);
       plot?.destroy();
       plot = null;
@@ -80,12 +108,16 @@ export function tripsView(ctx: Ctx): View {
 
   let lastTrip = '';
   function update(): void {
-    const t = live.session?.trip ?? null;
-    const text = JSON.stringify(t);
+    const s = live.session;
+    const t = s?.trip ?? null;
+    const text = JSON.stringify([t, s?.diagnostics.map((d) => d.verdict), s?.dtcs]);
     if (text === lastTrip) return;
-    const wasOpen = lastTrip !== '' && lastTrip !== 'null';
+    const wasOpen = lastTrip !== '' && !lastTrip.startsWith('[null');
     lastTrip = text;
-    current.replaceChildren(t ? stats(t) : h('p', { class: 'muted', text: 'No trip under way (the engine is off and the car stands).' }));
+    const codes = (s?.dtcs ?? []).flatMap((r) => r.codes.map((c) => ({ ecu: r.ecu, code: c.code, description: c.description })));
+    current.replaceChildren(...(t
+      ? [stats(t), h('h4', { text: 'Verdicts so far' }), verdictList(s?.diagnostics ?? [], 'current-verdicts'), h('h4', { text: 'Trouble codes so far' }), codeList(codes, 'current-dtcs')]
+      : [h('p', { class: 'muted', text: 'No trip under way (the engine is off and the car stands).' })]));
     if (wasOpen && !t) void load();
   }
   void load();
