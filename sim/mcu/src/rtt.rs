@@ -79,6 +79,33 @@ impl RttLog {
         }))
     }
 
+    /// The defmt log of the image in `elf` that has a defmt table but no RTT control block
+    /// (a program that logs over semihosting, defmt-semihosting): it decodes what
+    /// [`RttLog::decode`] is given and [`RttLog::poll`] finds nothing. `None` without a
+    /// defmt table: the program's semihosting output is plain text.
+    pub fn defmt_only(name: &str, elf: &[u8]) -> Result<Option<RttLog>, String> {
+        let Some(table) = defmt_decoder::Table::parse(elf)
+            .map_err(|e| format!("{name}: the defmt table cannot be read ({e})"))?
+        else {
+            return Ok(None);
+        };
+        let locations = table.get_locations(elf).unwrap_or_default();
+        Ok(Some(RttLog {
+            name: name.to_string(),
+            control_block: 0,
+            buffer: 0,
+            table,
+            locations,
+            partial: Vec::new(),
+            malformed: 0,
+        }))
+    }
+
+    /// Whether a defmt frame has begun and not ended (bytes kept for the next call).
+    pub fn mid_frame(&self) -> bool {
+        !self.partial.is_empty()
+    }
+
     /// The image's name, as given.
     pub fn name(&self) -> &str {
         &self.name
@@ -87,6 +114,9 @@ impl RttLog {
     /// Drains up-buffer 0 (moving RdOff as a probe does) and returns the lines completed.
     pub fn poll(&mut self, chip: &mut Chip) -> Vec<LogLine> {
         let cb = self.control_block;
+        if cb == 0 {
+            return Vec::new();
+        }
         let mut id = [0u8; 10];
         if chip.sram_read(cb, &mut id).is_none() || &id != b"SEGGER RTT" {
             return Vec::new();

@@ -1,6 +1,7 @@
 //! Runs a firmware ELF on the emulated STM32F446 with a debugger attached, as `probe-rs
 //! run` runs it on a Nucleo-F446RE: the defmt log streamed as it is written (RTT, or
-//! semihosting), semihosting exit ending the run with its status, a HardFault reported
+//! semihosting), a program's plain semihosting text (`hprintln!`) printed as text,
+//! semihosting exit ending the run with its status, a HardFault reported
 //! with its registers and the last log lines. An ECU firmware (linked for slot A) starts
 //! through the bootloader, found beside it or given with `--boot`.
 //!
@@ -25,7 +26,27 @@ use autoplug_mcu::rtt::{LogLine, RttLog};
 const USAGE: &str =
     "usage: autoplug-emu ELF [--boot BOOT_ELF] [--for SECONDS | --until-exit SECONDS]";
 
+const HELP: &str = "\
+Runs a firmware ELF on AutoPlug's emulated STM32F446 (a Nucleo-F446RE), as probe-rs runs
+it on a board: its defmt log (RTT or semihosting) decoded as it is written, its plain
+semihosting text (cortex-m-semihosting's hprintln!) printed as text, a semihosting exit
+ending the run with the program's status, a HardFault reported with its registers.
+An application linked behind the bootloader starts through it (the `boot` ELF beside it,
+or --boot).
+
+Options:
+  --boot BOOT_ELF        the bootloader to start the application through
+  --for SECONDS          run this long in simulated time, as fast as the machine goes
+  --until-exit SECONDS   as --for, and fail (status 124) if the program has not exited
+  -h, --help             this text
+Without --for or --until-exit it runs until stopped, at the pace of real time.
+
+Exit status: the program's own (semihosting exit); 0 after --for; 1 on a HardFault,
+lockup or unmodelled access; 124 after --until-exit without an exit; 2 on a usage error.
+";
+
 struct Args {
+    help: bool,
     elf: PathBuf,
     boot: Option<PathBuf>,
     seconds: f64,
@@ -40,6 +61,15 @@ fn parse(args: &[String]) -> Result<Args, String> {
     let mut it = args.iter();
     while let Some(arg) = it.next() {
         match arg.as_str() {
+            "-h" | "--help" => {
+                return Ok(Args {
+                    help: true,
+                    elf: PathBuf::new(),
+                    boot: None,
+                    seconds,
+                    expect_exit,
+                })
+            }
             "--boot" => boot = Some(PathBuf::from(it.next().ok_or("--boot needs a file")?)),
             "--for" | "--until-exit" => {
                 let value = it
@@ -59,6 +89,7 @@ fn parse(args: &[String]) -> Result<Args, String> {
         }
     }
     Ok(Args {
+        help: false,
         elf: elf.ok_or("no ELF file given")?,
         boot,
         seconds,
@@ -75,6 +106,10 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if args.help {
+        println!("{USAGE}\n\n{HELP}");
+        return ExitCode::SUCCESS;
+    }
     match run(&args) {
         Ok(status) => ExitCode::from(status),
         Err(e) => {
@@ -126,6 +161,17 @@ fn run(args: &Args) -> Result<u8, String> {
         load(&boot, &mut flash, &mut logs)?;
     }
     load(&args.elf, &mut flash, &mut logs)?;
+    // Semihosting output is the program's defmt log when it has a defmt table (through
+    // its RTT log, or a decoder of its own for defmt-semihosting); without one it is text.
+    let name = args.elf.display().to_string();
+    let mut semihosting_defmt = match logs.pop() {
+        Some(log) if log.name() == name => Some(log),
+        other => {
+            logs.extend(other);
+            RttLog::defmt_only(&name, &bytes)?
+        }
+    };
+    let mut text = SemihostingText::default();
     let mut mcu = Mcu::power_on(
         flash.to_sim_flash(1),
         [0x0031_0042, 0x3433_5107, 0x3236_3731],
@@ -163,15 +209,20 @@ fn run(args: &Args) -> Result<u8, String> {
             }
         }
         let result = mcu.run_until(at);
-        for log in &mut logs {
+        for log in logs.iter_mut().chain(semihosting_defmt.as_mut()) {
             let lines = log.poll(&mut mcu.chip);
             print(lines, &mut recent);
         }
         if !mcu.semihosting_output.is_empty() {
             let bytes = std::mem::take(&mut mcu.semihosting_output);
-            if let Some(log) = logs.last_mut() {
-                let lines = log.decode(&bytes);
-                print(lines, &mut recent);
+            match semihosting_defmt.as_mut() {
+                // A write of printable text with no zero byte outside a defmt frame is the
+                // program's own text (hprintln!): defmt frames are binary and end in zero.
+                Some(log) if log.mid_frame() || !looks_like_text(&bytes) => {
+                    let lines = log.decode(&bytes);
+                    print(lines, &mut recent);
+                }
+                _ => print(text.take(&bytes), &mut recent),
             }
         }
         if let Some(fault) = mcu.faults.first().cloned() {
@@ -200,6 +251,7 @@ fn run(args: &Args) -> Result<u8, String> {
             }
         }
     };
+    print(text.finish(), &mut recent);
     if outcome != 0 && !recent.is_empty() {
         eprintln!("autoplug-emu: the last log lines:");
         for line in &recent {
@@ -207,4 +259,84 @@ fn run(args: &Args) -> Result<u8, String> {
         }
     }
     Ok(outcome)
+}
+
+/// A program's plain semihosting text, printed line by line as it comes (a line may come in
+/// several writes).
+#[derive(Default)]
+struct SemihostingText {
+    partial: Vec<u8>,
+}
+
+impl SemihostingText {
+    /// The lines `bytes` completes.
+    fn take(&mut self, bytes: &[u8]) -> Vec<LogLine> {
+        self.partial.extend_from_slice(bytes);
+        let Some(end) = self.partial.iter().rposition(|&b| b == b'\n') else {
+            return Vec::new();
+        };
+        let complete: Vec<u8> = self.partial.drain(..=end).collect();
+        String::from_utf8_lossy(&complete)
+            .lines()
+            .map(|line| LogLine {
+                level: None,
+                text: line.trim_end_matches('\r').to_string(),
+                location: None,
+            })
+            .collect()
+    }
+
+    /// What is left without a line end, at the end of the run.
+    fn finish(&mut self) -> Vec<LogLine> {
+        if self.partial.is_empty() {
+            return Vec::new();
+        }
+        self.take(b"\n")
+    }
+}
+
+/// Printable UTF-8 text with no zero byte (what `hprintln!` writes; never a defmt frame,
+/// whose rzCOBS encoding ends each frame in a zero byte).
+fn looks_like_text(bytes: &[u8]) -> bool {
+    !bytes.contains(&0)
+        && std::str::from_utf8(bytes).is_ok_and(|s| {
+            s.chars()
+                .all(|c| !c.is_control() || matches!(c, '\n' | '\r' | '\t'))
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plain_text_is_told_from_defmt_frames() {
+        assert!(looks_like_text(b"Hello, world!\n"));
+        assert!(looks_like_text("42 °C\r\n".as_bytes()));
+        assert!(
+            !looks_like_text(&[0x03, 0x01, 0x2A, 0x00]),
+            "an rzCOBS frame ends in 0"
+        );
+        assert!(!looks_like_text(&[0x1B, 0x80, 0xFF]));
+    }
+
+    #[test]
+    fn text_is_printed_a_line_at_a_time_whatever_the_writes() {
+        let mut text = SemihostingText::default();
+        assert!(text.take(b"Hello, ").is_empty());
+        let lines = text.take(b"world!\nsecond");
+        assert_eq!(lines.len(), 1);
+        assert_eq!(lines[0].text, "Hello, world!");
+        let rest = text.finish();
+        assert_eq!(rest[0].text, "second");
+        assert!(text.finish().is_empty());
+    }
+
+    #[test]
+    fn help_is_an_answer_not_an_error() {
+        let args = parse(&["--help".to_string()]).unwrap();
+        assert!(args.help);
+        let error = parse(&["--frobnicate".to_string()]).err().unwrap();
+        assert!(error.contains("--frobnicate"), "{error}");
+    }
 }
