@@ -98,43 +98,18 @@ impl<'a> FirmwareBuild<'a> {
         let script = root.join("scripts/firmware-demo-images");
         (root.join("Cargo.toml").is_file() && script.is_file()).then(|| Self {
             root,
-            cargo: std::env::var_os("CARGO").map_or_else(|| PathBuf::from("cargo"), PathBuf::from),
+            cargo: autoplug_virtual_car::firmware::cargo(),
         })
     }
 
     /// Builds the ELF files of `ecus` and the bootloader that `dir` lacks; the packages
     /// built, none if nothing was missing.
     pub fn firmware(&self, ecus: &[Node], dir: &Path) -> Result<Vec<String>, String> {
-        let missing: Vec<String> = ecus
-            .iter()
-            .filter(|&&ecu| {
-                !dir.join(format!("{}-fw", autoplug_can::firmware_name(ecu)))
-                    .is_file()
-            })
-            .map(|&ecu| format!("ecu-{}", autoplug_can::firmware_name(ecu)))
-            .collect();
-        let mut built = Vec::new();
-        if !missing.is_empty() {
-            let mut args = vec!["build", "--release", "--target", FIRMWARE_TARGET];
-            for package in &missing {
-                args.extend(["-p", package.as_str()]);
-            }
-            self.run(self.cargo.as_os_str(), &args)?;
-            built.extend(missing);
-        }
-        if !dir.join("boot").is_file() {
-            let args = [
-                "build",
-                "--release",
-                "--target",
-                FIRMWARE_TARGET,
-                "-p",
-                "autoplug-boot",
-            ];
-            self.run(self.cargo.as_os_str(), &args)?;
-            built.push("autoplug-boot".into());
-        }
-        Ok(built)
+        let choice = autoplug_virtual_car::firmware::FirmwareChoice {
+            ecus: ecus.to_vec(),
+            dir: dir.to_path_buf(),
+        };
+        choice.build_missing(self.root, &self.cargo)
     }
 
     /// Builds the demonstration releases of those of `ecus` that have them into `folder`'s
@@ -196,9 +171,6 @@ impl<'a> FirmwareBuild<'a> {
         }
     }
 }
-
-/// The firmware's target: the Nucleo-F446RE's Cortex-M4F.
-const FIRMWARE_TARGET: &str = "thumbv7em-none-eabihf";
 
 /// The report's demonstrations: the faulty software, then the fix (a newer version: the
 /// ECUs refuse to go back).

@@ -20,7 +20,7 @@ use autoplug_mcu::rtt::RttLog;
 use autoplug_virtual_bus::{NodeId, VirtualBus};
 
 /// Where the firmware the car runs comes from when none is named: the release build of
-/// `cargo build --release --target thumbv7em-none-eabihf`.
+/// `cargo build --release --target thumbv7em-none-eabihf` ([`FIRMWARE_TARGET`]).
 pub const DEFAULT_FIRMWARE_DIR: &str = "target/thumbv7em-none-eabihf/release";
 
 /// The log lines the car keeps for its caller (the oldest go first beyond this).
@@ -66,6 +66,111 @@ impl FirmwareChoice {
     pub fn runs(&self, node: Node) -> bool {
         self.ecus.contains(&node)
     }
+
+    /// The ELF files the choice needs that its directory lacks, each with the cargo
+    /// package that builds it: every ECU's firmware, and the bootloader (`autoplug-boot`).
+    pub fn missing(&self) -> Vec<(String, PathBuf)> {
+        let mut missing: Vec<(String, PathBuf)> = self
+            .ecus
+            .iter()
+            .map(|&ecu| {
+                let name = firmware_name(ecu);
+                (format!("ecu-{name}"), self.dir.join(format!("{name}-fw")))
+            })
+            .filter(|(_, file)| !file.is_file())
+            .collect();
+        if !self.dir.join("boot").is_file() {
+            missing.push(("autoplug-boot".into(), self.dir.join("boot")));
+        }
+        missing
+    }
+
+    /// The cargo commands (arguments after `cargo`) that build `missing`: the firmware in
+    /// one build, the bootloader in one of its own (its HAL features differ from the
+    /// firmware's, and one build would unify them).
+    pub fn build_commands(missing: &[(String, PathBuf)]) -> Vec<Vec<String>> {
+        let base = ["build", "--release", "--target", FIRMWARE_TARGET].map(String::from);
+        let (boot, firmware): (Vec<&String>, Vec<&String>) = missing
+            .iter()
+            .map(|(package, _)| package)
+            .partition(|p| *p == "autoplug-boot");
+        [firmware, boot]
+            .into_iter()
+            .filter(|packages| !packages.is_empty())
+            .map(|packages| {
+                let mut args = base.to_vec();
+                for p in packages {
+                    args.extend(["-p".to_string(), p.clone()]);
+                }
+                args
+            })
+            .collect()
+    }
+
+    /// Nothing when every file is there; else an error naming every missing file at once
+    /// and the commands that build them all.
+    pub fn check_files(&self) -> Result<(), String> {
+        let missing = self.missing();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        let files: Vec<String> = missing
+            .iter()
+            .map(|(_, f)| f.display().to_string())
+            .collect();
+        let commands: Vec<String> = Self::build_commands(&missing)
+            .iter()
+            .map(|args| format!("cargo {}", args.join(" ")))
+            .collect();
+        Err(format!(
+            "{} firmware file(s) missing: {}; build them in the AutoPlug checkout: {}",
+            files.len(),
+            files.join(", "),
+            commands.join(" && ")
+        ))
+    }
+
+    /// Builds what the choice lacks with `cargo` in the workspace at `root` (cargo's output
+    /// on this program's standard error); the packages built, none if nothing was missing.
+    pub fn build_missing(&self, root: &Path, cargo: &Path) -> Result<Vec<String>, String> {
+        let missing = self.missing();
+        for args in Self::build_commands(&missing) {
+            let shown = format!("{} {}", cargo.display(), args.join(" "));
+            let status = std::process::Command::new(cargo)
+                .args(&args)
+                .current_dir(root)
+                .stdin(std::process::Stdio::null())
+                .stdout(std::io::stderr())
+                .status()
+                .map_err(|e| format!("cannot run {shown}: {e}"))?;
+            if !status.success() {
+                return Err(format!("{shown} failed ({status})"));
+            }
+        }
+        self.check_files()?;
+        Ok(missing.into_iter().map(|(package, _)| package).collect())
+    }
+}
+
+/// The firmware's target: the Nucleo-F446RE's Cortex-M4F.
+pub const FIRMWARE_TARGET: &str = "thumbv7em-none-eabihf";
+
+/// The AutoPlug cargo workspace `dir` is in (the folder with its `Cargo.toml`, the
+/// bootloader's and the emulator's crates), if it is in one: there `--firmware` can build
+/// what it needs.
+pub fn workspace_root(dir: &Path) -> Option<PathBuf> {
+    dir.ancestors()
+        .find(|d| {
+            d.join("Cargo.toml").is_file()
+                && d.join("boot/Cargo.toml").is_file()
+                && d.join("sim/mcu/Cargo.toml").is_file()
+        })
+        .map(Path::to_path_buf)
+}
+
+/// The cargo to build with: the one running this program, else `cargo` on the path.
+pub fn cargo() -> PathBuf {
+    std::env::var_os("CARGO").map_or_else(|| PathBuf::from("cargo"), PathBuf::from)
 }
 
 /// A line of an emulated ECU's defmt log.

@@ -1005,3 +1005,33 @@ fn the_simulators_hand_turns_the_wheel_no_faster_than_a_hand() {
     );
     assert!(last.abs() < 10.0, "the wheel came back straight: {last}°");
 }
+
+#[test]
+fn missing_firmware_is_named_all_at_once_with_the_commands_that_build_it() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("cruise-fw"), b"").unwrap();
+    let choice = crate::firmware::FirmwareChoice::parse("all", dir.path()).unwrap();
+    let missing = choice.missing();
+    assert_eq!(
+        missing.len(),
+        9,
+        "eight ECUs and the bootloader: {missing:?}"
+    );
+    let error = choice.check_files().unwrap_err();
+    for file in ["engine-fw", "abs-fw", "boot"] {
+        assert!(error.contains(file), "{error}");
+    }
+    assert!(!error.contains("cruise-fw"), "{error}");
+    // The firmware in one build, the bootloader in one of its own.
+    assert!(
+        error.contains("cargo build --release --target thumbv7em-none-eabihf -p ecu-engine"),
+        "{error}"
+    );
+    assert!(
+        error.contains("&& cargo build --release --target thumbv7em-none-eabihf -p autoplug-boot"),
+        "{error}"
+    );
+    let commands = crate::firmware::FirmwareChoice::build_commands(&missing);
+    assert_eq!(commands.len(), 2);
+    assert_eq!(commands[0].iter().filter(|a| *a == "-p").count(), 8);
+}

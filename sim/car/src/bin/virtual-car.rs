@@ -164,6 +164,7 @@ fn main() -> ExitCode {
                 .as_deref()
                 .map(|list| FirmwareChoice::parse(list, &firmware_dir))
                 .transpose()
+                .and_then(|choice| choice.map(firmware_at_hand).transpose())
             {
                 Ok(choice) => choice,
                 Err(e) => {
@@ -247,13 +248,14 @@ fn main() -> ExitCode {
             out,
             twice,
         } => {
-            let choice = match FirmwareChoice::parse(&firmware, &firmware_dir) {
-                Ok(choice) => choice,
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    return ExitCode::from(2);
-                }
-            };
+            let choice =
+                match FirmwareChoice::parse(&firmware, &firmware_dir).and_then(firmware_at_hand) {
+                    Ok(choice) => choice,
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        return ExitCode::from(2);
+                    }
+                };
             let mut failed = false;
             for path in &scenarios {
                 let outcome = Scenario::load(path)
@@ -563,5 +565,36 @@ fn list(dir: &Path) -> ExitCode {
         ExitCode::SUCCESS
     } else {
         ExitCode::FAILURE
+    }
+}
+
+/// The firmware `choice` needs, built first when files are missing and this is run from
+/// the AutoPlug checkout whose release folder it names (`cargo`, as `cargo build-fw-<ecu>`
+/// does); elsewhere an error names every missing file and the commands that build them.
+fn firmware_at_hand(choice: FirmwareChoice) -> Result<FirmwareChoice, String> {
+    if choice.missing().is_empty() {
+        return Ok(choice);
+    }
+    let cwd = std::env::current_dir().map_err(|e| format!("the current folder: {e}"))?;
+    let root = firmware::workspace_root(&cwd);
+    let ours = root.as_ref().is_some_and(|root| {
+        let dir = cwd.join(&choice.dir);
+        dir == root.join(firmware::DEFAULT_FIRMWARE_DIR)
+    });
+    match root {
+        Some(root) if ours => {
+            eprintln!(
+                "virtual-car: building the missing firmware: {}",
+                choice
+                    .missing()
+                    .iter()
+                    .map(|(package, _)| package.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            choice.build_missing(&root, &firmware::cargo())?;
+            Ok(choice)
+        }
+        _ => choice.check_files().map(|()| choice),
     }
 }
