@@ -28,7 +28,7 @@ except ImportError:
 
 FLASH = (0x0800_0000, 0x0808_0000)  # 512 KiB on the F446RE
 RAM = (0x2000_0000, 0x2002_0000)  # 128 KiB
-# Budgets of issue 13: 64 KiB of flash and 16 KiB of static RAM per firmware (the active
+# The budgets: 64 KiB of flash and 16 KiB of static RAM per firmware (the active
 # slot, 128 KiB less the image header and signature, would take twice the flash).
 FLASH_BUDGET = 64 * 1024
 RAM_BUDGET = 16 * 1024

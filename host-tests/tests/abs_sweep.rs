@@ -84,7 +84,7 @@ fn sweep_within_bounds(
 }
 
 #[test]
-#[ignore = "issue 13: on dry asphalt (µ 1.0) the stops from 50 and 60 km/h are 1.069 and 1.059 x v²/(2µg), and the car's own limit there (sweep::car_limit_m: an ABS that knows every slip and cuts the torque at once) is already 1.054 and 1.050, so the bound of 1.05 is out of reach from 50 km/h and leaves nothing from 60; 2 split-friction stops (from 50 km/h) are longer than on the low side all round (run with --ignored; `virtual-car abs-sweep` shows where)"]
+#[ignore = "the sweep's bound is out of reach: on dry asphalt (µ 1.0) the stops from 50 and 60 km/h are 1.069 and 1.059 x v²/(2µg), and the car's own limit there (sweep::car_limit_m: an ABS that knows every slip and cuts the torque at once) is already 1.054 and 1.050, so the bound of 1.05 is out of reach from 50 km/h and leaves nothing from 60; 2 split-friction stops (from 50 km/h) are longer than on the low side all round (run with --ignored; `virtual-car abs-sweep` shows where)"]
 fn full_braking_stays_near_the_limit_on_any_friction_and_keeps_the_heading_on_split_friction() {
     sweep_within_bounds(
         &sweep::FRICTIONS,
@@ -95,11 +95,11 @@ fn full_braking_stays_near_the_limit_on_any_friction_and_keeps_the_heading_on_sp
 }
 
 /// The parts of the sweep the ABS already meets, held so they stay met: friction 0.2 to
-/// 0.8 at every speed. On ice and snow the 1 km/h VehicleSpeedMsg alone made the slip too
-/// coarse (up to 1.16 × the limit before the ABS estimated the speed itself); on wet roads
-/// the tyres peak below the fixed 12 % slip target (up to 1.12 × before the ABS sought
-/// the peak while regulating); on 0.6–0.8 the first cycle overshot the peak while the
-/// pressure was still building (up to 1.06 × from 50 km/h before the pressure hold).
+/// 0.8 at every speed. What it takes: on ice and snow the 1 km/h VehicleSpeedMsg alone is
+/// too coarse for the slip, so the ABS estimates the speed itself; on wet roads the tyres
+/// peak below a fixed slip target, so it seeks the peak while regulating; on 0.6–0.8 the
+/// first cycle would overshoot the peak while the pressure builds, so it holds the
+/// pressure.
 #[test]
 fn full_braking_up_to_friction_0_8_stays_near_the_limit() {
     sweep_within_bounds(

@@ -1,4 +1,4 @@
-//! The car on a road (issue 32): the path-following driver keeps it between the edges,
+//! The car on a road: the path-following driver keeps it between the edges,
 //! and the surface under each tyre comes from where the tyre is.
 
 use autoplug_host_tests::scenario;

@@ -10,7 +10,7 @@
 //! report's demonstration shows.
 //!
 //! Thresholds: a working ABS lets a wheel dip deep only for the tens of milliseconds of a
-//! control cycle; 0.2 s is the longest lock allowed in the project's ABS sweep (issue 13),
+//! control cycle; 0.2 s is the longest lock allowed in the project's ABS sweep (`virtual-car abs-sweep`),
 //! so a longer lock is suspect; [`FAULTY_S`] of lock is far beyond any control cycle (the
 //! faulty software of the report never releases: its wheels stay locked to standstill).
 

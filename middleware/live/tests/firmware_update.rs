@@ -1,4 +1,4 @@
-//! The A/B update on an ECU that runs its firmware (issue 31): the cruise ECU's release
+//! The A/B update on an ECU that runs its firmware: the cruise ECU's release
 //! firmware and the bootloader on an emulated STM32F446, alone on a bit-timed bus with a
 //! tester that downloads a signed release into it over UDS (the middleware's `FlashJob`).
 //! The firmware writes the image into the slot it is not running, the bootloader checks the

@@ -3,7 +3,7 @@
 //!
 //!     cargo run --release -p autoplug-virtual-car --example benchmark [-- SCENARIO [RUNS]]
 //!
-//! Goals (issue 3): at least 1000x real time, bus load under 35 %. Each run is timed on
+//! Goals: at least 1000x real time, bus load under 35 %. Each run is timed on
 //! its own; the best and median are reported, since other processes only ever slow a
 //! run down.
 

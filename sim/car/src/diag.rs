@@ -40,8 +40,8 @@ pub const BOOT_TIME_US: u64 = 20_000;
 /// The version every virtual ECU leaves the factory with.
 pub const FACTORY_VERSION: Version = Version::new(1, 0, 0);
 
-/// Bytes of a factory image's payload: about what the real firmwares take (issue 4's
-/// size table), so a download of one takes as long as a download of those would.
+/// Bytes of a factory image's payload: about what the real firmwares take (the table of
+/// `scripts/firmware-size`), so a download of one takes as long as a download of those would.
 pub const FACTORY_PAYLOAD_LEN: usize = 30 * 1024;
 
 /// The part number of an ECU's software (UDS F187).

@@ -27,7 +27,7 @@ pub const FRICTIONS: [f64; 7] = [0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0];
 /// The initial speeds of the sweep, km/h.
 pub const SPEEDS_KMH: [f64; 8] = [40.0, 50.0, 60.0, 80.0, 100.0, 130.0, 160.0, 200.0];
 
-/// Issue 13's bound on an even-friction stop, × v²/(2µg): from [`BOUND_FAST_FROM_KMH`] up ...
+/// The sweep's bound on an even-friction stop, × v²/(2µg): from [`BOUND_FAST_FROM_KMH`] up ...
 pub const BOUND_FAST: f64 = 1.05;
 
 /// ... and below it, where the brake system's pressure build-up weighs more.

@@ -1,4 +1,4 @@
-//! Firmware that goes wrong on the virtual car (issue 31): the cruise ECU's release ELF with a
+//! Firmware that goes wrong on the virtual car: the cruise ECU's release ELF with a
 //! few instructions patched in, so that it takes a HardFault, locks up until its watchdog
 //! resets it, hangs until its watchdog resets it, or writes to a peripheral no model covers. Each gets a clear report
 //! (the registers that say where, the last log lines) and the rest of the car runs on.

@@ -1,4 +1,4 @@
-//! An emulated STM32F446 that runs AutoPlug's unmodified firmware images (issue 31): the
+//! An emulated STM32F446 that runs AutoPlug's unmodified firmware images: the
 //! bootloader and an ECU's release ELF files, as `cargo fw-<ecu>` would flash them, boot on
 //! it and run their Embassy executors, timers, watchdog, flash writes and CAN.
 //!
@@ -12,8 +12,8 @@
 //! - [`rtt`]: the firmware's defmt log from its RTT buffer;
 //! - [`oracle`]: QEMU as an independent core for differential tests of [`cpu`].
 //!
-//! Still to come (issue 31): the ECUs' pins joined to the vehicle model, and the virtual
-//! car running emulated ECUs.
+//! The virtual car (`autoplug-virtual-car`) runs the ECUs' firmware on it, the pins joined
+//! to the vehicle model and the CAN controller to its bus.
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 

@@ -1,4 +1,4 @@
-//! Roads for the AutoPlug virtual car (issue 32): a centreline of straights, arcs and
+//! Roads for the AutoPlug virtual car: a centreline of straights, arcs and
 //! clothoids, the road's width, grade sections and friction patches (wet, icy, split
 //! friction), and the queries the simulation asks of it every step: where a point lies on
 //! the road (station along it, lateral offset, the road's heading there) and what surface
