@@ -26,7 +26,7 @@ use can::Can;
 use flash_if::{FlashEffect, FlashInterface};
 use gpio::Port;
 use iwdg::Iwdg;
-use rcc::{Clocks, Rcc, ResetCause, APB1, APB2};
+use rcc::{Clocks, Rcc, ResetCause, AHB1, APB1, APB2};
 use timer::Timer;
 
 /// An access a model does not cover: what, for the report.
@@ -53,78 +53,134 @@ pub fn merge(old: u32, value: u32, mask: u32) -> u32 {
     (old & !mask) | (value & mask)
 }
 
-/// The peripherals by base address (RM0390 table 1), for the reports of unmodelled ones.
-const PERIPHERAL_NAMES: &[(u32, &str)] = &[
-    (0x4000_0000, "TIM2"),
-    (0x4000_0400, "TIM3"),
-    (0x4000_0800, "TIM4"),
-    (0x4000_0C00, "TIM5"),
-    (0x4000_1000, "TIM6"),
-    (0x4000_1400, "TIM7"),
-    (0x4000_1800, "TIM12"),
-    (0x4000_1C00, "TIM13"),
-    (0x4000_2000, "TIM14"),
-    (0x4000_2800, "RTC"),
-    (0x4000_2C00, "WWDG"),
-    (0x4000_3000, "IWDG"),
-    (0x4000_3800, "SPI2"),
-    (0x4000_3C00, "SPI3"),
-    (0x4000_4000, "SPDIFRX"),
-    (0x4000_4400, "USART2"),
-    (0x4000_4800, "USART3"),
-    (0x4000_4C00, "UART4"),
-    (0x4000_5000, "UART5"),
-    (0x4000_5400, "I2C1"),
-    (0x4000_5800, "I2C2"),
-    (0x4000_5C00, "I2C3"),
-    (0x4000_6000, "FMPI2C1"),
-    (0x4000_6400, "CAN1"),
-    (0x4000_6800, "CAN2"),
-    (0x4000_6C00, "HDMI-CEC"),
-    (0x4000_7000, "PWR"),
-    (0x4000_7400, "DAC"),
-    (0x4001_0000, "TIM1"),
-    (0x4001_0400, "TIM8"),
-    (0x4001_1000, "USART1"),
-    (0x4001_1400, "USART6"),
-    (0x4001_2000, "ADC1/2/3"),
-    (0x4001_2C00, "SDIO"),
-    (0x4001_3000, "SPI1"),
-    (0x4001_3400, "SPI4"),
-    (0x4001_3800, "SYSCFG"),
-    (0x4001_3C00, "EXTI"),
-    (0x4001_4000, "TIM9"),
-    (0x4001_4400, "TIM10"),
-    (0x4001_4800, "TIM11"),
-    (0x4001_5800, "SAI1"),
-    (0x4001_5C00, "SAI2"),
-    (0x4002_0000, "GPIOA"),
-    (0x4002_0400, "GPIOB"),
-    (0x4002_0800, "GPIOC"),
-    (0x4002_0C00, "GPIOD"),
-    (0x4002_1000, "GPIOE"),
-    (0x4002_1400, "GPIOF"),
-    (0x4002_1800, "GPIOG"),
-    (0x4002_1C00, "GPIOH"),
-    (0x4002_3000, "CRC"),
-    (0x4002_3800, "RCC"),
-    (0x4002_3C00, "FLASH"),
-    (0x4002_4000, "BKPSRAM"),
-    (0x4002_6000, "DMA1"),
-    (0x4002_6400, "DMA2"),
-    (0x4004_0000, "USB OTG HS"),
-    (0x5000_0000, "USB OTG FS"),
-    (0x5005_0000, "DCMI"),
+/// Which model answers a peripheral's registers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Model {
+    Tim3,
+    Tim12,
+    Iwdg,
+    Can1,
+    Pwr,
+    Adc,
+    /// A GPIO port, by its index (A is 0).
+    Gpio(usize),
+    Rcc,
+    FlashInterface,
+}
+
+/// A peripheral of the memory map: its base (each takes 1 KiB), its name, the RCC enable
+/// bit that gates its clock (bus and bit) and the model that answers it (`None`: named
+/// in reports, not modelled). Reads, writes and the reports of what is not modelled all
+/// look here.
+struct Peripheral {
+    base: u32,
+    name: &'static str,
+    clock: Option<(usize, u32)>,
+    model: Option<Model>,
+}
+
+impl Peripheral {
+    const fn named(base: u32, name: &'static str) -> Self {
+        Self {
+            base,
+            name,
+            clock: None,
+            model: None,
+        }
+    }
+
+    const fn modelled(
+        base: u32,
+        name: &'static str,
+        clock: Option<(usize, u32)>,
+        model: Model,
+    ) -> Self {
+        Self {
+            base,
+            name,
+            clock,
+            model: Some(model),
+        }
+    }
+}
+
+/// Bytes of a peripheral's register block.
+const PERIPHERAL_SIZE: u32 = 0x400;
+
+/// The peripherals by base address (RM0390 table 1), in address order.
+const PERIPHERAL_MAP: &[Peripheral] = &[
+    Peripheral::named(0x4000_0000, "TIM2"),
+    Peripheral::modelled(0x4000_0400, "TIM3", Some((APB1, 1)), Model::Tim3),
+    Peripheral::named(0x4000_0800, "TIM4"),
+    Peripheral::named(0x4000_0C00, "TIM5"),
+    Peripheral::named(0x4000_1000, "TIM6"),
+    Peripheral::named(0x4000_1400, "TIM7"),
+    Peripheral::modelled(0x4000_1800, "TIM12", Some((APB1, 6)), Model::Tim12),
+    Peripheral::named(0x4000_1C00, "TIM13"),
+    Peripheral::named(0x4000_2000, "TIM14"),
+    Peripheral::named(0x4000_2800, "RTC"),
+    Peripheral::named(0x4000_2C00, "WWDG"),
+    Peripheral::modelled(0x4000_3000, "IWDG", None, Model::Iwdg),
+    Peripheral::named(0x4000_3800, "SPI2"),
+    Peripheral::named(0x4000_3C00, "SPI3"),
+    Peripheral::named(0x4000_4000, "SPDIFRX"),
+    Peripheral::named(0x4000_4400, "USART2"),
+    Peripheral::named(0x4000_4800, "USART3"),
+    Peripheral::named(0x4000_4C00, "UART4"),
+    Peripheral::named(0x4000_5000, "UART5"),
+    Peripheral::named(0x4000_5400, "I2C1"),
+    Peripheral::named(0x4000_5800, "I2C2"),
+    Peripheral::named(0x4000_5C00, "I2C3"),
+    Peripheral::named(0x4000_6000, "FMPI2C1"),
+    Peripheral::modelled(0x4000_6400, "CAN1", Some((APB1, 25)), Model::Can1),
+    Peripheral::named(0x4000_6800, "CAN2"),
+    Peripheral::named(0x4000_6C00, "HDMI-CEC"),
+    Peripheral::modelled(0x4000_7000, "PWR", Some((APB1, 28)), Model::Pwr),
+    Peripheral::named(0x4000_7400, "DAC"),
+    Peripheral::named(0x4001_0000, "TIM1"),
+    Peripheral::named(0x4001_0400, "TIM8"),
+    Peripheral::named(0x4001_1000, "USART1"),
+    Peripheral::named(0x4001_1400, "USART6"),
+    Peripheral::modelled(0x4001_2000, "ADC1/2/3", Some((APB2, 8)), Model::Adc),
+    Peripheral::named(0x4001_2C00, "SDIO"),
+    Peripheral::named(0x4001_3000, "SPI1"),
+    Peripheral::named(0x4001_3400, "SPI4"),
+    Peripheral::named(0x4001_3800, "SYSCFG"),
+    Peripheral::named(0x4001_3C00, "EXTI"),
+    Peripheral::named(0x4001_4000, "TIM9"),
+    Peripheral::named(0x4001_4400, "TIM10"),
+    Peripheral::named(0x4001_4800, "TIM11"),
+    Peripheral::named(0x4001_5800, "SAI1"),
+    Peripheral::named(0x4001_5C00, "SAI2"),
+    Peripheral::modelled(0x4002_0000, "GPIOA", Some((AHB1, 0)), Model::Gpio(0)),
+    Peripheral::modelled(0x4002_0400, "GPIOB", Some((AHB1, 1)), Model::Gpio(1)),
+    Peripheral::modelled(0x4002_0800, "GPIOC", Some((AHB1, 2)), Model::Gpio(2)),
+    Peripheral::modelled(0x4002_0C00, "GPIOD", Some((AHB1, 3)), Model::Gpio(3)),
+    Peripheral::modelled(0x4002_1000, "GPIOE", Some((AHB1, 4)), Model::Gpio(4)),
+    Peripheral::modelled(0x4002_1400, "GPIOF", Some((AHB1, 5)), Model::Gpio(5)),
+    Peripheral::modelled(0x4002_1800, "GPIOG", Some((AHB1, 6)), Model::Gpio(6)),
+    Peripheral::modelled(0x4002_1C00, "GPIOH", Some((AHB1, 7)), Model::Gpio(7)),
+    Peripheral::named(0x4002_3000, "CRC"),
+    Peripheral::modelled(0x4002_3800, "RCC", None, Model::Rcc),
+    Peripheral::modelled(0x4002_3C00, "FLASH", None, Model::FlashInterface),
+    Peripheral::named(0x4002_4000, "BKPSRAM"),
+    Peripheral::named(0x4002_6000, "DMA1"),
+    Peripheral::named(0x4002_6400, "DMA2"),
+    Peripheral::named(0x4004_0000, "USB OTG HS"),
+    Peripheral::named(0x5000_0000, "USB OTG FS"),
+    Peripheral::named(0x5005_0000, "DCMI"),
 ];
+
+/// The peripheral whose register block holds `address`.
+fn peripheral_at(address: u32) -> Option<&'static Peripheral> {
+    let after = PERIPHERAL_MAP.partition_point(|p| p.base <= address);
+    let p = PERIPHERAL_MAP.get(after.checked_sub(1)?)?;
+    (address - p.base < PERIPHERAL_SIZE).then_some(p)
+}
 
 /// The name of the peripheral at `address`.
 pub fn peripheral_name(address: u32) -> &'static str {
-    PERIPHERAL_NAMES
-        .iter()
-        .rev()
-        .find(|(base, _)| address >= *base)
-        .filter(|(base, _)| address - base < 0x400)
-        .map_or("no peripheral", |(_, name)| name)
+    peripheral_at(address).map_or("no peripheral", |p| p.name)
 }
 
 /// The interrupt numbers (RM0390 table 38) of the modelled peripherals.
@@ -365,41 +421,37 @@ impl Chip {
         )))
     }
 
+    /// The modelled peripheral at `address`, its clock checked, and the offset into it.
+    fn modelled_peripheral(&self, address: u32) -> Result<(Model, u32), Unmodelled> {
+        let p = peripheral_at(address)
+            .filter(|p| p.model.is_some())
+            .ok_or_else(|| Unmodelled(String::from("the peripheral is not modelled")))?;
+        if let Some((bus, bit)) = p.clock {
+            self.clock_gate(bus, bit, p.name)?;
+        }
+        Ok((p.model.unwrap_or(Model::Rcc), address - p.base))
+    }
+
     fn peripheral_read(&mut self, address: u32, now: u64) -> Result<u32, Unmodelled> {
-        let base = address & !0x3FF;
-        let offset = address & 0x3FF;
-        match base {
-            0x4000_0400 => self
-                .clock_gate(APB1, 1, "TIM3")
-                .and_then(|()| self.tim3.read(offset, now)),
-            0x4000_1800 => self
-                .clock_gate(APB1, 6, "TIM12")
-                .and_then(|()| self.tim12.read(offset, now)),
-            0x4000_3000 => {
+        let (model, offset) = self.modelled_peripheral(address)?;
+        match model {
+            Model::Tim3 => self.tim3.read(offset, now),
+            Model::Tim12 => self.tim12.read(offset, now),
+            Model::Iwdg => {
                 let ns = self.ns_at(now);
                 self.iwdg.read(offset, ns)
             }
-            0x4000_6400 => self
-                .clock_gate(APB1, 25, "CAN1")
-                .and_then(|()| self.can1.read(offset)),
-            0x4000_7000 => self
-                .clock_gate(APB1, 28, "PWR")
-                .and_then(|()| self.rcc.pwr_read(offset)),
-            0x4001_2000 => {
-                self.clock_gate(APB2, 8, "ADC1")?;
+            Model::Can1 => self.can1.read(offset),
+            Model::Pwr => self.rcc.pwr_read(offset),
+            Model::Adc => {
                 if (0x100..0x300).contains(&offset) {
                     return Err(Unmodelled::feature("ADC2 and ADC3"));
                 }
                 self.adc.read(offset, now)
             }
-            0x4002_0000..=0x4002_1C00 => {
-                let port = ((base - 0x4002_0000) / 0x400) as usize;
-                self.clock_gate(rcc::AHB1, port as u32, "GPIO")?;
-                self.gpio[port].read(offset)
-            }
-            0x4002_3800 => self.rcc.read(offset),
-            0x4002_3C00 => self.flash_if.read(offset),
-            _ => Err(Unmodelled(String::from("the peripheral is not modelled"))),
+            Model::Gpio(port) => self.gpio[port].read(offset),
+            Model::Rcc => self.rcc.read(offset),
+            Model::FlashInterface => self.flash_if.read(offset),
         }
     }
 
@@ -410,51 +462,38 @@ impl Chip {
         mask: u32,
         now: u64,
     ) -> Result<Result<(), BusError>, Unmodelled> {
-        let base = address & !0x3FF;
-        let offset = address & 0x3FF;
+        let (model, offset) = self.modelled_peripheral(address)?;
         self.touched = true;
-        match base {
-            0x4000_0400 => self
-                .clock_gate(APB1, 1, "TIM3")
-                .and_then(|()| self.tim3.write(offset, value, mask, now))?,
-            0x4000_1800 => self
-                .clock_gate(APB1, 6, "TIM12")
-                .and_then(|()| self.tim12.write(offset, value, mask, now))?,
-            0x4000_3000 => {
+        match model {
+            Model::Tim3 => self.tim3.write(offset, value, mask, now)?,
+            Model::Tim12 => self.tim12.write(offset, value, mask, now)?,
+            Model::Iwdg => {
                 let ns = self.ns_at(now);
                 self.iwdg.write(offset, value, mask, ns)?
             }
-            0x4000_6400 => self
-                .clock_gate(APB1, 25, "CAN1")
-                .and_then(|()| self.can1.write(offset, value, mask, now))?,
-            0x4000_7000 => self
-                .clock_gate(APB1, 28, "PWR")
-                .and_then(|()| self.rcc.pwr_write(offset, value, mask))?,
-            0x4001_2000 => {
-                self.clock_gate(APB2, 8, "ADC1")?;
+            Model::Can1 => self.can1.write(offset, value, mask, now)?,
+            Model::Pwr => self.rcc.pwr_write(offset, value, mask)?,
+            Model::Adc => {
                 if (0x100..0x300).contains(&offset) {
                     return Err(Unmodelled::feature("ADC2 and ADC3"));
                 }
                 let divisor = (self.clocks.hclk / self.clocks.pclk2.max(1)).max(1);
                 self.adc.write(offset, value, mask, now, divisor)?
             }
-            0x4002_0000..=0x4002_1C00 => {
-                let port = ((base - 0x4002_0000) / 0x400) as usize;
-                self.clock_gate(rcc::AHB1, port as u32, "GPIO")?;
-                self.gpio[port].write(offset, value, mask)?
-            }
-            0x4002_3800 => {
+            Model::Gpio(port) => self.gpio[port].write(offset, value, mask)?,
+            Model::Rcc => {
                 if let Some((bus, bits)) = self.rcc.write(offset, value, mask)? {
                     self.reset_peripherals(bus, bits);
                 }
                 self.rcc.settle();
                 self.clocks_changed(now);
             }
-            0x4002_3C00 => match self.flash_if.write(offset, value, mask, &mut self.flash)? {
-                FlashEffect::BusFault => return Ok(Err(BusError::Fault)),
-                effect => self.flash_effect(effect),
-            },
-            _ => return Err(Unmodelled(String::from("the peripheral is not modelled"))),
+            Model::FlashInterface => {
+                match self.flash_if.write(offset, value, mask, &mut self.flash)? {
+                    FlashEffect::BusFault => return Ok(Err(BusError::Fault)),
+                    effect => self.flash_effect(effect),
+                }
+            }
         }
         Ok(Ok(()))
     }
@@ -636,6 +675,37 @@ impl Bus for Chip {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn one_table_names_every_peripheral_and_routes_the_modelled_ones() {
+        assert!(
+            PERIPHERAL_MAP
+                .windows(2)
+                .all(|w| w[0].base + PERIPHERAL_SIZE <= w[1].base),
+            "in address order, without overlaps"
+        );
+        assert_eq!(peripheral_name(0x4000_6404), "CAN1");
+        assert_eq!(peripheral_name(0x4002_1C14), "GPIOH");
+        assert_eq!(peripheral_name(0x4001_1004), "USART1");
+        assert_eq!(peripheral_name(0x4000_2400), "no peripheral");
+        assert_eq!(peripheral_name(0x3FFF_FFFC), "no peripheral");
+        let modelled: Vec<&str> = PERIPHERAL_MAP
+            .iter()
+            .filter(|p| p.model.is_some())
+            .map(|p| p.name)
+            .collect();
+        assert_eq!(modelled.len(), 16, "{modelled:?}");
+        let chip = Chip::new(SimFlash::new(1), [0; 3]);
+        // RCC answers without a clock of its own; GPIOC is gated by its AHB1 bit (off
+        // after reset); USART1 is named but not modelled.
+        assert!(chip.modelled_peripheral(0x4002_3800).is_ok());
+        let gated = chip.modelled_peripheral(0x4002_0800).unwrap_err().0;
+        assert!(
+            gated.starts_with("GPIOC is accessed with its clock disabled"),
+            "{gated}"
+        );
+        assert!(chip.modelled_peripheral(0x4001_1000).is_err());
+    }
 
     #[test]
     fn cycles_and_nanoseconds_convert_as_one_wide_product_would() {
