@@ -10,7 +10,6 @@
 //! - [`node`]: emulated MCUs as nodes of the virtual car's bit-timed bus;
 //! - [`map`] and [`programming`]: the memory map, and the flash as a programmer leaves it;
 //! - [`rtt`]: the firmware's defmt log from its RTT buffer;
-//! - [`oracle`]: QEMU as an independent core for differential tests of [`cpu`].
 //!
 //! The virtual car (`autoplug-virtual-car`) runs the ECUs' firmware on it, the pins joined
 //! to the vehicle model and the CAN controller to its bus.
@@ -22,6 +21,5 @@ pub mod cpu;
 pub mod map;
 pub mod mcu;
 pub mod node;
-pub mod oracle;
 pub mod programming;
 pub mod rtt;

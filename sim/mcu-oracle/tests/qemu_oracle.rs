@@ -1,4 +1,4 @@
-//! The QEMU oracle (`autoplug_mcu::oracle`) against results known from the ARMv7-M
+//! The QEMU oracle (`autoplug_mcu_oracle`) against results known from the ARMv7-M
 //! Architecture Reference Manual (DDI 0403E), and the block generator's promises.
 //!
 //! The hand-written blocks were assembled with LLVM 14's `llvm-mc -triple=thumbv7em-none-eabihf
@@ -9,8 +9,8 @@
 use std::time::Instant;
 
 use autoplug_mcu::cpu::ArchState;
-use autoplug_mcu::oracle::qemu::qemu_binary;
-use autoplug_mcu::oracle::{
+use autoplug_mcu_oracle::qemu::qemu_binary;
+use autoplug_mcu_oracle::{
     Block, BlockGen, OracleError, Outcome, Qemu, CODE_BASE, DATA_BASE, DATA_LEN,
 };
 
@@ -448,10 +448,10 @@ fn a_missing_qemu_says_how_to_install_it() {
 }
 
 /// The emulated core against QEMU on generated blocks: the CI sample. A longer run:
-/// `cargo run --release -p autoplug-mcu --example differential -- --blocks 100000`.
+/// `cargo run --release -p autoplug-mcu-oracle --example differential -- --blocks 100000`.
 #[test]
 fn the_emulated_core_agrees_with_qemu_on_generated_blocks() {
-    use autoplug_mcu::oracle::differential::{compare, emulate};
+    use autoplug_mcu_oracle::differential::{compare, emulate};
     let mut qemu = qemu();
     let mut blocks = BlockGen::new(20_111);
     let count = 2_000;

@@ -1,4 +1,5 @@
-//! An independent Cortex-M4F for differential testing of the emulated core: QEMU's
+//! An independent Cortex-M4F for differential testing of AutoPlug's emulated core
+//! (`autoplug-mcu`): QEMU's
 //! `mps2-an386` machine (a Cortex-M4 with the FPv4-SP unit) run as a separate process and
 //! driven through its GDB stub.
 //!

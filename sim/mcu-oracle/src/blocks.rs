@@ -50,7 +50,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::thumb::{self, Index, Insn, Width};
-use crate::cpu::ArchState;
+use autoplug_mcu::cpu::ArchState;
 
 /// Where a block's code starts (QEMU `mps2-an386` RAM).
 pub const CODE_BASE: u32 = 0x0000_1000;

@@ -2,7 +2,7 @@
 //! instruction blocks: the long run of the differential test.
 //!
 //! ```text
-//! cargo run --release -p autoplug-mcu --example differential -- [--blocks N] [--seed S] [--show K] [--only I]
+//! cargo run --release -p autoplug-mcu-oracle --example differential -- [--blocks N] [--seed S] [--show K] [--only I]
 //! ```
 //!
 //! Prints how many blocks ran and every disagreement (the first `--show` in full, with the
@@ -11,8 +11,8 @@
 use std::process::ExitCode;
 use std::time::Instant;
 
-use autoplug_mcu::oracle::differential::{compare, emulate};
-use autoplug_mcu::oracle::{BlockGen, Qemu};
+use autoplug_mcu_oracle::differential::{compare, emulate};
+use autoplug_mcu_oracle::{BlockGen, Qemu};
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -2,7 +2,7 @@
 //! QEMU ([`super::Qemu::run`]), the results compared register by register, flag by flag
 //! and byte by byte ([`compare`]).
 
-use crate::cpu::{ArchState, Bus, BusError, Cpu, Size};
+use autoplug_mcu::cpu::{ArchState, Bus, BusError, Cpu, Size};
 
 use super::{Block, Outcome, CODE_BASE, DATA_BASE, DATA_LEN};
 
@@ -152,9 +152,9 @@ pub fn emulate(block: &Block) -> Outcome {
     }
 }
 
-fn halt_code(halt: &crate::cpu::Halt) -> u32 {
+fn halt_code(halt: &autoplug_mcu::cpu::Halt) -> u32 {
     match halt {
-        crate::cpu::Halt::Unmodelled { address, .. } => *address,
+        autoplug_mcu::cpu::Halt::Unmodelled { address, .. } => *address,
         _ => 0,
     }
 }

@@ -57,7 +57,7 @@ use super::blocks::{Block, CODE_BASE, DATA_BASE, DATA_LEN};
 use super::gdb::{GdbClient, StopReply, TargetDescription};
 use super::thumb::{self, Insn};
 use super::OracleError;
-use crate::cpu::ArchState;
+use autoplug_mcu::cpu::ArchState;
 
 /// The vector table's address.
 pub const VECTOR_TABLE: u32 = 0x0000_0000;
