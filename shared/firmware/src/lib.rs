@@ -37,10 +37,14 @@ pub mod runtime;
 
 /// The entry point of an ECU firmware binary: brings up the board (the binary's `board`
 /// module: `init() -> (Platform, impl Io<E>)`) and runs the ECU built by `$new_ecu`
-/// (`fn(Instant) -> E`) with [`runtime::run`].
+/// (`fn(Instant) -> E`) with [`runtime::run`]. On the host, where the firmware cannot
+/// run, the binary only says what it is and how to build it: every firmware's `main.rs`
+/// is then this one line and its `board` module.
 ///
 /// ```ignore
+/// #![cfg_attr(target_os = "none", no_std, no_main)]
 /// #[cfg(target_os = "none")]
+/// mod board;
 /// autoplug_firmware::ecu_main!(ecu_pedals::PedalsEcu::new);
 /// ```
 #[cfg(target_os = "none")]
@@ -51,6 +55,24 @@ macro_rules! ecu_main {
         async fn main(spawner: embassy_executor::Spawner) {
             let (platform, board) = board::init();
             $crate::runtime::run(spawner, platform, board, $new_ecu).await
+        }
+    };
+}
+
+/// On the host: see the MCU's `ecu_main!` above.
+#[cfg(not(target_os = "none"))]
+#[macro_export]
+macro_rules! ecu_main {
+    ($new_ecu:expr) => {
+        fn main() {
+            println!(
+                "{bin} is firmware for the Nucleo-F446RE ({what}): build it with \
+                 `cargo build --release --target thumbv7em-none-eabihf --bin {bin}`, then run \
+                 it on a board (the runner flashes it through probe-rs) or on the emulated one \
+                 (autoplug-emu target/thumbv7em-none-eabihf/release/{bin})",
+                bin = env!("CARGO_BIN_NAME"),
+                what = env!("CARGO_PKG_DESCRIPTION"),
+            );
         }
     };
 }

@@ -3,20 +3,11 @@
 //! every decision is the logic crate's, and the control loop, CAN and the watchdog are
 //! `autoplug-firmware`'s. Build and flash: `cargo fw-trans`; pin map: `board.rs`.
 //!
-//! On the host this is an empty program: the firmware only builds for
+//! On the host it only says what it is and how to build it for
 //! `--target thumbv7em-none-eabihf`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
-
-#[cfg(not(target_os = "none"))]
-fn main() {
-    println!(
-        "trans-fw is the transmission ECU's firmware for the Nucleo-F446RE: \
-         build it with `cargo fw-trans` (--target thumbv7em-none-eabihf)"
-    );
-}
 
 #[cfg(target_os = "none")]
 mod board;
 
-#[cfg(target_os = "none")]
 autoplug_firmware::ecu_main!(ecu_trans::TransEcu::new);
