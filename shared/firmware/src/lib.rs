@@ -59,6 +59,30 @@ macro_rules! ecu_main {
     };
 }
 
+/// The bring-up every board shares, in its `init()`: the clocks (`$p` becomes the HAL's
+/// peripherals, the rest of which are the board's own), and `$platform` the
+/// [`runtime::Platform`]: CAN1 on the bench's CAN wiring (PB8 RX, PB9 TX to the
+/// transceiver, on every board), the watchdog and the flash controller.
+///
+/// ```ignore
+/// pub fn init() -> (Platform, Board) {
+///     autoplug_firmware::board_init!(p, platform);
+///     (platform, Board { pedal: p.PA0.degrade_adc(), /* ... */ })
+/// }
+/// ```
+#[cfg(target_os = "none")]
+#[macro_export]
+macro_rules! board_init {
+    ($p:ident, $platform:ident) => {
+        let $p = $crate::clocks::init();
+        let $platform = $crate::runtime::Platform {
+            can: ::embassy_stm32::can::Can::new($p.CAN1, $p.PB8, $p.PB9, $crate::can_io::Irqs),
+            watchdog: $p.IWDG,
+            flash: $p.FLASH,
+        };
+    };
+}
+
 /// On the host: see the MCU's `ecu_main!` above.
 #[cfg(not(target_os = "none"))]
 #[macro_export]

@@ -15,10 +15,8 @@
 //! switches a real lamp. PB3 is also the SWO trace pin: leave SWO off. Safe state at
 //! power-up: lamps off until the first step.
 
-use autoplug_firmware::can_io;
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_console::{Actuators, ConsoleEcu, Sensors};
-use embassy_stm32::can::Can;
 use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
 
 /// The console ECU's switches and lamps.
@@ -32,12 +30,7 @@ pub struct Board {
 
 /// Brings up the clocks, CAN1 and the I/O; the lamps start off.
 pub fn init() -> (Platform, Board) {
-    let p = autoplug_firmware::clocks::init();
-    let platform = Platform {
-        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
-        watchdog: p.IWDG,
-        flash: p.FLASH,
-    };
+    autoplug_firmware::board_init!(p, platform);
     let board = Board {
         headlight_switch: Input::new(p.PA10, Pull::Up),
         engine_mode_switch: Input::new(p.PB3, Pull::Up),

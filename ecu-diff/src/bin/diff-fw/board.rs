@@ -11,12 +11,10 @@
 //! Safe state at power-up: 50 % duty, no torque moved (an open differential).
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
-use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_diff::{pins, Actuators, DiffEcu, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
-use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
@@ -37,12 +35,7 @@ pub struct Board {
 
 /// Brings up the clocks, CAN1 and the I/O; the split starts open.
 pub fn init() -> (Platform, Board) {
-    let p = autoplug_firmware::clocks::init();
-    let platform = Platform {
-        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
-        watchdog: p.IWDG,
-        flash: p.FLASH,
-    };
+    autoplug_firmware::board_init!(p, platform);
     let pwm = SimplePwm::new(
         p.TIM3,
         Some(PwmPin::new(p.PB4, OutputType::PushPull)),

@@ -12,12 +12,10 @@
 //! The engine ECU drives nothing: it reports on EngineMsg.
 
 use autoplug_firmware::analog::LinearInput;
-use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_engine::{pins, EngineEcu, Sensors, Status};
 use embassy_stm32::adc::{Adc, AdcChannel};
-use embassy_stm32::can::Can;
 use embassy_stm32::peripherals::ADC1;
 
 /// Engine speed: 0–3.3 V is 0–9000 rpm.
@@ -37,12 +35,7 @@ pub struct Board {
 
 /// Brings up the clocks, CAN1 and the sensor inputs.
 pub fn init() -> (Platform, Board) {
-    let p = autoplug_firmware::clocks::init();
-    let platform = Platform {
-        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
-        watchdog: p.IWDG,
-        flash: p.FLASH,
-    };
+    autoplug_firmware::board_init!(p, platform);
     let board = Board {
         adc: Adc::new(p.ADC1),
         engine_speed: p.PA0.degrade_adc(),

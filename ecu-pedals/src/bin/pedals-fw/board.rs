@@ -14,12 +14,10 @@
 //! power-up: both commands at 0.
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
-use autoplug_firmware::can_io;
 use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_pedals::{pins, Actuators, PedalsEcu, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
-use embassy_stm32::can::Can;
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
@@ -42,12 +40,7 @@ pub struct Board {
 
 /// Brings up the clocks, CAN1 and the pedal I/O; the commands start at 0.
 pub fn init() -> (Platform, Board) {
-    let p = autoplug_firmware::clocks::init();
-    let platform = Platform {
-        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
-        watchdog: p.IWDG,
-        flash: p.FLASH,
-    };
+    autoplug_firmware::board_init!(p, platform);
     let pwm = SimplePwm::new(
         p.TIM3,
         Some(PwmPin::new(p.PB4, OutputType::PushPull)),

@@ -18,10 +18,8 @@
 //! leave SWO off. Safe state at power-up: neutral commanded.
 
 use autoplug_can::Gear;
-use autoplug_firmware::can_io;
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_trans::{Actuators, Sensors, TransEcu};
-use embassy_stm32::can::Can;
 use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
 
 /// The transmission ECU's gear lines.
@@ -34,12 +32,7 @@ pub struct Board {
 
 /// Brings up the clocks, CAN1 and the I/O; neutral is commanded.
 pub fn init() -> (Platform, Board) {
-    let p = autoplug_firmware::clocks::init();
-    let platform = Platform {
-        can: Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs),
-        watchdog: p.IWDG,
-        flash: p.FLASH,
-    };
+    autoplug_firmware::board_init!(p, platform);
     let mut board = Board {
         gear_engaged: [
             Input::new(p.PA10, Pull::Down),
