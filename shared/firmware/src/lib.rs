@@ -83,6 +83,47 @@ macro_rules! board_init {
     };
 }
 
+/// A timer's PWM channels as every board's actuator outputs use them: [`io::PWM_FREQUENCY_HZ`],
+/// edge-aligned, push-pull on the pins given (a channel not named stays unused), split into
+/// its four channels for [`io::PwmOutput`].
+///
+/// ```ignore
+/// let pwm = autoplug_firmware::pwm_channels!(p.TIM3, ch1 = p.PB4, ch2 = p.PB5);
+/// let accelerator = PwmOutput::new(pwm.ch1, COMMAND, 0.0);
+/// ```
+#[cfg(target_os = "none")]
+#[macro_export]
+macro_rules! pwm_channels {
+    ($timer:expr $(, ch1 = $c1:expr)? $(, ch2 = $c2:expr)? $(, ch3 = $c3:expr)? $(, ch4 = $c4:expr)? $(,)?) => {
+        ::embassy_stm32::timer::simple_pwm::SimplePwm::new(
+            $timer,
+            $crate::pwm_pin!($($c1)?),
+            $crate::pwm_pin!($($c2)?),
+            $crate::pwm_pin!($($c3)?),
+            $crate::pwm_pin!($($c4)?),
+            ::embassy_stm32::time::Hertz($crate::io::PWM_FREQUENCY_HZ),
+            ::embassy_stm32::timer::low_level::CountingMode::EdgeAlignedUp,
+        )
+        .split()
+    };
+}
+
+/// One channel's pin for [`pwm_channels!`]: push-pull, or none.
+#[cfg(target_os = "none")]
+#[doc(hidden)]
+#[macro_export]
+macro_rules! pwm_pin {
+    () => {
+        None
+    };
+    ($pin:expr) => {
+        Some(::embassy_stm32::timer::simple_pwm::PwmPin::new(
+            $pin,
+            ::embassy_stm32::gpio::OutputType::PushPull,
+        ))
+    };
+}
+
 /// On the host: see the MCU's `ecu_main!` above.
 #[cfg(not(target_os = "none"))]
 #[macro_export]

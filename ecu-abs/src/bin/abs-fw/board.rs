@@ -20,15 +20,11 @@
 //! 5 ms step. Safe state at power-up: no brake applied.
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
-use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_abs::{pins, AbsEcu, Actuators, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
-use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, TIM3};
-use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// A wheel speed: 0–3.3 V is 0–255 km/h (VehicleSpeedMsg's range).
 const WHEEL_SPEED: LinearInput = pins::WHEEL_SPEEDS[0].scale;
@@ -48,16 +44,13 @@ pub struct Board {
 /// Brings up the clocks, CAN1 and the I/O; no brake is applied.
 pub fn init() -> (Platform, Board) {
     autoplug_firmware::board_init!(p, platform);
-    let pwm = SimplePwm::new(
+    let pwm = autoplug_firmware::pwm_channels!(
         p.TIM3,
-        Some(PwmPin::new(p.PB4, OutputType::PushPull)),
-        Some(PwmPin::new(p.PB5, OutputType::PushPull)),
-        Some(PwmPin::new(p.PC8, OutputType::PushPull)),
-        Some(PwmPin::new(p.PC9, OutputType::PushPull)),
-        Hertz(PWM_FREQUENCY_HZ),
-        CountingMode::EdgeAlignedUp,
-    )
-    .split();
+        ch1 = p.PB4,
+        ch2 = p.PB5,
+        ch3 = p.PC8,
+        ch4 = p.PC9
+    );
     let board = Board {
         adc: Adc::new(p.ADC1),
         front_left_speed: p.PA0.degrade_adc(),

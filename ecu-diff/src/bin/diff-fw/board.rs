@@ -11,15 +11,11 @@
 //! Safe state at power-up: 50 % duty, no torque moved (an open differential).
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
-use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_diff::{pins, Actuators, DiffEcu, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
-use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, TIM3};
-use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// The yaw-rate error signal: 0–3.3 V is −2.5–+2.5 rad/s (YawErrorMsg's range).
 const YAW_RATE_ERROR: LinearInput = pins::YAW_RATE_ERROR.scale;
@@ -36,16 +32,7 @@ pub struct Board {
 /// Brings up the clocks, CAN1 and the I/O; the split starts open.
 pub fn init() -> (Platform, Board) {
     autoplug_firmware::board_init!(p, platform);
-    let pwm = SimplePwm::new(
-        p.TIM3,
-        Some(PwmPin::new(p.PB4, OutputType::PushPull)),
-        None,
-        None,
-        None,
-        Hertz(PWM_FREQUENCY_HZ),
-        CountingMode::EdgeAlignedUp,
-    )
-    .split();
+    let pwm = autoplug_firmware::pwm_channels!(p.TIM3, ch1 = p.PB4);
     let board = Board {
         adc: Adc::new(p.ADC1),
         yaw_rate_error: p.PA0.degrade_adc(),

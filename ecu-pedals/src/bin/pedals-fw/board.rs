@@ -14,15 +14,11 @@
 //! power-up: both commands at 0.
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
-use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_pedals::{pins, Actuators, PedalsEcu, Sensors};
 use embassy_stm32::adc::{Adc, AdcChannel};
-use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, TIM3};
-use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// A pedal: 0–3.3 V is 0–100 pedal units.
 const PEDAL: LinearInput = pins::ACCELERATOR_PEDAL.scale;
@@ -41,16 +37,7 @@ pub struct Board {
 /// Brings up the clocks, CAN1 and the pedal I/O; the commands start at 0.
 pub fn init() -> (Platform, Board) {
     autoplug_firmware::board_init!(p, platform);
-    let pwm = SimplePwm::new(
-        p.TIM3,
-        Some(PwmPin::new(p.PB4, OutputType::PushPull)),
-        Some(PwmPin::new(p.PB5, OutputType::PushPull)),
-        None,
-        None,
-        Hertz(PWM_FREQUENCY_HZ),
-        CountingMode::EdgeAlignedUp,
-    )
-    .split();
+    let pwm = autoplug_firmware::pwm_channels!(p.TIM3, ch1 = p.PB4, ch2 = p.PB5);
     let board = Board {
         adc: Adc::new(p.ADC1),
         accelerator_pedal: p.PA0.degrade_adc(),

@@ -20,15 +20,12 @@
 //! power-up: command straight ahead.
 
 use autoplug_firmware::analog::{LinearInput, LinearOutput};
-use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput, PWM_FREQUENCY_HZ};
+use autoplug_firmware::io::{read_analog, AnalogPin, PwmOutput};
 use autoplug_firmware::runtime::{Io, Platform};
 use ecu_steering::{pins, Actuators, Sensors, SteeringEcu};
 use embassy_stm32::adc::{Adc, AdcChannel};
-use embassy_stm32::gpio::{Input, OutputType, Pull};
+use embassy_stm32::gpio::{Input, Pull};
 use embassy_stm32::peripherals::{ADC1, TIM3};
-use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 
 /// The wheel angle: 0–3.3 V is the full lock-to-lock range, positive (left) at 3.3 V.
 const WHEEL_ANGLE: LinearInput = pins::WHEEL_ANGLE.scale;
@@ -49,16 +46,7 @@ pub struct Board {
 /// Brings up the clocks, CAN1 and the I/O; the command starts straight ahead.
 pub fn init() -> (Platform, Board) {
     autoplug_firmware::board_init!(p, platform);
-    let pwm = SimplePwm::new(
-        p.TIM3,
-        Some(PwmPin::new(p.PB4, OutputType::PushPull)),
-        None,
-        None,
-        None,
-        Hertz(PWM_FREQUENCY_HZ),
-        CountingMode::EdgeAlignedUp,
-    )
-    .split();
+    let pwm = autoplug_firmware::pwm_channels!(p.TIM3, ch1 = p.PB4);
     let board = Board {
         adc: Adc::new(p.ADC1),
         wheel_angle: p.PA0.degrade_adc(),
