@@ -16,7 +16,7 @@
 //! a program for this board, say) would never be reset, and so never reverted: now the
 //! watchdog resets it within the timeout, and the next start reverts the trial.
 //!
-//! Flash once with probe-rs: `cargo flash-boot` (README, "Firmware upgrades over CAN").
+//! Flash once with probe-rs: `cargo flash-boot` (docs/src/updates-over-can.md, "On a bench").
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(not(target_os = "none"))]

@@ -161,7 +161,8 @@ impl Observer for DtcMonitor {
     }
 }
 
-/// What a code means, from the ECUs' published definitions (the README's DTC table).
+/// What a code means, from the ECUs' published definitions (the DTC tables of
+/// docs/src/ecus-and-bench.md).
 pub fn describe(dtc: Dtc) -> String {
     for node in ecus() {
         if dtc == lost_communication(node) {

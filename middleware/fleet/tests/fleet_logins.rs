@@ -1,4 +1,4 @@
-//! More than one fleet process logged in at once, as the README's scaling out and
+//! More than one fleet process logged in at once, as docs/src/fleet.md's "Scaling out" and
 //! `fleet campaign create` have it: on a private Mosquitto run from the shipped
 //! configuration (logins, ACL, persistence) and the PostgreSQL server.
 
@@ -175,7 +175,8 @@ fn two_services_and_a_campaign_publisher_log_in_side_by_side_and_store_every_rep
     let vins = vins(3);
     let broker = broker_with_logins(&vins);
     let (schema, rt, stop) = servers();
-    // Two services of one group, as the README scales out: distinct client ids, one login.
+    // Two services of one group, as docs/src/fleet.md scales out: distinct client ids, one
+    // login.
     let a = service(&rt, &broker, &schema, "fleet-a", stop.clone());
     let b = service(&rt, &broker, &schema, "fleet-b", stop.clone());
     let mut check = FleetStore::open(&schema.url).unwrap();

@@ -76,7 +76,7 @@ impl Bench {
     fn factory() -> Self {
         let dir = root().join(DEFAULT_FIRMWARE_DIR);
         let (mcu, logs) = load(ECU, &dir, FLASH_SEED).unwrap_or_else(|e| {
-            panic!("{e} (build the firmware first: README, \"The virtual car on the firmware\")")
+            panic!("{e} (build the firmware first: docs/src/firmware-without-a-board.md)")
         });
         Self::on(mcu, logs)
     }

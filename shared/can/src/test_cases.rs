@@ -12,8 +12,8 @@ const SPEC_TABLE: [(&str, u16, u8, u32, &[Node]); 18] = [
     ("PedalBrake", 0x004, 1, 10, &[Node::Pedals]),
     ("SteeringMsg", 0x005, 1, 10, &[Node::Steering]),
     // The spec's three bytes, then the fuel-used counter (bytes 3-4) this project added so
-    // a trip's fuel is known to 1 mL, not to the level's 0.25 L steps (README, "The CAN
-    // catalogue").
+    // a trip's fuel is known to 1 mL, not to the level's 0.25 L steps
+    // (docs/src/can-catalogue.md, "Fuel used").
     ("EngineMsg", 0x006, 5, 20, &[Node::Engine]),
     ("PedalAccel", 0x007, 1, 10, &[Node::Pedals]),
     (

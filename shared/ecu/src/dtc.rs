@@ -73,7 +73,7 @@ impl fmt::Display for Dtc {
 
 /// Network DTC digits per node, in the style of SAE J2012: lost communication U01xx,
 /// invalid data U04xx. The assignment per AutoPlug node is this project's (documented in
-/// the README); the engine and transmission keep J2012's ECM/TCM numbers.
+/// docs/src/ecus-and-bench.md); the engine and transmission keep J2012's ECM/TCM numbers.
 const fn network_digits(node: Node) -> (u16, u16) {
     match node {
         Node::Engine => (0x0100, 0x0401),

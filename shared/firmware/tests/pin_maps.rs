@@ -1,9 +1,9 @@
 //! The pin maps of the nine boards (`ecu-*/src/bin/*-fw/board.rs`): each board's table
 //! names exactly the pins its code takes, every header position agrees with the
 //! Nucleo-F446RE's connectors, no pin serves two signals, the pins the Nucleo reserves are
-//! left alone, the README's bench tables are the boards' tables, and each table is its ECU
-//! crate's `pins` declaration (which the firmware's scales and the virtual car's wiring
-//! come from), with the F446's ADC and TIM3 channels for those pins.
+//! left alone, the bench tables of docs/src/ecus-and-bench.md are the boards' tables, and
+//! each table is its ECU crate's `pins` declaration (which the firmware's scales and the
+//! virtual car's wiring come from), with the F446's ADC and TIM3 channels for those pins.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
@@ -86,6 +86,30 @@ fn cells(row: &str) -> Vec<&str> {
     row.trim_matches('|').split('|').map(str::trim).collect()
 }
 
+/// The shared bring-up every board calls (`board_init!`, in autoplug-firmware), whose
+/// pins (CAN1's) are the board's too.
+fn shared_bring_up() -> String {
+    let path = root().join("shared/firmware/src/lib.rs");
+    let source = fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let start = source
+        .find("macro_rules! board_init")
+        .expect("autoplug-firmware defines board_init!");
+    let end = source[start..]
+        .find("\n}\n")
+        .map_or(source.len(), |e| start + e);
+    source[start..end].replace("$p.", "p.")
+}
+
+/// The GPIO pins a board's code takes from the HAL's peripherals (`p.PA0`, ...), the
+/// shared bring-up's included when the board calls it.
+fn board_pins(source: &str) -> BTreeSet<String> {
+    let mut pins = pins_in_code(source);
+    if source.contains("autoplug_firmware::board_init!(p, platform)") {
+        pins.extend(pins_in_code(&shared_bring_up()));
+    }
+    pins
+}
+
 /// The GPIO pins the code takes from the HAL's peripherals (`p.PA0`, ...).
 fn pins_in_code(source: &str) -> BTreeSet<String> {
     let code: String = source
@@ -128,7 +152,7 @@ fn every_board_table_names_exactly_the_pins_its_code_takes() {
         }
         assert_eq!(
             documented,
-            pins_in_code(&source),
+            board_pins(&source),
             "{ecu}: the table and the code name different pins"
         );
     }
@@ -162,7 +186,7 @@ fn header_positions_agree_with_the_nucleo_connectors() {
 #[test]
 fn no_board_takes_a_pin_the_nucleo_reserves() {
     for ecu in ECUS {
-        let pins = pins_in_code(&board_source(ecu));
+        let pins = board_pins(&board_source(ecu));
         for (pin, use_) in RESERVED {
             assert!(!pins.contains(*pin), "{ecu} takes {pin}, the {use_}");
         }
@@ -171,18 +195,23 @@ fn no_board_takes_a_pin_the_nucleo_reserves() {
 
 #[test]
 fn every_board_is_on_can1_at_pb8_pb9() {
+    assert!(
+        shared_bring_up().contains("Can::new(p.CAN1, p.PB8, p.PB9, $crate::can_io::Irqs)"),
+        "the shared bring-up puts CAN1 on PB8 (RX) / PB9 (TX), the bench's common wiring"
+    );
     for ecu in ECUS {
         let source = board_source(ecu);
         assert!(
-            source.contains("Can::new(p.CAN1, p.PB8, p.PB9, can_io::Irqs)"),
-            "{ecu}: CAN1 must be on PB8 (RX) / PB9 (TX), the bench's common wiring"
+            source.contains("autoplug_firmware::board_init!(p, platform)")
+                && !source.contains("p.CAN1"),
+            "{ecu}: the board brings CAN1 up through board_init! (the bench's common wiring)"
         );
     }
 }
 
 #[test]
 fn the_readme_bench_tables_are_the_boards_tables() {
-    let readme = fs::read_to_string(root().join("README.md")).expect("README.md");
+    let readme = fs::read_to_string(root().join("docs/src/ecus-and-bench.md")).expect("book page");
     for ecu in ECUS {
         let rows = table_rows(&board_source(ecu));
         let block = format!(
@@ -193,11 +222,11 @@ fn the_readme_bench_tables_are_the_boards_tables() {
         let section = readme
             .split("\n#### ")
             .find(|s| format!("#### {s}").starts_with(&heading))
-            .unwrap_or_else(|| panic!("README: no section starting with '{heading}'"));
+            .unwrap_or_else(|| panic!("docs/src/ecus-and-bench.md: no section '{heading}'"));
         assert!(
             section.contains(&block),
-            "README, {heading}: the wiring table differs from ecu-{ecu}/src/bin/{ecu}-fw/board.rs; \
-             copy the board's table:\n{block}"
+            "docs/src/ecus-and-bench.md, {heading}: the wiring table differs from \
+             ecu-{ecu}/src/bin/{ecu}-fw/board.rs; copy the board's table:\n{block}"
         );
     }
 }

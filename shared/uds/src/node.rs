@@ -63,8 +63,8 @@ const SPEED_VALID_US: u64 = VehicleSpeedMsg::CYCLE_TIME_MS as u64 * 1000 * STALE
 /// VehicleSpeedMsg of this window under [`crate::server::STANDING_KMH`], none missing for
 /// more than 3 periods. A single spoofed zero-speed frame between the real sender's frames
 /// proves nothing: the next real frame ends the chain. (An attacker who can silence the
-/// real sender and send its frames instead can still pass; see the README's security
-/// section.)
+/// real sender and send its frames instead can still pass; see docs/src/security.md, "What
+/// is not protected".)
 pub const STANDSTILL_WINDOW_US: u64 = 500_000;
 
 /// The ECU's backend as the server sees it through the stack: what the stack knows itself

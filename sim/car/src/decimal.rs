@@ -3,7 +3,7 @@
 //!
 //! Why not `write!`: core formats a float with a given precision exactly (Grisu with a
 //! Dragon4 fallback over big integers), and the trace of a 150 s run has over half a million
-//! numbers: that was a seventh of the README run's whole time. Here the value is scaled
+//! numbers: that was a seventh of the drive-cycle run's whole time. Here the value is scaled
 //! by 10^decimals and rounded as an integer, which is exact except within an ulp of a
 //! tie; those few values (and non-finite or huge ones) still go to core.
 

@@ -141,7 +141,7 @@ fn main() {
                 Ok(bytes) => bytes,
                 Err(e) => {
                     eprintln!(
-                        "{file}: {e} (build the firmware first: the README's Firmware section)"
+                        "{file}: {e} (build them first: docs/src/firmware-without-a-board.md)"
                     );
                     std::process::exit(1);
                 }
