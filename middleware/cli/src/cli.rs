@@ -1242,7 +1242,7 @@ struct GatewayOptions {
     /// Recordings may be opened in replay dashboards of their own.
     replay_pages: Option<autoplug_dashboard::dashboard::ReplayPages>,
     /// Report to a fleet (needs `transmit`).
-    fleet: Option<autoplug_fleet::link::FleetConfig>,
+    fleet: Option<autoplug_fleet_agent::link::FleetConfig>,
     /// ECUs of the virtual car that run as their firmware on emulated MCUs.
     firmware: Option<FirmwareChoice>,
 }
@@ -1428,7 +1428,7 @@ fn gateway(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     };
     if let (Some(config), Some(runtime)) = (options.fleet.clone(), &fleet_runtime) {
         writeln!(out, "reporting to the fleet at {}", config.broker)?;
-        watch.fleet = Some(autoplug_fleet::link::FleetLink::new(
+        watch.fleet = Some(autoplug_fleet_agent::link::FleetLink::new(
             config,
             runtime.handle().clone(),
         ));
@@ -1585,7 +1585,7 @@ fn fleet_summary(
     not_connected: Option<String>,
     broker: &str,
     reports: &[autoplug_fleet::campaign::CampaignReport],
-    closed: autoplug_fleet::link::Closed,
+    closed: autoplug_fleet_agent::link::Closed,
     out: &mut dyn Write,
 ) -> io::Result<()> {
     match (&vin, &not_connected) {

@@ -75,7 +75,7 @@ impl VehicleFleetArgs {
     pub fn config(
         &self,
         default_state: Option<PathBuf>,
-    ) -> Result<Option<autoplug_fleet::link::FleetConfig>, String> {
+    ) -> Result<Option<autoplug_fleet_agent::link::FleetConfig>, String> {
         let Some(broker) = &self.fleet else {
             return Ok(None);
         };
@@ -88,7 +88,7 @@ impl VehicleFleetArgs {
             broker_password_file: self.fleet_password_file.clone(),
         }
         .broker()?;
-        Ok(Some(autoplug_fleet::link::FleetConfig {
+        Ok(Some(autoplug_fleet_agent::link::FleetConfig {
             broker,
             fleet_key: autoplug_image_tool::read_public_key(fleet_key)
                 .map_err(|e| e.to_string())?,
@@ -490,7 +490,7 @@ fn simulate(
     if !(park_s.is_finite() && (0.0..=86_400.0).contains(&park_s)) {
         return Err("--park is 0 to 86400 seconds".into());
     }
-    let config = autoplug_fleet::link::FleetConfig {
+    let config = autoplug_fleet_agent::link::FleetConfig {
         broker: broker.broker()?,
         fleet_key: autoplug_image_tool::read_public_key(fleet_key).map_err(|e| e.to_string())?,
         image_key: autoplug_image_tool::read_public_key(image_key).map_err(|e| e.to_string())?,

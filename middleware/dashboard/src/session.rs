@@ -804,7 +804,7 @@ impl<'a> Session<'a> {
 
 /// The fleet link as the page shows it: the offer the driver answers, the campaign's
 /// progress, the connection.
-fn fleet_state(fleet: &autoplug_fleet::link::FleetLink) -> Value {
+fn fleet_state(fleet: &autoplug_fleet_agent::link::FleetLink) -> Value {
     let status = fleet.status();
     json!({
         "broker": fleet.broker(),

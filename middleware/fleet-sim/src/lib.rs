@@ -41,7 +41,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use autoplug_fleet::link::{FleetConfig, FleetLink};
+use autoplug_fleet_agent::link::{FleetConfig, FleetLink};
 use autoplug_live::sources::{Transmitting, VirtualCarSource};
 use autoplug_live::watch::Watch;
 use autoplug_tester::bus_tester::BusTester;

@@ -15,11 +15,11 @@ use autoplug_fleet::campaign::{now_ms, sha256_hex, VehicleState};
 use autoplug_fleet::campaigns::{CampaignSpec, CampaignState, Target};
 use autoplug_fleet::db::Value;
 use autoplug_fleet::ingest::Ingest;
-use autoplug_fleet::link::FleetConfig;
 use autoplug_fleet::mqtt::{Broker, LinkOptions, MqttLink};
 use autoplug_fleet::service::FleetService;
 use autoplug_fleet::testing::{broker_url, PgSchema};
 use autoplug_fleet::{topics, EvidenceQuery, Finding, FleetStore, InventoryQuery};
+use autoplug_fleet_agent::link::FleetConfig;
 use autoplug_fleet_sim::{FleetPlan, Order, SimFleet, VehicleStatus};
 use autoplug_image::{SigningKey, SoftwareVariant, Version};
 use autoplug_virtual_car::diag::{build_image, FACTORY_PAYLOAD_LEN};
@@ -643,10 +643,10 @@ fn started_link(
     runtime: &tokio::runtime::Runtime,
     vin: autoplug_vin::Vin,
     state_file: &std::path::Path,
-) -> autoplug_fleet::link::FleetLink {
+) -> autoplug_fleet_agent::link::FleetLink {
     let mut config = fleet_config();
     config.state_file = Some(state_file.to_path_buf());
-    let mut link = autoplug_fleet::link::FleetLink::new(config, runtime.handle().clone());
+    let mut link = autoplug_fleet_agent::link::FleetLink::new(config, runtime.handle().clone());
     let cruise = autoplug_store::EcuIdentity {
         ecu: "cruise".into(),
         node: 0x0D,
@@ -664,7 +664,7 @@ fn started_link(
 }
 
 /// Polls `link` until an event contains `needle`.
-fn wait_event(link: &mut autoplug_fleet::link::FleetLink, needle: &str) {
+fn wait_event(link: &mut autoplug_fleet_agent::link::FleetLink, needle: &str) {
     let state = autoplug_gateway::CarState::new();
     let deadline = Instant::now() + Duration::from_secs(10);
     while !link.events().any(|e| e.contains(needle)) {

@@ -7,16 +7,16 @@
 //! or, on one machine, in an SQLite file: one schema, one set of statements, versioned
 //! migrations for both ([`migrations`]).
 //!
-//! The vehicle's side is here too: the campaign agent ([`vehicle`], sans-IO), its outbox
-//! ([`outbox`]) and the gateway's link that runs them against MQTT and the car's tester
-//! ([`link`]).
+//! The protocol both sides speak is here (topics, reports, campaigns, the MQTT link and the
+//! outbox that keeps a report until its receipt); the vehicle's side, the campaign agent and
+//! the gateway's link, is `autoplug-fleet-agent`, so that the service links neither the
+//! gateway nor the tester.
 
 pub mod broker;
 pub mod campaign;
 pub mod campaigns;
 pub mod db;
 pub mod ingest;
-pub mod link;
 pub mod migrations;
 pub mod mqtt;
 pub mod outbox;
@@ -25,7 +25,6 @@ pub mod service;
 pub mod store;
 pub mod testing;
 pub mod topics;
-pub mod vehicle;
 
 pub use report::{InventoryReport, Receipt, ReportError, TripReport};
 pub use store::{

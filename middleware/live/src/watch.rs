@@ -288,7 +288,7 @@ pub struct Watch<'a> {
     /// The ECUs' identification, once the tester read it.
     pub identification: Option<Vec<EcuIdentification>>,
     /// The link to the fleet, if the gateway reports to one.
-    pub fleet: Option<autoplug_fleet::link::FleetLink>,
+    pub fleet: Option<autoplug_fleet_agent::link::FleetLink>,
     /// The findings as of the last time the bus was alive (bus time, findings), taken
     /// every [`ALIVE_FINDINGS_US`] while a trip runs.
     alive_findings: Option<(u64, Findings)>,

@@ -9,16 +9,22 @@
 //! | [`series`] | [`Downsampler`]: every signal in 1 s buckets of mean, min and max |
 //! | `record` | [`TripStats`], [`TripEnd`], [`SeriesPoint`]: what a trip leaves behind, for a store |
 //!
-//! The tracker reads frames only, so a recorded log gives the trips the live bus gave.
+//! The tracker reads frames only, so a recorded log gives the trips the live bus gave. It
+//! and the series are the default feature `tracker`; without it the crate is the records
+//! alone (for stores and the fleet service, which need no gateway).
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 mod record;
+#[cfg(feature = "tracker")]
 pub mod series;
+#[cfg(feature = "tracker")]
 pub mod tracker;
 
 pub use record::{SeriesPoint, TripEnd, TripStats};
+#[cfg(feature = "tracker")]
 pub use series::Downsampler;
+#[cfg(feature = "tracker")]
 pub use tracker::{CompletedTrip, TripTracker};
 
 /// ABS release stretches closer together than this are one intervention: the ABS ECU's
@@ -37,5 +43,5 @@ pub const PARKED_AFTER_US: u64 = 30_000_000;
 /// 10-20 ms: 5 s is the ignition off, not a hiccup).
 pub const SILENT_AFTER_US: u64 = 5_000_000;
 
-#[cfg(test)]
+#[cfg(all(test, feature = "tracker"))]
 mod tests;

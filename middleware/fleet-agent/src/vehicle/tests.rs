@@ -181,7 +181,7 @@ fn forged_altered_and_foreign_instructions_are_refused_without_acting() {
     agent.on_inventory(inventory("1.1.0"), NOW);
     drain(&mut agent);
     let forged = instruction_for(&image, 1).sign(&SigningKey::from_seed([9; 32]));
-    let mut envelope: crate::campaign::Envelope =
+    let mut envelope: autoplug_fleet::campaign::Envelope =
         serde_json::from_slice(&instruction_for(&image, 1).sign(&fleet_key())).unwrap();
     envelope.instruction = envelope.instruction.replace("\"1.2.0\"", "\"1.0.0\"");
     let altered = serde_json::to_vec(&envelope).unwrap();

@@ -7,7 +7,7 @@
 //! campaign instructions sent while the car was off wait at the broker. The inventory goes
 //! out when it changes, every trip when it ends (with the verdicts and trouble codes it
 //! ended with). Every report stays in a bounded outbox until the fleet's receipt says it is
-//! stored, and is published again while none comes ([`crate::outbox`]): a broker
+//! stored, and is published again while none comes ([`autoplug_fleet::outbox`]): a broker
 //! that acknowledged a report and lost it (a restart) costs a delay, not the report.
 //!
 //! Whether the car stands is judged from the bus: the vehicle speed at 0 km/h for
@@ -16,12 +16,12 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use crate::campaign::now_ms;
-use crate::mqtt::{Broker, LinkOptions, LinkStatus, MqttLink};
-use crate::outbox::{Confirmed, Outbox};
 use crate::vehicle::{Action, AgentConfig, FlashResult, Offer, VehicleAgent};
-use crate::TripReport;
 use autoplug_can::{Node, VehicleSpeedMsg};
+use autoplug_fleet::campaign::now_ms;
+use autoplug_fleet::mqtt::{Broker, LinkOptions, LinkStatus, MqttLink};
+use autoplug_fleet::outbox::{Confirmed, Outbox};
+use autoplug_fleet::TripReport;
 use autoplug_gateway::CarState;
 use autoplug_image::PUBLIC_KEY_LEN;
 use autoplug_store::{DtcRecord, EcuIdentity, VerdictRecord};
@@ -52,7 +52,7 @@ pub struct FleetConfig {
     /// The SecurityAccess secret for flashing.
     pub security_secret: Vec<u8>,
     /// How long a report waits for its receipt before it is published again, ms (doubling
-    /// each time): [`crate::outbox::RESEND_AFTER_MS`] unless a test is in a hurry.
+    /// each time): [`autoplug_fleet::outbox::RESEND_AFTER_MS`] unless a test is in a hurry.
     pub resend_after_ms: i64,
     /// Where the vehicle keeps what it has seen of the fleet across restarts (the newest
     /// instruction number taken: [`FleetState`]); none: in memory only (a simulated car).
@@ -187,7 +187,7 @@ impl FleetLink {
     }
 
     /// The vehicle's reports on campaigns (the latest few), oldest first.
-    pub fn campaign_reports(&self) -> Vec<crate::campaign::CampaignReport> {
+    pub fn campaign_reports(&self) -> Vec<autoplug_fleet::campaign::CampaignReport> {
         self.agent
             .as_ref()
             .map(|a| a.reports().cloned().collect())
@@ -305,7 +305,10 @@ impl FleetLink {
     fn connect(&mut self, vin: autoplug_vin::Vin) {
         let mut options = LinkOptions::new(vin.to_string());
         options.persistent_session = true;
-        options.subscriptions = vec![crate::topics::command(&vin), crate::topics::receipt(&vin)];
+        options.subscriptions = vec![
+            autoplug_fleet::topics::command(&vin),
+            autoplug_fleet::topics::receipt(&vin),
+        ];
         options.max_backoff = Duration::from_secs(10);
         self.link = Some(MqttLink::connect(
             &self.runtime,
@@ -357,7 +360,7 @@ impl FleetLink {
             return;
         };
         agent.set_standing(self.standing);
-        let receipts = crate::topics::receipt(agent.vin());
+        let receipts = autoplug_fleet::topics::receipt(agent.vin());
         let mut confirmed = Vec::new();
         if let Some(link) = self.link.as_mut() {
             for _ in 0..MESSAGES_PER_POLL {
@@ -472,7 +475,10 @@ impl FleetLink {
         }
     }
 
-    fn request(&mut self, call: impl FnOnce(&MqttLink) -> Result<(), crate::mqtt::LinkError>) {
+    fn request(
+        &mut self,
+        call: impl FnOnce(&MqttLink) -> Result<(), autoplug_fleet::mqtt::LinkError>,
+    ) {
         if let Some(link) = &self.link {
             if let Err(e) = call(link) {
                 self.event(format!("fleet: {e}"));
@@ -518,7 +524,10 @@ impl FleetLink {
     /// rest; what then stands.
     pub fn close(mut self, timeout: Duration) -> Closed {
         let deadline = std::time::Instant::now() + timeout;
-        let receipts = self.agent.as_ref().map(|a| crate::topics::receipt(a.vin()));
+        let receipts = self
+            .agent
+            .as_ref()
+            .map(|a| autoplug_fleet::topics::receipt(a.vin()));
         while self.link.is_some() && !self.outbox.is_empty() && std::time::Instant::now() < deadline
         {
             self.flush();

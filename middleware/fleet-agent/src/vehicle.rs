@@ -35,9 +35,9 @@ use autoplug_image::{hardware_name, ImageHeader, Version, PUBLIC_KEY_LEN};
 use autoplug_store::EcuIdentity;
 use autoplug_vin::Vin;
 
-use crate::campaign::{sha256_hex, CampaignReport, Instruction, VehicleState};
-use crate::report::{InventoryReport, TripReport};
-use crate::topics::{self, ReportKind};
+use autoplug_fleet::campaign::{sha256_hex, CampaignReport, Instruction, VehicleState};
+use autoplug_fleet::report::{InventoryReport, TripReport};
+use autoplug_fleet::topics::{self, ReportKind};
 
 /// How long the image may take to arrive from the broker, ms, before the attempt fails.
 pub const IMAGE_WAIT_MS: i64 = 10 * 60 * 1000;
