@@ -13,9 +13,12 @@ use autoplug_mcu::mcu::Mcu;
 use autoplug_mcu::programming::FlashContents;
 use autoplug_mcu::rtt::RttLog;
 
-const ECUS: [&str; 9] = [
-    "engine", "pedals", "steering", "trans", "cabin", "console", "diff", "cruise", "abs",
-];
+/// The ECUs' firmware names, from the catalogue's one list (`<name>-fw`).
+fn ecus() -> impl Iterator<Item = &'static str> {
+    autoplug_can::ECUS
+        .iter()
+        .map(|&node| autoplug_can::firmware_name(node))
+}
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -32,7 +35,7 @@ fn main() -> ExitCode {
         }
     };
     let mut failed = false;
-    for (n, ecu) in ECUS.iter().enumerate() {
+    for (n, ecu) in ecus().enumerate() {
         match boot(dir, ecu, n as u32, ms) {
             Ok(summary) => println!("{ecu:>9}: {summary}"),
             Err(why) => {

@@ -93,9 +93,12 @@ const LOOP: &[u8] = &[
     0x8a, 0x42, 0xf4, 0xd1, 0xce, 0xe7, 0x00, 0x00, 0x88, 0xed, 0x00, 0xe0, 0x20, 0x83, 0xb8, 0xed,
 ];
 
-const ECUS: [&str; 9] = [
-    "engine", "pedals", "steering", "trans", "cabin", "console", "diff", "cruise", "abs",
-];
+/// The ECUs' firmware names, from the catalogue's one list (`<name>-fw`).
+fn ecus() -> impl Iterator<Item = &'static str> {
+    autoplug_can::ECUS
+        .iter()
+        .map(|&node| autoplug_can::firmware_name(node))
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -134,7 +137,7 @@ fn main() {
     // 2. The nine firmwares.
     let mut total_instructions = 0;
     let mut total_wall = 0.0;
-    for (n, ecu) in ECUS.iter().enumerate() {
+    for (n, ecu) in ecus().enumerate() {
         let mut contents = FlashContents::erased();
         for file in [format!("{dir}/boot"), format!("{dir}/{ecu}-fw")] {
             let bytes = match std::fs::read(&file) {
