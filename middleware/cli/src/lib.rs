@@ -7,8 +7,10 @@
 //! |---|---|
 //! | [`cli`] | the `autoplug` command's arguments and its commands |
 //! | [`fleet_cli`] | `autoplug fleet`: the fleet service, campaigns, queries, the simulated fleet |
+//! | `cmd` | the commands, one module per subcommand (`cmd::fleet::…` for the fleet's) |
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 pub mod cli;
+mod cmd;
 pub mod fleet_cli;
