@@ -38,253 +38,18 @@ use std::fmt;
 
 use autoplug_can::Node;
 use autoplug_ecu::Instant;
-use autoplug_image::{BootState, ImageHeader, ImageSet, ImageSlot, Payload, HEADER_LEN};
+use autoplug_image::{BootState, ImageHeader, ImageSet, ImageSlot, Payload};
 use autoplug_uds::security::{key_for, SEED_LEN};
 use autoplug_uds::server::did;
 
-use super::{hex_bytes, label, Job, Response, Tester, TesterConfig, UdsError};
+use super::{hex_bytes, Job, Response, Tester, TesterConfig, UdsError};
 use crate::names::ecu_name;
 
-/// The phases of a flash job, in order; each is timed in the [`FlashReport`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Phase {
-    /// Extended session for all, programming session for the target, DTC setting and
-    /// communication off.
-    SessionSetup,
-    /// Seed and key.
-    Security,
-    /// The erase routine.
-    Erase,
-    /// RequestDownload, TransferData, RequestTransferExit.
-    Transfer,
-    /// The check routine (signature, ECU, version).
-    Check,
-    /// Communication on, ECUReset and the wait until the ECU answers again.
-    ResetAndWait,
-    /// DTC setting on (and communication, after a failure), default session for all.
-    Restore,
-}
+mod records;
+mod report;
 
-impl Phase {
-    /// Every phase, in order.
-    pub const ALL: [Phase; 7] = [
-        Phase::SessionSetup,
-        Phase::Security,
-        Phase::Erase,
-        Phase::Transfer,
-        Phase::Check,
-        Phase::ResetAndWait,
-        Phase::Restore,
-    ];
-
-    /// How reports name the phase.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Phase::SessionSetup => "session setup",
-            Phase::Security => "security",
-            Phase::Erase => "erase",
-            Phase::Transfer => "transfer",
-            Phase::Check => "check",
-            Phase::ResetAndWait => "reset and wait",
-            Phase::Restore => "restore",
-        }
-    }
-}
-
-impl fmt::Display for Phase {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// How long one phase took.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PhaseTiming {
-    /// The phase.
-    pub phase: Phase,
-    /// From its first request to the response of its last, µs.
-    pub duration_us: u64,
-    /// 0x78 "response pending" received during the phase.
-    pub response_pending: u32,
-}
-
-/// What a flash job did and how long it took (also what a failed job did so far).
-#[derive(Debug, Clone, PartialEq)]
-pub struct FlashReport {
-    /// The ECU flashed.
-    pub ecu: Node,
-    /// The slot the image went to (`None` before the ECU said which it runs).
-    pub slot: Option<ImageSlot>,
-    /// Bytes of the image.
-    pub image_len: u64,
-    /// Data bytes per TransferData block (the ECU's maxNumberOfBlockLength less 2); 0
-    /// before RequestDownload was answered.
-    pub block_len: usize,
-    /// TransferData blocks acknowledged.
-    pub blocks: u32,
-    /// The phases that ran, in order.
-    pub phases: Vec<PhaseTiming>,
-    /// Whatever deserves a mention without failing the job (negative answers to the
-    /// functional requests, a repeated block...).
-    pub notes: Vec<String>,
-    /// From the job's first poll to its end, µs.
-    pub total_us: u64,
-}
-
-impl FlashReport {
-    /// How long `phase` took, if it ran.
-    pub fn duration_us(&self, phase: Phase) -> Option<u64> {
-        self.phases
-            .iter()
-            .find(|p| p.phase == phase)
-            .map(|p| p.duration_us)
-    }
-
-    /// Image bytes per second over the transfer phase (RequestDownload to the end of
-    /// RequestTransferExit); `None` unless the whole image was transferred.
-    pub fn transfer_throughput(&self) -> Option<f64> {
-        let duration = self.duration_us(Phase::Transfer)?;
-        let transferred = self.blocks > 0 && self.duration_us(Phase::Check).is_some();
-        (transferred && duration > 0).then(|| self.image_len as f64 * 1e6 / duration as f64)
-    }
-}
-
-impl fmt::Display for FlashReport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}: {} bytes, {} blocks of up to {} bytes",
-            label(self.ecu),
-            self.image_len,
-            self.blocks,
-            self.block_len
-        )?;
-        match self.slot {
-            Some(slot) => writeln!(f, ", into slot {}", slot.letter())?,
-            None => writeln!(f)?,
-        }
-        writeln!(f, "{:<16} {:>11}", "phase", "time")?;
-        for timing in &self.phases {
-            write!(
-                f,
-                "{:<16} {:>8.1} ms",
-                timing.phase.name(),
-                timing.duration_us as f64 / 1000.0
-            )?;
-            if timing.phase == Phase::Transfer {
-                if let Some(rate) = self.transfer_throughput() {
-                    write!(f, "   {:.0} bytes/s ({:.1} KiB/s)", rate, rate / 1024.0)?;
-                }
-            }
-            if timing.response_pending > 0 {
-                write!(f, "   {} x response pending", timing.response_pending)?;
-            }
-            writeln!(f)?;
-        }
-        write!(
-            f,
-            "{:<16} {:>8.1} ms",
-            "total",
-            self.total_us as f64 / 1000.0
-        )?;
-        for note in &self.notes {
-            write!(f, "\nnote: {note}")?;
-        }
-        Ok(())
-    }
-}
-
-/// What made a flash job fail.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum FlashFailure {
-    /// A request failed (negative response, timeout, ISO-TP error, odd response).
-    Uds(UdsError),
-    /// The ECU did not answer TesterPresent within the reset timeout after ECUReset.
-    NoReturnAfterReset {
-        /// How long the tester waited, µs.
-        waited_us: u64,
-    },
-    /// The job cannot run as configured (no image, an image too large for a download).
-    Invalid(String),
-    /// The ECU kept refusing the programming session with conditionsNotCorrect: it has not
-    /// seen the car stand.
-    NotStanding {
-        /// How long the tester kept asking, µs.
-        waited_us: u64,
-    },
-}
-
-impl fmt::Display for FlashFailure {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            FlashFailure::Uds(error) => error.fmt(f),
-            FlashFailure::NoReturnAfterReset { waited_us } => write!(
-                f,
-                "the ECU did not answer TesterPresent within {:.1} s after its reset",
-                *waited_us as f64 / 1e6
-            ),
-            FlashFailure::Invalid(reason) => f.write_str(reason),
-            FlashFailure::NotStanding { waited_us } => write!(
-                f,
-                "the ECU refused the programming session for {:.1} s (NRC 0x22 conditionsNotCorrect): it reprograms only a car it has seen stand, VehicleSpeedMsg under 1 km/h for {} ms; stop the car and flash again",
-                *waited_us as f64 / 1e6,
-                autoplug_uds::STANDSTILL_WINDOW_US / 1000
-            ),
-        }
-    }
-}
-
-/// A failed flash job: where and why, and the report of what it did.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FlashError {
-    /// The ECU being flashed.
-    pub ecu: Node,
-    /// The phase that failed.
-    pub phase: Phase,
-    /// The request that failed, e.g. `"0x31 01 FF00 (erase)"`.
-    pub step: &'static str,
-    /// Why.
-    pub failure: FlashFailure,
-    /// What was done, restore included.
-    pub report: FlashReport,
-}
-
-impl FlashError {
-    /// The UDS error, when a request failed.
-    pub fn uds(&self) -> Option<&UdsError> {
-        match &self.failure {
-            FlashFailure::Uds(error) => Some(error),
-            _ => None,
-        }
-    }
-}
-
-impl fmt::Display for FlashError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "flashing {} failed in phase '{}' at {}: {}",
-            label(self.ecu),
-            self.phase,
-            self.step,
-            self.failure
-        )
-    }
-}
-
-impl std::error::Error for FlashError {}
-
-/// Where a flash job is: progress callbacks get one at each change of phase and each
-/// time more of the image is on the bus.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Progress {
-    /// The phase under way.
-    pub phase: Phase,
-    /// Image bytes on the bus (acknowledged blocks plus the frames of the block going out).
-    pub transferred: u64,
-    /// Bytes of the image.
-    pub total: u64,
-}
+use records::{image_for, parse_max_block_len, slot_and_length, unstartable};
+pub use report::{FlashError, FlashFailure, FlashReport, Phase, PhaseTiming, Progress};
 
 /// What to flash where, and the timing to do it with.
 #[derive(Debug, Clone)]
@@ -338,25 +103,6 @@ const NRC_CONDITIONS_NOT_CORRECT: u8 = 0x22;
 /// The NRC an ECU refuses an image's header with when the download is not what it takes
 /// (a length or format it does not accept, or no machine code for an ECU running firmware).
 const NRC_UPLOAD_DOWNLOAD_NOT_ACCEPTED: u8 = 0x70;
-
-/// Why the file's images (one, or a release's set) could never start, if so: a machine-code
-/// image whose vector table the bootloader would not start (an image without machine code
-/// is for the virtual car's ECUs, which start none). Checked before anything goes to the
-/// car. A file that is not an image goes as it is: the ECU says what is wrong with it.
-fn unstartable(file: &[u8]) -> Option<String> {
-    let set = ImageSet::parse(file).ok()?;
-    let reason = set.iter().find_map(|(image, header)| {
-        let slot = header.slot()?;
-        if header.payload != Payload::MachineCode {
-            return None;
-        }
-        let table = image.get(HEADER_LEN..).unwrap_or_default();
-        autoplug_image::check_startable(slot, table)
-            .err()
-            .map(|error| format!("the image for slot {}: {error}", slot.letter()))
-    });
-    reason
-}
 
 /// One request of the sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -466,46 +212,6 @@ pub struct FlashJob {
     result: Option<Result<FlashReport, FlashError>>,
     observer: Option<Box<dyn FnMut(Progress)>>,
     last_progress: Option<Progress>,
-}
-
-/// addressAndLengthFormatIdentifier 0x44, the slot's address and the image's length: the
-/// record RequestDownload and the erase routine both carry. `None` for a length UDS cannot
-/// announce (0, or 4 GiB and more).
-fn slot_and_length(slot: ImageSlot, image_len: usize) -> Option<[u8; 9]> {
-    let len = u32::try_from(image_len).ok().filter(|&len| len > 0)?;
-    let mut record = [0x44; 9];
-    record[1..5].copy_from_slice(&slot.region().start.to_be_bytes());
-    record[5..].copy_from_slice(&len.to_be_bytes());
-    Some(record)
-}
-
-/// The image of `file` for `target` while the ECU runs `running`, or why there is none. A
-/// file that is not a set of images goes as it is: the ECU says what is wrong with it.
-fn image_for(file: &[u8], running: ImageSlot, target: ImageSlot) -> Result<Vec<u8>, String> {
-    let Ok(set) = ImageSet::parse(file) else {
-        return Ok(file.to_vec());
-    };
-    if let Some((image, _)) = set.for_slot(target) {
-        return Ok(image.to_vec());
-    }
-    let linked: Vec<String> = set
-        .iter()
-        .map(|(_, header)| match header.slot() {
-            Some(slot) => format!("slot {}", slot.letter()),
-            None => format!("0x{:08X}", header.load_address),
-        })
-        .collect();
-    if set.iter().any(|(_, header)| header.slot() == Some(running)) {
-        return Err(format!(
-            "the ECU runs slot {} and writes the update to slot {}, but the file holds only an image linked for {}: flash a release with the slot-{} build (`autoplug image build` puts both in one file)",
-            running.letter(),
-            target.letter(),
-            linked.join(" and "),
-            target.letter()
-        ));
-    }
-    // Linked for neither slot: the ECU refuses it with the load address it expects.
-    Ok(set.first_image().to_vec())
 }
 
 impl FlashJob {
@@ -998,22 +704,6 @@ impl FlashJob {
             }),
         });
     }
-}
-
-/// maxNumberOfBlockLength from a RequestDownload response: `74`, the
-/// lengthFormatIdentifier (its high nibble is the number of bytes that follow), the length.
-fn parse_max_block_len(response: &[u8]) -> Option<usize> {
-    let [0x74, format, rest @ ..] = response else {
-        return None;
-    };
-    let n = usize::from(format >> 4);
-    if n == 0 || n > 8 || rest.len() < n {
-        return None;
-    }
-    let value = rest[..n]
-        .iter()
-        .fold(0u64, |acc, &b| (acc << 8) | u64::from(b));
-    usize::try_from(value).ok()
 }
 
 impl Job for FlashJob {
