@@ -646,6 +646,18 @@ pub enum CliError {
     NotAutoPlug(String),
 }
 
+impl From<autoplug_gateway_app::RunError> for CliError {
+    fn from(e: autoplug_gateway_app::RunError) -> Self {
+        use autoplug_gateway_app::RunError;
+        match e {
+            RunError::Failed(why) => CliError::Log(why),
+            RunError::Fleet(why) => CliError::Fleet(why),
+            RunError::Incomplete(why) => CliError::Incomplete(why),
+            RunError::Output(e) => CliError::Output(e),
+        }
+    }
+}
+
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

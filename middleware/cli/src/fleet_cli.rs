@@ -16,8 +16,6 @@ use autoplug_image::Version;
 use clap::{Args, Subcommand};
 
 use crate::cmd::fleet;
-// The gateway's fleet link runs on it too; its public path stays `fleet_cli::mqtt_runtime`.
-pub use crate::cmd::fleet::mqtt_runtime;
 
 /// The database by default: an SQLite file in the working directory.
 pub const DEFAULT_DB: &str = "fleet.db";

@@ -19,6 +19,17 @@ use rumqttc::{
 use tokio::runtime::Handle;
 use tokio::sync::mpsc;
 
+/// A runtime for MQTT connections, to share between them (two workers: the connections
+/// only move bytes).
+pub fn runtime() -> Result<tokio::runtime::Runtime, String> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name("mqtt")
+        .enable_all()
+        .build()
+        .map_err(|e| format!("cannot start the MQTT runtime: {e}"))
+}
+
 /// The broker's standard port for MQTT without TLS.
 pub const DEFAULT_PORT: u16 = 1883;
 

@@ -1,5 +1,5 @@
 //! `autoplug dashboard`: the web dashboard over the virtual car, a live bus or a log, on
-//! the gateway's run (`gateway::run_on`), with its data folder and firmware library.
+//! the gateway's run ([`autoplug_gateway_app::run`]), with its data folder and firmware library.
 
 use std::io::{self, Write};
 use std::path::Path;
@@ -9,7 +9,6 @@ use autoplug_dashboard::dashboard::DataFolder;
 use autoplug_live::sources::BusUrl;
 use autoplug_virtual_car::firmware::FirmwareChoice;
 
-use super::gateway;
 use crate::cli::{CliError, DashboardArgs};
 
 /// Prepares the data folder (and the firmware the virtual car runs), then runs the
@@ -37,7 +36,7 @@ pub(crate) fn run(args: DashboardArgs, out: &mut dyn Write) -> Result<(), CliErr
         // Reads until the other end closes (the parent ended, however it ended).
         std::thread::spawn(|| {
             let _ = io::copy(&mut io::stdin().lock(), &mut io::sink());
-            gateway::EXIT_WITH_INPUT.store(true, Ordering::SeqCst);
+            autoplug_gateway_app::EXIT_WITH_INPUT.store(true, Ordering::SeqCst);
         });
     }
     let folder = DataFolder::prepare(&data).map_err(CliError::Log)?;
@@ -64,7 +63,7 @@ pub(crate) fn run(args: DashboardArgs, out: &mut dyn Write) -> Result<(), CliErr
         }
         None => None,
     };
-    let options = gateway::GatewayOptions {
+    let options = autoplug_gateway_app::GatewayOptions {
         firmware,
         transmit: (virtual_car || (transmit && matches!(bus, BusUrl::Transport(_))))
             .then_some(60_000_000),
@@ -100,7 +99,7 @@ pub(crate) fn run(args: DashboardArgs, out: &mut dyn Write) -> Result<(), CliErr
             .config(Some(folder.root.join("fleet-state.json")))
             .map_err(CliError::Fleet)?,
     };
-    gateway::run_on(&bus, options, out)
+    Ok(autoplug_gateway_app::run(&bus, options, out)?)
 }
 
 /// The virtual car's firmware library in the data folder: the demonstration releases,

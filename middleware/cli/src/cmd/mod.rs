@@ -10,7 +10,7 @@
 //! | [`demo`] | `demo` |
 //! | [`replay`] | `replay` |
 //! | [`diagnose`] | `diagnose` |
-//! | [`gateway`] | `gateway`, and the run the dashboard shares with it (trip log, fleet link, world) |
+//! | [`gateway`] | `gateway` (the run itself: `autoplug-gateway-app`, the dashboard's too) |
 //! | [`dashboard`] | `dashboard` |
 //! | [`trips`] | `trips list`, `trips show` |
 //! | [`log`] | `log export` |

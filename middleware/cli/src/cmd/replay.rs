@@ -2,9 +2,9 @@
 
 use std::io::Write;
 
-use super::gateway::{open_trip_log, report_trip_log};
 use super::{incomplete, strictness};
 use crate::cli::{CliError, ReplayArgs};
+use autoplug_gateway_app::{open_trip_log, report_trip_log};
 
 /// Runs the gateway over the log (into the trip database with `--db`) and prints the bus,
 /// the signals, the verdicts, the trouble codes heard and the trips.

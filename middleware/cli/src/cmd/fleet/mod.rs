@@ -37,13 +37,4 @@ fn io(e: std::io::Error) -> String {
     format!("cannot write the output: {e}")
 }
 
-/// A runtime for the fleet's MQTT connections (two workers: the connections only move
-/// bytes).
-pub fn mqtt_runtime() -> Result<tokio::runtime::Runtime, String> {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .thread_name("mqtt")
-        .enable_all()
-        .build()
-        .map_err(|e| format!("cannot start the MQTT runtime: {e}"))
-}
+pub use autoplug_fleet::mqtt::runtime as mqtt_runtime;
