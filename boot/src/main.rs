@@ -23,7 +23,7 @@
 fn main() {
     println!(
         "boot is the ECUs' bootloader for the Nucleo-F446RE: build it with \
-         `cargo build --release --target thumbv7em-none-eabihf -p autoplug-boot`"
+         `cargo build --profile firmware --target thumbv7em-none-eabihf -p autoplug-boot`"
     );
 }
 

@@ -163,6 +163,10 @@ pub const BUILD_VARIANT: Variant = if cfg!(feature = "faulty") {
     Variant::Correct
 };
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-ABS-0001";
+
 /// Control period. Wheel dynamics are fast (a wheel locks within ~100 ms at full brake), so
 /// the ABS runs at twice the message rate; messages still go out at their 10 ms periods
 /// (or on change, at most every 5 ms). A PedalBrake frame that starts a braking gets a

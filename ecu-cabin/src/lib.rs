@@ -60,6 +60,10 @@ const _: () = assert!(SET_TEMP_MIN_F < SET_TEMP_MAX_F);
 /// Readings outside this range, °F, come from a broken sensor and are ignored.
 pub const CABIN_TEMP_VALID_F: core::ops::RangeInclusive<f32> = -40.0..=160.0;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-CABIN-0001";
+
 /// Control period, µs: the rate of the messages published. The cabin is slow.
 pub const STEP_PERIOD_US: u64 = 100_000;
 

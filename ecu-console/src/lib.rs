@@ -31,6 +31,10 @@ use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicT
 // other ECUs' in `autoplug-ecu-params`, where the gateway's diagnostics read them.
 pub use autoplug_ecu_params::console::*;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-CONSOLE-0001";
+
 /// Control period: brake lights follow PedalBrake (10 ms) within a step.
 pub const STEP_PERIOD_US: u64 = 10_000;
 

@@ -56,6 +56,10 @@ pub const FAULTY_DEAD_BAND_KMH: f32 = 1.0;
 /// reach the bus just after it; requiring the request to persist filters that frame out.
 pub const ENGAGE_CONFIRM_STEPS: u8 = 2;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-CRUISE-0001";
+
 /// Control period: the rate VehicleSpeedMsg is published at.
 pub const STEP_PERIOD_US: u64 = 10_000;
 

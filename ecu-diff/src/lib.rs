@@ -70,6 +70,10 @@ const YAW_PID: Pid = Pid::from_tuning(TUNING);
 /// Largest torque split, N·m: DiffMsg's range (spec section 3).
 pub const SPLIT_LIMIT_NM: f32 = 50.0;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-DIFF-0001";
+
 /// Control period, µs: the rate of the inputs and of DiffMsg.
 pub const STEP_PERIOD_US: u64 = 10_000;
 

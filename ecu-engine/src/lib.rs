@@ -57,6 +57,10 @@ pub const FUEL_USED_WRAP_ML: u32 = 1 << 16;
 /// The engine mode reported while the console's choice is unknown (see the crate docs).
 pub const SAFE_ENGINE_MODE: EngineMode = EngineMode::Economy;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-ENGINE-0001";
+
 /// Control period: the rate EngineMsg is published at.
 pub const STEP_PERIOD_US: u64 = 20_000;
 

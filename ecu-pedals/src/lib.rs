@@ -57,6 +57,10 @@ pub const CRUISE_COMMAND_FULL: f32 = 100.0;
 /// Full traction cut, % (TracMsg's 0..100).
 pub const TRACTION_CUT_FULL: f32 = 100.0;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-PEDALS-0001";
+
 /// Control period: the rate PedalAccel and PedalBrake are published at.
 pub const STEP_PERIOD_US: u64 = 10_000;
 

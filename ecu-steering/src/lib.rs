@@ -50,6 +50,10 @@ pub const STEERING_LIMIT_DEG: f32 = 135.0;
 /// 20 ms at the 10 ms step, longer than contact bounce, far shorter than a deliberate press.
 pub const DEBOUNCE_STEPS: u8 = 2;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-STEER-0001";
+
 /// Control period: the rate SteeringMsg is published at.
 pub const STEP_PERIOD_US: u64 = 10_000;
 

@@ -58,6 +58,10 @@ use autoplug_ecu::{receive, supervise, Dtcs, EcuLogic, Input, Instant, PeriodicT
 // other ECUs' in `autoplug-ecu-params`, where the gateway's diagnostics read them.
 pub use autoplug_ecu_params::trans::*;
 
+/// The part number of this ECU's software (UDS 0xF187), as the virtual car's ECUs answer
+/// it.
+pub const PART_NUMBER: &str = "AP-TRANS-0001";
+
 /// Control period, µs: twice the rate of ShiftMsg, the speed's own period.
 pub const STEP_PERIOD_US: u64 = 10_000;
 

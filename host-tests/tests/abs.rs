@@ -153,7 +153,7 @@ fn the_brake_acts_as_soon_as_the_pedal_frame_arrives() {
         for logged in car.take_log() {
             let braking = logged.frame.id() == PedalBrake::ID
                 && PedalBrake::decode_data(logged.frame.data())
-                    .is_ok_and(|m| m.brake_cmd > ecu_abs::BRAKING_THRESHOLD);
+                    .is_ok_and(|m| m.brake_cmd > autoplug_ecus::abs::BRAKING_THRESHOLD);
             if braking && pressed_at_us.is_none() {
                 pressed_at_us = Some(logged.t_us);
             }

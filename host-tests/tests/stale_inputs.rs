@@ -27,20 +27,9 @@ accelerator = 0.0
     )
 }
 
-/// Control step period of each ECU, µs (the ECUs' own constants).
+/// Control step period of each ECU, µs (the ECUs' own constants, from their registry).
 fn step_period_us(node: Node) -> u64 {
-    match node {
-        Node::Engine => ecu_engine::STEP_PERIOD_US,
-        Node::Pedals => ecu_pedals::STEP_PERIOD_US,
-        Node::Steering => ecu_steering::STEP_PERIOD_US,
-        Node::Transmission => ecu_trans::STEP_PERIOD_US,
-        Node::Cabin => ecu_cabin::STEP_PERIOD_US,
-        Node::Console => ecu_console::STEP_PERIOD_US,
-        Node::Differential => ecu_diff::STEP_PERIOD_US,
-        Node::Cruise => ecu_cruise::STEP_PERIOD_US,
-        Node::ABS => ecu_abs::STEP_PERIOD_US,
-        Node::Gateway => 0,
-    }
+    autoplug_ecus::ecu(node).map_or(0, |e| e.step_period_us)
 }
 
 /// Nodes that supervise a message: its receivers in the DBC, less the gateway and the
@@ -158,7 +147,7 @@ fn safe_states_on_the_car() {
     }
     assert_eq!(
         car.abs_status().expect("host logic").availability,
-        ecu_abs::Availability::NoSpeedReference
+        autoplug_ecus::abs::Availability::NoSpeedReference
     );
     assert_eq!(
         car.trans_status().expect("host logic").engaged,

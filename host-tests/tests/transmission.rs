@@ -120,11 +120,18 @@ press = ["shift_down"]
 #[test]
 fn the_transmission_calibration_matches_the_vehicle() {
     let p = autoplug_vehicle::VehicleParams::evo_vi();
-    let ratios = ecu_trans::GEAR_RATIOS.map(f64::from);
+    let ratios = autoplug_ecus::trans::GEAR_RATIOS.map(f64::from);
     for (ecu, car) in ratios.iter().zip(p.driveline.gear_ratios) {
         assert!((ecu - car).abs() < 1e-6, "{ecu} vs {car}");
     }
-    assert!((f64::from(ecu_trans::REVERSE_RATIO) - p.driveline.reverse_ratio).abs() < 1e-6);
-    assert!((f64::from(ecu_trans::FINAL_DRIVE_RATIO) - p.driveline.final_drive_ratio).abs() < 1e-6);
-    assert!((f64::from(ecu_trans::TYRE_RADIUS_M) - p.tyre.rolling_radius_m).abs() < 1e-6);
+    assert!(
+        (f64::from(autoplug_ecus::trans::REVERSE_RATIO) - p.driveline.reverse_ratio).abs() < 1e-6
+    );
+    assert!(
+        (f64::from(autoplug_ecus::trans::FINAL_DRIVE_RATIO) - p.driveline.final_drive_ratio).abs()
+            < 1e-6
+    );
+    assert!(
+        (f64::from(autoplug_ecus::trans::TYRE_RADIUS_M) - p.tyre.rolling_radius_m).abs() < 1e-6
+    );
 }

@@ -1,11 +1,11 @@
-//! `ecu_abs::test_cases` on the Cortex-M4F: the ABS logic (slip control, faulty build, traction control), as on the host.
+//! `autoplug_ecus::abs::test_cases` on the Cortex-M4F: the ABS logic (slip control, faulty build, traction control), as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::abs::test_cases;
     use autoplug_target_tests as _;
-    use ecu_abs::test_cases;
 
     #[test]
     fn publishes_its_messages_every_10_ms() {

@@ -1,11 +1,11 @@
-//! `ecu_cabin::test_cases` on the Cortex-M4F: the cabin comfort logic (fan PID), as on the host.
+//! `autoplug_ecus::cabin::test_cases` on the Cortex-M4F: the cabin comfort logic (fan PID), as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::cabin::test_cases;
     use autoplug_target_tests as _;
-    use ecu_cabin::test_cases;
 
     #[test]
     fn publishes_temperatures_and_fan_every_100_ms() {

@@ -1,11 +1,11 @@
-//! `ecu_console::test_cases` on the Cortex-M4F: the console logic (lights, AccMsg), as on the host.
+//! `autoplug_ecus::console::test_cases` on the Cortex-M4F: the console logic (lights, AccMsg), as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::console::test_cases;
     use autoplug_target_tests as _;
-    use ecu_console::test_cases;
 
     #[test]
     fn reports_the_switches() {

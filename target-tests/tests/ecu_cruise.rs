@@ -1,12 +1,12 @@
-//! `ecu_cruise::test_cases` on the Cortex-M4F: the cruise control logic's decisions and
+//! `autoplug_ecus::cruise::test_cases` on the Cortex-M4F: the cruise control logic's decisions and
 //! its safe state, as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::cruise::test_cases;
     use autoplug_target_tests as _;
-    use ecu_cruise::test_cases;
 
     #[test]
     fn publishes_speed_and_command_at_their_periods() {

@@ -1,11 +1,11 @@
-//! `ecu_diff::test_cases` on the Cortex-M4F: the differential logic (yaw control), as on the host.
+//! `autoplug_ecus::diff::test_cases` on the Cortex-M4F: the differential logic (yaw control), as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::diff::test_cases;
     use autoplug_target_tests as _;
-    use ecu_diff::test_cases;
 
     #[test]
     fn publishes_split_and_yaw_error_every_10_ms() {

@@ -1,11 +1,11 @@
-//! `ecu_engine::test_cases` on the Cortex-M4F: the engine logic (RPM, fuel, engine mode), as on the host.
+//! `autoplug_ecus::engine::test_cases` on the Cortex-M4F: the engine logic (RPM, fuel, engine mode), as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::engine::test_cases;
     use autoplug_target_tests as _;
-    use ecu_engine::test_cases;
 
     #[test]
     fn reports_rpm_and_fuel() {

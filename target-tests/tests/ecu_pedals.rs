@@ -1,11 +1,11 @@
-//! `ecu_pedals::test_cases` on the Cortex-M4F: the pedals logic (cruise cancel, traction cut), as on the host.
+//! `autoplug_ecus::pedals::test_cases` on the Cortex-M4F: the pedals logic (cruise cancel, traction cut), as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::pedals::test_cases;
     use autoplug_target_tests as _;
-    use ecu_pedals::test_cases;
 
     #[test]
     fn reports_the_driver_pedals() {

@@ -1,11 +1,11 @@
-//! `ecu_trans::test_cases` on the Cortex-M4F: the transmission logic (shift schedules, manual, over-rev), as on the host.
+//! `autoplug_ecus::trans::test_cases` on the Cortex-M4F: the transmission logic (shift schedules, manual, over-rev), as on the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 #[defmt_test::tests]
 mod tests {
+    use autoplug_ecus::trans::test_cases;
     use autoplug_target_tests as _;
-    use ecu_trans::test_cases;
 
     #[test]
     fn publishes_gear_and_mode_every_20_ms() {

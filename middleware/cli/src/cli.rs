@@ -104,9 +104,8 @@ pub struct FlashArgs {
     /// The bus: socketcand://HOST:PORT/BUS or socketcan://IFACE.
     #[arg(long, value_name = "URL", value_parser = parse_via)]
     pub via: Via,
-    /// The ECU to flash: engine, pedals, steering, transmission (trans), cabin,
-    /// console, differential (diff), cruise, abs.
-    #[arg(long, value_name = "NAME", value_parser = parse_ecu_arg)]
+    /// The ECU to flash.
+    #[arg(long, value_name = "NAME", value_parser = parse_ecu_arg, help = ecu_help("The ECU to flash"))]
     pub ecu: Node,
     /// The signed image file.
     #[arg(long, value_name = "FILE")]
@@ -427,9 +426,8 @@ pub enum ImageCommand {
 /// `autoplug image build`: the payloads, what the header says, the key and the output.
 #[derive(Debug, Args)]
 pub struct BuildArgs {
-    /// The target ECU: engine, pedals, steering, transmission (trans), cabin, console,
-    /// differential (diff), cruise, abs.
-    #[arg(long, value_name = "NAME", value_parser = parse_ecu_arg)]
+    /// The target ECU.
+    #[arg(long, value_name = "NAME", value_parser = parse_ecu_arg, help = ecu_help("The target ECU"))]
     pub ecu: Node,
     /// The software version, MAJOR.MINOR.PATCH.
     #[arg(long, value_name = "X.Y.Z", value_parser = parse_version)]
@@ -567,6 +565,11 @@ impl TimingArgs {
 fn parse_via(text: &str) -> Result<Via, String> {
     text.parse()
         .map_err(|e: autoplug_transport::ViaError| e.to_string())
+}
+
+/// The help of an `--ecu NAME` option: what it is, then every ECU's name (from the DBC).
+fn ecu_help(what: &str) -> String {
+    format!("{what}: {ECU_NAME_LIST} (or a name's start, four letters or more: trans, diff)")
 }
 
 fn parse_ecu_arg(text: &str) -> Result<Node, String> {

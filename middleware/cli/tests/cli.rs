@@ -73,7 +73,7 @@ fn argument_errors_are_clear() {
     assert_eq!(output.status.code(), Some(2));
     let text = stderr(&output);
     assert!(text.contains("unknown ECU 'brakes'"), "{text}");
-    assert!(text.contains("transmission (trans)"), "{text}");
+    assert!(text.contains("transmission, cabin"), "{text}");
 
     let output = autoplug(&["ids", "--via", "tcp://127.0.0.1:29536"]);
     assert_eq!(output.status.code(), Some(2));

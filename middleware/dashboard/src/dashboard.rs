@@ -81,7 +81,7 @@ impl DataFolder {
 
 /// What the dashboard builds for ECUs it runs as their firmware, from the checkout it runs
 /// in, so that `--firmware` needs nothing prepared by hand: the firmware ELF files the car
-/// loads (cargo, as `cargo build-fw-<ecu>` does, and the bootloader in a build of its own:
+/// loads (cargo, as `cargo build-fw -p ecu-<ecu>` does, and the bootloader in a build of its own:
 /// its HAL features differ) and the signed demonstration releases of cruise and ABS for the
 /// library (scripts/firmware-demo-images: the faulty build 1.1.0 and the fix 1.2.0, each
 /// for both slots, the development key). Only what is missing is built.

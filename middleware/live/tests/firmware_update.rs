@@ -12,7 +12,7 @@
 //! the update on a bus 87 % busy with frames above the ECU's.
 //!
 //! Ignored: they need the firmware built for the MCU and the demonstration's releases
-//! (`cargo build --release --target thumbv7em-none-eabihf -p autoplug-boot -p ecu-cruise`,
+//! (`cargo build --profile firmware --target thumbv7em-none-eabihf -p autoplug-boot -p ecu-cruise`,
 //! `scripts/firmware-demo-images target/demo-images`); then `cargo test -p autoplug-live
 //! --test firmware_update -- --ignored --nocapture` (CI does). The sweep cuts at every
 //! operation outside the image's own words and at every `AUTOPLUG_CUT_STRIDE`-th word of the

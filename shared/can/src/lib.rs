@@ -34,7 +34,7 @@ mod spec;
 
 pub use autoplug_scaling::LinearScale;
 pub use codec::{DecodeError, SignalError};
-pub use ecu_names::{ecu_name, firmware_name, parse_ecu, ECUS, ECU_NAME_LIST};
+pub use ecu_names::{ecu_name, parse_ecu, ECUS, ECU_NAME_LIST};
 pub use frame::{Frame, FrameError};
 pub use spec::{CanMessage, MessageSpec, SignalKind, SignalSpec};
 

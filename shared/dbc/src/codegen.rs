@@ -586,6 +586,68 @@ fn emit_nodes(db: &Database, w: &mut String) -> Result<(), GenerateError> {
             all.join(", ")
         ),
     );
+    // The ECUs are the nodes a tester can address: every list of them (the command line's,
+    // the gateway's inventory, the fleet's) comes from here.
+    let ecus: Vec<&Node> = db
+        .nodes
+        .iter()
+        .filter(|n| {
+            db.node_attribute(n, "DiagNodeNumber")
+                .and_then(AttributeValue::as_int)
+                .is_some_and(|num| num != 0)
+        })
+        .collect();
+    line(w, "");
+    line(
+        w,
+        "    /// The ECUs: the nodes with a diagnostic address (attribute `DiagNodeNumber`), in",
+    );
+    line(w, "    /// DBC order.");
+    let list: Vec<String> = ecus
+        .iter()
+        .map(|n| format!("Node::{}", variant_ident(&n.name)))
+        .collect();
+    line(
+        w,
+        &format!(
+            "    pub const ECUS: [Node; {}] = [{}];",
+            list.len(),
+            list.join(", ")
+        ),
+    );
+    line(w, "");
+    line(
+        w,
+        "    /// The ECUs' names as people type them (the DBC's names in lower case), for help",
+    );
+    line(w, "    /// texts and error messages.");
+    let names: Vec<String> = ecus.iter().map(|n| n.name.to_lowercase()).collect();
+    line(
+        w,
+        &format!(
+            "    pub const ECU_NAMES: &'static str = {};",
+            rust_str(&names.join(", "))
+        ),
+    );
+    line(w, "");
+    line(
+        w,
+        "    /// The node's name as people type it: the DBC's name in lower case (`cruise`).",
+    );
+    line(w, "    pub const fn short_name(self) -> &'static str {");
+    line(w, "        match self {");
+    for n in &db.nodes {
+        line(
+            w,
+            &format!(
+                "            Node::{} => {},",
+                variant_ident(&n.name),
+                rust_str(&n.name.to_lowercase())
+            ),
+        );
+    }
+    line(w, "        }");
+    line(w, "    }");
     line(w, "");
     line(w, "    /// The node's name in the DBC.");
     line(w, "    pub const fn name(self) -> &'static str {");

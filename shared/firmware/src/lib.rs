@@ -132,9 +132,9 @@ macro_rules! ecu_main {
         fn main() {
             println!(
                 "{bin} is firmware for the Nucleo-F446RE ({what}): build it with \
-                 `cargo build --release --target thumbv7em-none-eabihf --bin {bin}`, then run \
+                 `cargo build --profile firmware --target thumbv7em-none-eabihf --bin {bin}`, then run \
                  it on a board (the runner flashes it through probe-rs) or on the emulated one \
-                 (autoplug-emu target/thumbv7em-none-eabihf/release/{bin})",
+                 (autoplug-emu target/thumbv7em-none-eabihf/firmware/{bin})",
                 bin = env!("CARGO_BIN_NAME"),
                 what = env!("CARGO_PKG_DESCRIPTION"),
             );

@@ -50,9 +50,10 @@ const RESERVED: &[(&str, &str)] = &[
     ("PC15", "LSE crystal"),
 ];
 
-const ECUS: [&str; 9] = [
-    "engine", "pedals", "steering", "trans", "cabin", "console", "diff", "cruise", "abs",
-];
+/// Every ECU's short name (`ecu-{name}/src/bin/{name}-fw/board.rs`), from the registry.
+fn ecus() -> impl Iterator<Item = &'static str> {
+    autoplug_ecus::ECUS.iter().map(|e| e.name)
+}
 
 const TABLE_HEADER: &str = "| Arduino | Morpho | MCU pin | signal | direction | electrical range |";
 
@@ -137,7 +138,7 @@ fn pins_in_code(source: &str) -> BTreeSet<String> {
 
 #[test]
 fn every_board_table_names_exactly_the_pins_its_code_takes() {
-    for ecu in ECUS {
+    for ecu in ecus() {
         let source = board_source(ecu);
         let rows = table_rows(&source);
         let mut documented = BTreeSet::new();
@@ -162,7 +163,7 @@ fn every_board_table_names_exactly_the_pins_its_code_takes() {
 fn header_positions_agree_with_the_nucleo_connectors() {
     let headers: BTreeMap<&str, (&str, &str)> =
         HEADERS.iter().map(|&(pin, a, m)| (pin, (a, m))).collect();
-    for ecu in ECUS {
+    for ecu in ecus() {
         for row in table_rows(&board_source(ecu)) {
             let cells = cells(&row);
             let (arduino, morpho, pin) = (cells[0], cells[1], cells[2]);
@@ -185,7 +186,7 @@ fn header_positions_agree_with_the_nucleo_connectors() {
 
 #[test]
 fn no_board_takes_a_pin_the_nucleo_reserves() {
-    for ecu in ECUS {
+    for ecu in ecus() {
         let pins = board_pins(&board_source(ecu));
         for (pin, use_) in RESERVED {
             assert!(!pins.contains(*pin), "{ecu} takes {pin}, the {use_}");
@@ -199,7 +200,7 @@ fn every_board_is_on_can1_at_pb8_pb9() {
         shared_bring_up().contains("Can::new(p.CAN1, p.PB8, p.PB9, $crate::can_io::Irqs)"),
         "the shared bring-up puts CAN1 on PB8 (RX) / PB9 (TX), the bench's common wiring"
     );
-    for ecu in ECUS {
+    for ecu in ecus() {
         let source = board_source(ecu);
         assert!(
             source.contains("autoplug_firmware::board_init!(p, platform)")
@@ -212,7 +213,7 @@ fn every_board_is_on_can1_at_pb8_pb9() {
 #[test]
 fn the_readme_bench_tables_are_the_boards_tables() {
     let readme = fs::read_to_string(root().join("docs/src/ecus-and-bench.md")).expect("book page");
-    for ecu in ECUS {
+    for ecu in ecus() {
         let rows = table_rows(&board_source(ecu));
         let block = format!(
             "{TABLE_HEADER}\n|---|---|---|---|---|---|\n{}\n",
@@ -231,20 +232,11 @@ fn the_readme_bench_tables_are_the_boards_tables() {
     }
 }
 
-/// Each ECU's declared signals (its crate's `pins::SIGNALS`).
+/// Each ECU's declared signals (its crate's `pins::SIGNALS`, from the registry).
 fn declared(ecu: &str) -> &'static [Signal] {
-    match ecu {
-        "engine" => ecu_engine::pins::SIGNALS,
-        "pedals" => ecu_pedals::pins::SIGNALS,
-        "steering" => ecu_steering::pins::SIGNALS,
-        "trans" => ecu_trans::pins::SIGNALS,
-        "cabin" => ecu_cabin::pins::SIGNALS,
-        "console" => ecu_console::pins::SIGNALS,
-        "diff" => ecu_diff::pins::SIGNALS,
-        "cruise" => ecu_cruise::pins::SIGNALS,
-        "abs" => ecu_abs::pins::SIGNALS,
-        other => panic!("no ECU {other}"),
-    }
+    autoplug_ecus::by_name(ecu)
+        .unwrap_or_else(|| panic!("no ECU {ecu}"))
+        .signals
 }
 
 /// ADC1's input channel of an F446 pin (RM0390 / DS10693 pin table), for the Nucleo's
@@ -274,7 +266,7 @@ fn tim3_channel(pin: &str) -> Option<u8> {
 
 #[test]
 fn every_board_table_is_its_crates_pin_declaration() {
-    for ecu in ECUS {
+    for ecu in ecus() {
         let source = board_source(ecu);
         let mut documented = BTreeMap::new();
         for row in table_rows(&source) {

@@ -8,12 +8,13 @@
 
 use crate::diag::VirtualDiag;
 use crate::driver::{CarOnRoad, DriverControls, ManualDriver, RoadDriver, Timeline};
-use crate::firmware::{self, Bench, FirmwareChoice, FirmwareLogLine, FirmwareStop, Wiring};
+use crate::firmware::{self, FirmwareChoice, FirmwareLogLine, FirmwareStop};
 use crate::scenario::FRICTION_RANGE;
 use crate::scenario::{Activation, Event, GearName, Scenario, Software};
 use crate::track::{self, OnTrack};
+use crate::wiring::{Bench, Wiring};
 use autoplug_can::{AbsMsg, CanMessage, CruiseAccelMsg, Frame, Gear as CanGear, Node, TracMsg};
-use autoplug_ecu::{Dtcs, EcuLogic, Instant, Variant};
+use autoplug_ecu::{Dtcs, EcuLogic, Instant};
 use autoplug_image::SoftwareVariant;
 use autoplug_scaling::units::{celsius_to_fahrenheit, fahrenheit_to_celsius};
 use autoplug_vehicle::{
@@ -55,8 +56,6 @@ struct Slot<E: EcuLogic> {
     emulated: bool,
     ecu: E,
     diag: VirtualDiag,
-    /// Builds the logic for the software variant the installed image names.
-    make: fn(SoftwareVariant, Instant) -> E,
     node: NodeId,
     phase_us: u64,
     next_step_us: u64,
@@ -74,7 +73,6 @@ where
     /// The ECU on host logic, attached to the bus; or, with `emulated_node`, the slot of
     /// an ECU whose MCU is attached as that node.
     fn new(
-        make: fn(SoftwareVariant, Instant) -> E,
         variant: SoftwareVariant,
         scenario: &Scenario,
         bus: &mut VirtualBus,
@@ -95,12 +93,11 @@ where
             scenario.vin(),
             scenario.seed,
         );
-        let ecu = make(diag.installed().variant, Instant::ZERO);
+        let ecu = E::make(diag.installed().variant, Instant::ZERO);
         Self {
             emulated: emulated_node.is_some(),
             ecu,
             diag,
-            make,
             node,
             phase_us,
             next_step_us: phase_us % E::STEP_PERIOD_US,
@@ -211,7 +208,7 @@ where
     fn reset(&mut self, t_us: u64) {
         let boot = self.diag.boot(t_us);
         let started = self.diag.booted_at_us();
-        self.ecu = (self.make)(boot.header.variant, Instant::from_micros(started));
+        self.ecu = E::make(boot.header.variant, Instant::from_micros(started));
         self.outputs = None;
         self.next_step_us = started + self.phase_us % E::STEP_PERIOD_US;
         self.steps_since_boot = 0;
@@ -220,55 +217,95 @@ where
     }
 }
 
-/// The demonstration variant the image's header names (the faulty software exists for
-/// cruise and ABS; another ECU ignores it).
-fn variant(software: SoftwareVariant) -> Variant {
+/// The ECUs, one slot each, in the registry's order (the order they start in, their
+/// phases a step apart): what the car does with every ECU, written once over the list.
+macro_rules! ecus {
+    ($(($node:ident, $name:ident, $krate:ident, $logic:ident)),* $(,)?) => {
+        /// The car's ECUs.
+        struct Ecus {
+            $($name: Slot<autoplug_ecus::$name::$logic>,)*
+        }
+
+        impl Ecus {
+            /// Every ECU on the bus: on host logic, or its board attached when `choice`
+            /// runs it as firmware; each with the software the scenario gives it.
+            fn build(
+                scenario: &Scenario,
+                choice: Option<&FirmwareChoice>,
+                fw: &mut firmware::Firmware,
+                bus: &mut VirtualBus,
+            ) -> Result<Self, String> {
+                let mut phases = (0..).map(|i| i * PHASE_SPACING_US);
+                $(
+                    let emulated = emulate(fw, choice, Node::$node, bus, scenario.seed)?;
+                    let phase_us = phases.next().unwrap_or_default();
+                    let software = software_of(scenario, Node::$node);
+                    let $name = Slot::new(software, scenario, bus, phase_us, emulated);
+                )*
+                Ok(Self { $($name),* })
+            }
+
+            /// Each ECU's DTCs on host logic, and whether it is emulated.
+            fn dtcs(&self) -> Vec<(Node, bool, &Dtcs)> {
+                vec![$((Node::$node, self.$name.emulated, self.$name.ecu.dtcs())),*]
+            }
+
+            fn emulated(&self, node: Node) -> bool {
+                match node {
+                    $(Node::$node => self.$name.emulated,)*
+                    _ => false,
+                }
+            }
+
+            fn diag(&self, node: Node) -> Option<&VirtualDiag> {
+                match node {
+                    $(Node::$node => Some(&self.$name.diag),)*
+                    _ => None,
+                }
+            }
+
+            /// What the emulated boards' pins show, then the frames that reached each ECU.
+            fn receive(&mut self, fw: &mut firmware::Firmware, bus: &mut VirtualBus) {
+                $(self.$name.read_pins(fw);)*
+                $(self.$name.deliver(bus);)*
+            }
+
+            /// Each ECU's control step, when due, on its own sensors.
+            fn step(
+                &mut self,
+                t_us: u64,
+                state: &VehicleState,
+                controls: &DriverControls,
+                fw: &mut firmware::Firmware,
+            ) {
+                $(self.$name.step_if_due(
+                    t_us,
+                    || <autoplug_ecus::$name::$logic as Wiring>::sensors(state, controls),
+                    fw,
+                );)*
+            }
+
+            /// Frames due now go to the ECUs' transmit queues.
+            fn transmit(&mut self, bus: &mut VirtualBus, t_us: u64) {
+                $(self.$name.transmit(bus, t_us);)*
+            }
+        }
+    };
+}
+autoplug_ecus::for_each_ecu!(ecus);
+
+/// The software an ECU starts with in `scenario` (the faulty software exists for cruise
+/// and ABS).
+fn software_of(scenario: &Scenario, node: Node) -> SoftwareVariant {
+    let software = match node {
+        Node::Cruise => scenario.ecus.cruise,
+        Node::ABS => scenario.ecus.abs,
+        _ => Software::Correct,
+    };
     match software {
-        SoftwareVariant::Standard => Variant::Correct,
-        SoftwareVariant::Faulty => Variant::Faulty,
+        Software::Correct => SoftwareVariant::Standard,
+        Software::Faulty => SoftwareVariant::Faulty,
     }
-}
-
-// How each ECU's logic is built for the software its image carries.
-fn make_pedals(_: SoftwareVariant, now: Instant) -> ecu_pedals::PedalsEcu {
-    ecu_pedals::PedalsEcu::new(now)
-}
-fn make_steering(_: SoftwareVariant, now: Instant) -> ecu_steering::SteeringEcu {
-    ecu_steering::SteeringEcu::new(now)
-}
-fn make_console(_: SoftwareVariant, now: Instant) -> ecu_console::ConsoleEcu {
-    ecu_console::ConsoleEcu::new(now)
-}
-fn make_engine(_: SoftwareVariant, now: Instant) -> ecu_engine::EngineEcu {
-    ecu_engine::EngineEcu::new(now)
-}
-fn make_trans(_: SoftwareVariant, now: Instant) -> ecu_trans::TransEcu {
-    ecu_trans::TransEcu::new(now)
-}
-fn make_cabin(_: SoftwareVariant, _: Instant) -> ecu_cabin::CabinEcu {
-    ecu_cabin::CabinEcu::new()
-}
-fn make_diff(_: SoftwareVariant, now: Instant) -> ecu_diff::DiffEcu {
-    ecu_diff::DiffEcu::new(now)
-}
-fn make_cruise(software: SoftwareVariant, now: Instant) -> ecu_cruise::CruiseEcu {
-    ecu_cruise::CruiseEcu::new(variant(software), now)
-}
-fn make_abs(software: SoftwareVariant, now: Instant) -> ecu_abs::AbsEcu {
-    ecu_abs::AbsEcu::new(variant(software), now)
-}
-
-/// The nine ECUs.
-struct Ecus {
-    pedals: Slot<ecu_pedals::PedalsEcu>,
-    steering: Slot<ecu_steering::SteeringEcu>,
-    console: Slot<ecu_console::ConsoleEcu>,
-    engine: Slot<ecu_engine::EngineEcu>,
-    trans: Slot<ecu_trans::TransEcu>,
-    cabin: Slot<ecu_cabin::CabinEcu>,
-    diff: Slot<ecu_diff::DiffEcu>,
-    cruise: Slot<ecu_cruise::CruiseEcu>,
-    abs: Slot<ecu_abs::AbsEcu>,
 }
 
 /// Everything recorded about one moment, in physical units from the model (not the
@@ -528,8 +565,8 @@ fn environment_of(scenario: &Scenario) -> Environment {
 /// the longer this is, the longer a command (a gear) waits for a car that does not move.
 pub const WARM_UP_US: u64 = 100_000;
 
-/// Phase of each ECU's control step, µs: spread over the first 5 ms.
-const PHASES_US: [u64; 9] = [0, 600, 1200, 1800, 2400, 3000, 3600, 4200, 4800];
+/// Between the phases of the ECUs' control steps, µs: nine spread over the first 5 ms.
+const PHASE_SPACING_US: u64 = 600;
 
 impl VirtualCar {
     /// The car at the start of a scenario, every ECU on host logic.
@@ -595,44 +632,8 @@ impl VirtualCar {
             event_log_capacity: 1024,
             ..BusConfig::default()
         });
-        let software = |s: Software| match s {
-            Software::Correct => SoftwareVariant::Standard,
-            Software::Faulty => SoftwareVariant::Faulty,
-        };
-        let standard = SoftwareVariant::Standard;
         let mut fw = firmware::Firmware::new();
-        let seed = scenario.seed;
-        let n = emulate(&mut fw, choice, Node::Pedals, &mut bus, seed)?;
-        let pedals = Slot::new(make_pedals, standard, scenario, &mut bus, PHASES_US[0], n);
-        let n = emulate(&mut fw, choice, Node::Steering, &mut bus, seed)?;
-        let steering = Slot::new(make_steering, standard, scenario, &mut bus, PHASES_US[1], n);
-        let n = emulate(&mut fw, choice, Node::Console, &mut bus, seed)?;
-        let console = Slot::new(make_console, standard, scenario, &mut bus, PHASES_US[2], n);
-        let n = emulate(&mut fw, choice, Node::Engine, &mut bus, seed)?;
-        let engine = Slot::new(make_engine, standard, scenario, &mut bus, PHASES_US[3], n);
-        let n = emulate(&mut fw, choice, Node::Transmission, &mut bus, seed)?;
-        let trans = Slot::new(make_trans, standard, scenario, &mut bus, PHASES_US[4], n);
-        let n = emulate(&mut fw, choice, Node::Cabin, &mut bus, seed)?;
-        let cabin = Slot::new(make_cabin, standard, scenario, &mut bus, PHASES_US[5], n);
-        let n = emulate(&mut fw, choice, Node::Differential, &mut bus, seed)?;
-        let diff = Slot::new(make_diff, standard, scenario, &mut bus, PHASES_US[6], n);
-        let n = emulate(&mut fw, choice, Node::Cruise, &mut bus, seed)?;
-        let cruise_sw = software(scenario.ecus.cruise);
-        let cruise = Slot::new(make_cruise, cruise_sw, scenario, &mut bus, PHASES_US[7], n);
-        let n = emulate(&mut fw, choice, Node::ABS, &mut bus, seed)?;
-        let abs_sw = software(scenario.ecus.abs);
-        let abs = Slot::new(make_abs, abs_sw, scenario, &mut bus, PHASES_US[8], n);
-        let ecus = Ecus {
-            pedals,
-            steering,
-            console,
-            engine,
-            trans,
-            cabin,
-            diff,
-            cruise,
-            abs,
-        };
+        let ecus = Ecus::build(scenario, choice, &mut fw, &mut bus)?;
         // The gateway listens to everything (and acknowledges), like the middleware on
         // the bench; tools attached over socketcand send through this node too.
         let external = bus.attach(EXTERNAL_SENDER, AcceptanceFilter::All);
@@ -847,65 +848,47 @@ impl VirtualCar {
 
     /// The cruise ECU's last decision (host logic only: an emulated ECU's state is in its
     /// MCU, and reaches the world through its pins, the bus and UDS).
-    pub fn cruise_status(&self) -> Option<ecu_cruise::Status> {
+    pub fn cruise_status(&self) -> Option<autoplug_ecus::cruise::Status> {
         let slot = &self.ecus.cruise;
         (!slot.emulated).then(|| slot.ecu.status())
     }
 
     /// The ABS ECU's last decision (host logic only).
-    pub fn abs_status(&self) -> Option<ecu_abs::Status> {
+    pub fn abs_status(&self) -> Option<autoplug_ecus::abs::Status> {
         let slot = &self.ecus.abs;
         (!slot.emulated).then(|| slot.ecu.status())
     }
 
     /// The transmission ECU's state (host logic only).
-    pub fn trans_status(&self) -> Option<ecu_trans::Status> {
+    pub fn trans_status(&self) -> Option<autoplug_ecus::trans::Status> {
         let slot = &self.ecus.trans;
         (!slot.emulated).then(|| slot.ecu.status())
     }
 
     /// The differential ECU's state (host logic only).
-    pub fn diff_status(&self) -> Option<ecu_diff::Status> {
+    pub fn diff_status(&self) -> Option<autoplug_ecus::diff::Status> {
         let slot = &self.ecus.diff;
         (!slot.emulated).then(|| slot.ecu.status())
     }
 
-    /// The DTCs of the ECUs on host logic, by node (an emulated ECU keeps its own, read
-    /// over UDS).
+    /// The DTCs of the ECUs on host logic, by node in the DBC's order (an emulated ECU
+    /// keeps its own, read over UDS).
     pub fn dtcs(&self) -> Vec<(Node, &Dtcs)> {
-        let e = &self.ecus;
-        [
-            (Node::Engine, e.engine.emulated, e.engine.ecu.dtcs()),
-            (Node::Pedals, e.pedals.emulated, e.pedals.ecu.dtcs()),
-            (Node::Steering, e.steering.emulated, e.steering.ecu.dtcs()),
-            (Node::Transmission, e.trans.emulated, e.trans.ecu.dtcs()),
-            (Node::Cabin, e.cabin.emulated, e.cabin.ecu.dtcs()),
-            (Node::Console, e.console.emulated, e.console.ecu.dtcs()),
-            (Node::Differential, e.diff.emulated, e.diff.ecu.dtcs()),
-            (Node::Cruise, e.cruise.emulated, e.cruise.ecu.dtcs()),
-            (Node::ABS, e.abs.emulated, e.abs.ecu.dtcs()),
-        ]
-        .into_iter()
-        .filter(|(_, emulated, _)| !emulated)
-        .map(|(node, _, dtcs)| (node, dtcs))
-        .collect()
+        let mut dtcs: Vec<(Node, &Dtcs)> = self
+            .ecus
+            .dtcs()
+            .into_iter()
+            .filter(|(_, emulated, _)| !emulated)
+            .map(|(node, _, dtcs)| (node, dtcs))
+            .collect();
+        // In the DBC's order, whatever the order the ECUs start in.
+        dtcs.sort_by_key(|(node, _)| *node);
+        dtcs
     }
 
     /// Whether `node` runs as its firmware on an emulated MCU.
     pub fn emulated(&self, node: Node) -> bool {
-        let e = &self.ecus;
-        match node {
-            Node::Pedals => e.pedals.emulated,
-            Node::Steering => e.steering.emulated,
-            Node::Console => e.console.emulated,
-            Node::Engine => e.engine.emulated,
-            Node::Transmission => e.trans.emulated,
-            Node::Cabin => e.cabin.emulated,
-            Node::Differential => e.diff.emulated,
-            Node::Cruise => e.cruise.emulated,
-            Node::ABS => e.abs.emulated,
-            Node::Gateway => false,
-        }
+        self.ecus.emulated(node)
     }
 
     /// The emulated ECUs' defmt log lines since the last call.
@@ -961,19 +944,7 @@ impl VirtualCar {
         if self.emulated(node) {
             return None;
         }
-        let e = &self.ecus;
-        Some(match node {
-            Node::Pedals => &e.pedals.diag,
-            Node::Steering => &e.steering.diag,
-            Node::Console => &e.console.diag,
-            Node::Engine => &e.engine.diag,
-            Node::Transmission => &e.trans.diag,
-            Node::Cabin => &e.cabin.diag,
-            Node::Differential => &e.diff.diag,
-            Node::Cruise => &e.cruise.diag,
-            Node::ABS => &e.abs.diag,
-            Node::Gateway => return None,
-        })
+        self.ecus.diag(node)
     }
 
     /// Stops or resumes a node's transmissions (fault injection).
@@ -1019,7 +990,7 @@ impl VirtualCar {
             // Emulated: the lamp, the set speed the firmware logged when it engaged, and
             // the command CruiseAccelMsg carries.
             let engaged = self.ecus.cruise.outputs.is_some_and(|o| o.engaged);
-            ecu_cruise::Status {
+            autoplug_ecus::cruise::Status {
                 engaged,
                 set_speed_kmh: match self.firmware.cruise_set_speed_kmh() {
                     Some(kmh) if engaged => kmh,
@@ -1147,119 +1118,19 @@ impl VirtualCar {
             self.firmware.poll_logs(t_us, self.start_us);
         }
         self.collect_log();
-        let e = &mut self.ecus;
-        let fw = &mut self.firmware;
-        e.pedals.read_pins(fw);
-        e.steering.read_pins(fw);
-        e.console.read_pins(fw);
-        e.engine.read_pins(fw);
-        e.trans.read_pins(fw);
-        e.cabin.read_pins(fw);
-        e.diff.read_pins(fw);
-        e.cruise.read_pins(fw);
-        e.abs.read_pins(fw);
-        e.pedals.deliver(&mut self.bus);
-        e.steering.deliver(&mut self.bus);
-        e.console.deliver(&mut self.bus);
-        e.engine.deliver(&mut self.bus);
-        e.trans.deliver(&mut self.bus);
-        e.cabin.deliver(&mut self.bus);
-        e.diff.deliver(&mut self.bus);
-        e.cruise.deliver(&mut self.bus);
-        e.abs.deliver(&mut self.bus);
+        self.ecus.receive(&mut self.firmware, &mut self.bus);
         while let Some(delivered) = self.bus.recv(self.external) {
             if let Some(rx) = &mut self.external_rx {
                 rx.push(delivered.frame);
             }
         }
 
-        // Each ECU's control step, when due, on its own sensors.
-        let s = self.vehicle.state();
-        let c = self.controls;
-        e.pedals.step_if_due(
-            t_us,
-            || ecu_pedals::Sensors {
-                accelerator_pedal: c.held.accelerator as f32,
-                brake_pedal: c.held.brake as f32,
-            },
-            fw,
-        );
-        e.steering.step_if_due(
-            t_us,
-            || ecu_steering::Sensors {
-                wheel_angle_deg: c.held.steering_deg as f32,
-                shift_up_button: c.buttons.shift_up,
-                shift_down_button: c.buttons.shift_down,
-                cruise_on_button: c.buttons.cruise_on,
-                cruise_off_button: c.buttons.cruise_off,
-            },
-            fw,
-        );
-        e.console.step_if_due(
-            t_us,
-            || ecu_console::Sensors {
-                headlight_switch: c.held.headlights,
-                economy_mode_switch: c.held.economy_mode,
-                manual_mode_switch: c.held.manual_mode,
-            },
-            fw,
-        );
-        e.engine.step_if_due(
-            t_us,
-            || ecu_engine::Sensors {
-                engine_rpm: s.engine_rpm as f32,
-                fuel_level_l: s.fuel_l as f32,
-                fuel_flow_l_per_h: s.fuel_flow_l_per_h as f32,
-            },
-            fw,
-        );
-        e.trans.step_if_due(
-            t_us,
-            || ecu_trans::Sensors {
-                current_gear: can_gear(s.gear),
-            },
-            fw,
-        );
-        e.cabin.step_if_due(
-            t_us,
-            || ecu_cabin::Sensors {
-                cabin_temp_f: s.cabin_temp_sensor_f(),
-                set_temp_f: c.held.set_temp_f as f32,
-            },
-            fw,
-        );
-        e.diff.step_if_due(
-            t_us,
-            || ecu_diff::Sensors {
-                yaw_rate_error_rad_s: s.yaw_rate_error_rad_s as f32,
-            },
-            fw,
-        );
-        e.cruise.step_if_due(
-            t_us,
-            || ecu_cruise::Sensors {
-                vehicle_speed_kmh: s.speed_kmh(),
-            },
-            fw,
-        );
-        e.abs.step_if_due(
-            t_us,
-            || ecu_abs::Sensors {
-                wheel_speed_kmh: s.wheel_speeds_kmh(),
-            },
-            fw,
-        );
-
-        // Frames due now go to the ECUs' transmit queues.
-        e.pedals.transmit(&mut self.bus, t_us);
-        e.steering.transmit(&mut self.bus, t_us);
-        e.console.transmit(&mut self.bus, t_us);
-        e.engine.transmit(&mut self.bus, t_us);
-        e.trans.transmit(&mut self.bus, t_us);
-        e.cabin.transmit(&mut self.bus, t_us);
-        e.diff.transmit(&mut self.bus, t_us);
-        e.cruise.transmit(&mut self.bus, t_us);
-        e.abs.transmit(&mut self.bus, t_us);
+        // Each ECU's control step, when due, on its own sensors; then the frames due now
+        // go to the ECUs' transmit queues.
+        let controls = self.controls;
+        self.ecus
+            .step(t_us, self.vehicle.state(), &controls, &mut self.firmware);
+        self.ecus.transmit(&mut self.bus, t_us);
 
         // The actuators drive the car for the next tick, on the surface under its wheels.
         if !held {

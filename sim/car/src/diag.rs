@@ -46,18 +46,8 @@ pub const FACTORY_PAYLOAD_LEN: usize = 30 * 1024;
 
 /// The part number of an ECU's software (UDS F187).
 pub fn part_number(node: Node) -> PartNumber {
-    let name = match node {
-        Node::Engine => "AP-ENGINE-0001",
-        Node::Pedals => "AP-PEDALS-0001",
-        Node::Steering => "AP-STEER-0001",
-        Node::Transmission => "AP-TRANS-0001",
-        Node::Cabin => "AP-CABIN-0001",
-        Node::Console => "AP-CONSOLE-0001",
-        Node::Differential => "AP-DIFF-0001",
-        Node::Cruise => "AP-CRUISE-0001",
-        Node::ABS => "AP-ABS-0001",
-        Node::Gateway => "AP-GATEWAY-0001",
-    };
+    // Each ECU's from its crate; the gateway's own.
+    let name = autoplug_ecus::ecu(node).map_or("AP-GATEWAY-0001", |e| e.part_number);
     PartNumber::new(name).expect("a valid part number")
 }
 

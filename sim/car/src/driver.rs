@@ -321,11 +321,11 @@ pub fn clamped(held: HeldControls) -> Option<HeldControls> {
 }
 
 /// The steering wheel's travel either way, degrees: the steering sensor's range.
-pub const MAX_STEERING_DEG: f64 = ecu_steering::STEERING_LIMIT_DEG as f64;
+pub const MAX_STEERING_DEG: f64 = autoplug_ecus::steering::STEERING_LIMIT_DEG as f64;
 /// The cabin knob's range, °F: the set-temperature sensor's.
-pub const MIN_SET_TEMP_F: f64 = ecu_cabin::SET_TEMP_MIN_F as f64;
+pub const MIN_SET_TEMP_F: f64 = autoplug_ecus::cabin::SET_TEMP_MIN_F as f64;
 /// The cabin knob's range, °F.
-pub const MAX_SET_TEMP_F: f64 = ecu_cabin::SET_TEMP_MAX_F as f64;
+pub const MAX_SET_TEMP_F: f64 = autoplug_ecus::cabin::SET_TEMP_MAX_F as f64;
 
 /// A person driving instead of the scenario's timeline (the dashboard's Drive view): the
 /// controls they hold, and each steering-wheel button held for [`BUTTON_PRESS_S`] from

@@ -1,4 +1,4 @@
-//! ECUs that run as their firmware: the release ELF (the bytes `cargo fw-<ecu>` flashes)
+//! ECUs that run as their firmware: the release ELF (the bytes `cargo fw -p ecu-<ecu>` flashes)
 //! with the bootloader, on AutoPlug's emulated STM32F446 (`autoplug-mcu`). Such an ECU
 //! meets the car as a board on the bench would: the vehicle model puts volts on its ADC
 //! pins and levels on its switch inputs, reads its PWM duties and output levels, all by
@@ -8,9 +8,8 @@
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
-use autoplug_can::{ecu_name, firmware_name, parse_ecu, Gear, Node, ECUS, ECU_NAME_LIST};
-use autoplug_ecu::pins::{AnalogIn, DigitalIn, DigitalOut, Pull, PwmOut};
-use autoplug_ecu::EcuLogic;
+use autoplug_can::{ecu_name, parse_ecu, Node, ECUS, ECU_NAME_LIST};
+use autoplug_ecus::firmware_name;
 use autoplug_mcu::chip::rcc::ResetCause;
 use autoplug_mcu::chip::Chip;
 use autoplug_mcu::mcu::{Mcu, Stop};
@@ -19,9 +18,9 @@ use autoplug_mcu::programming::FlashContents;
 use autoplug_mcu::rtt::RttLog;
 use autoplug_virtual_bus::{NodeId, VirtualBus};
 
-/// Where the firmware the car runs comes from when none is named: the release build of
-/// `cargo build --release --target thumbv7em-none-eabihf` ([`FIRMWARE_TARGET`]).
-pub const DEFAULT_FIRMWARE_DIR: &str = "target/thumbv7em-none-eabihf/release";
+/// Where the firmware the car runs comes from when none is named: the firmware build of
+/// `cargo build --profile firmware --target thumbv7em-none-eabihf` ([`FIRMWARE_TARGET`]).
+pub const DEFAULT_FIRMWARE_DIR: &str = "target/thumbv7em-none-eabihf/firmware";
 
 /// The log lines the car keeps for its caller (the oldest go first beyond this).
 const LOG_CAPACITY: usize = 100_000;
@@ -31,7 +30,7 @@ const LOG_CAPACITY: usize = 100_000;
 pub struct FirmwareChoice {
     /// The ECUs, in the catalogue's order.
     pub ecus: Vec<Node>,
-    /// The directory with `boot` and `<ecu>-fw` (a cargo release directory).
+    /// The directory with `boot` and `<ecu>-fw` (a cargo profile's directory).
     pub dir: PathBuf,
 }
 
@@ -89,7 +88,14 @@ impl FirmwareChoice {
     /// one build, the bootloader in one of its own (its HAL features differ from the
     /// firmware's, and one build would unify them).
     pub fn build_commands(missing: &[(String, PathBuf)]) -> Vec<Vec<String>> {
-        let base = ["build", "--release", "--target", FIRMWARE_TARGET].map(String::from);
+        let base = [
+            "build",
+            "--profile",
+            FIRMWARE_PROFILE,
+            "--target",
+            FIRMWARE_TARGET,
+        ]
+        .map(String::from);
         let (boot, firmware): (Vec<&String>, Vec<&String>) = missing
             .iter()
             .map(|(package, _)| package)
@@ -154,6 +160,10 @@ impl FirmwareChoice {
 
 /// The firmware's target: the Nucleo-F446RE's Cortex-M4F.
 pub const FIRMWARE_TARGET: &str = "thumbv7em-none-eabihf";
+
+/// The cargo profile the firmware is built in (the workspace's `Cargo.toml`: fat LTO,
+/// optimised for size; the host programs' `release` is built for build time).
+pub const FIRMWARE_PROFILE: &str = "firmware";
 
 /// The AutoPlug cargo workspace `dir` is in (the folder with its `Cargo.toml`, the
 /// bootloader's and the emulator's crates), if it is in one: there `--firmware` can build
@@ -259,7 +269,7 @@ pub fn load(node: Node, dir: &Path, seed: u64) -> Result<(Mcu, Vec<RttLog>), Str
         let name = path.display().to_string();
         let bytes = std::fs::read(&path).map_err(|e| {
             format!(
-                "{name}: {e} (build the firmware first: cargo build --release --target thumbv7em-none-eabihf -p {})",
+                "{name}: {e} (build the firmware first: cargo build --profile firmware --target thumbv7em-none-eabihf -p {})",
                 if file == "boot" {
                     "autoplug-boot".to_string()
                 } else {
@@ -525,208 +535,9 @@ fn push_line(log: &mut VecDeque<FirmwareLogLine>, dropped: &mut u64, line: Firmw
     log.push_back(line);
 }
 
-/// The bench's side of a board's pins: what the vehicle model drives and reads.
-pub(crate) struct Bench<'a> {
-    chip: &'a mut Chip,
-}
-
-/// GPIO mode bits (RM0390 8.4.1).
-const MODE_OUTPUT: u32 = 1;
-const MODE_ALTERNATE: u32 = 2;
-
-impl<'a> Bench<'a> {
-    pub(crate) fn new(chip: &'a mut Chip) -> Self {
-        Self { chip }
-    }
-
-    /// Puts the voltage for `value` on an analog input.
-    fn analog(&mut self, input: &AnalogIn, value: f32) {
-        self.chip
-            .adc
-            .set_input(usize::from(input.adc_channel), input.volts(value));
-    }
-
-    /// A switch between the pin and GND (pull-up inputs): closed pulls it low, open leaves
-    /// it to the pull-up.
-    fn switch(&mut self, input: &DigitalIn, closed: bool) {
-        debug_assert_eq!(input.pull, Pull::Up);
-        let pin = input.pin;
-        self.chip.gpio[pin.port_index()].drive(u32::from(pin.number), closed.then_some(false));
-    }
-
-    /// A line driven high or low by the other side (pull-down inputs).
-    fn level(&mut self, input: &DigitalIn, high: bool) {
-        let pin = input.pin;
-        self.chip.gpio[pin.port_index()].drive(u32::from(pin.number), Some(high));
-    }
-
-    /// The value a PWM output stands for, once the firmware drives it (pin in its
-    /// alternate function, the timer channel enabled in a PWM mode).
-    fn pwm(&self, output: &PwmOut) -> Option<f32> {
-        let pin = output.pin;
-        if self.chip.gpio[pin.port_index()].mode(u32::from(pin.number)) != MODE_ALTERNATE {
-            return None;
-        }
-        let duty = self
-            .chip
-            .tim3
-            .pwm_duty(usize::from(output.tim3_channel) - 1)?;
-        Some(output.value(duty))
-    }
-
-    /// An output's level, once the firmware made the pin an output.
-    fn output(&self, output: &DigitalOut) -> Option<bool> {
-        let pin = output.pin;
-        let port = &self.chip.gpio[pin.port_index()];
-        (port.mode(u32::from(pin.number)) == MODE_OUTPUT)
-            .then(|| port.output(u32::from(pin.number)))
-    }
-}
-
-/// How an ECU's sensors reach its board's pins and its pins drive its actuators: the
-/// bench wiring of `ecu_<name>::pins`, the inverse of the firmware's board module.
-pub(crate) trait Wiring: EcuLogic {
-    /// Puts the sensor readings on the pins.
-    fn drive(sensors: &Self::Sensors, bench: &mut Bench<'_>);
-    /// The actuator commands the pins show; `None` until the firmware drives them all.
-    fn read(bench: &Bench<'_>) -> Option<Self::Actuators>;
-}
-
-impl Wiring for ecu_pedals::PedalsEcu {
-    fn drive(s: &ecu_pedals::Sensors, bench: &mut Bench<'_>) {
-        use ecu_pedals::pins::*;
-        bench.analog(&ACCELERATOR_PEDAL, s.accelerator_pedal);
-        bench.analog(&BRAKE_PEDAL, s.brake_pedal);
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_pedals::Actuators> {
-        use ecu_pedals::pins::*;
-        Some(ecu_pedals::Actuators {
-            accelerator_cmd: bench.pwm(&ACCELERATOR_CMD)?,
-            brake_cmd: bench.pwm(&BRAKE_CMD)?,
-        })
-    }
-}
-
-impl Wiring for ecu_steering::SteeringEcu {
-    fn drive(s: &ecu_steering::Sensors, bench: &mut Bench<'_>) {
-        use ecu_steering::pins::*;
-        bench.analog(&WHEEL_ANGLE, s.wheel_angle_deg);
-        bench.switch(&SHIFT_UP, s.shift_up_button);
-        bench.switch(&SHIFT_DOWN, s.shift_down_button);
-        bench.switch(&CRUISE_ON, s.cruise_on_button);
-        bench.switch(&CRUISE_OFF, s.cruise_off_button);
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_steering::Actuators> {
-        Some(ecu_steering::Actuators {
-            steering_cmd_deg: bench.pwm(&ecu_steering::pins::STEERING_CMD)?,
-        })
-    }
-}
-
-impl Wiring for ecu_console::ConsoleEcu {
-    fn drive(s: &ecu_console::Sensors, bench: &mut Bench<'_>) {
-        use ecu_console::pins::*;
-        bench.switch(&HEADLIGHT_SWITCH, s.headlight_switch);
-        bench.switch(&ENGINE_MODE_SWITCH, s.economy_mode_switch);
-        bench.switch(&TRANSMISSION_MODE_SWITCH, s.manual_mode_switch);
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_console::Actuators> {
-        use ecu_console::pins::*;
-        Some(ecu_console::Actuators {
-            headlights: bench.output(&HEADLIGHTS)?,
-            brake_lights: bench.output(&BRAKE_LIGHTS)?,
-        })
-    }
-}
-
-impl Wiring for ecu_engine::EngineEcu {
-    fn drive(s: &ecu_engine::Sensors, bench: &mut Bench<'_>) {
-        use ecu_engine::pins::*;
-        bench.analog(&ENGINE_SPEED, s.engine_rpm);
-        bench.analog(&FUEL_LEVEL, s.fuel_level_l);
-        bench.analog(&FUEL_FLOW, s.fuel_flow_l_per_h);
-    }
-    fn read(_: &Bench<'_>) -> Option<ecu_engine::Status> {
-        None // the engine ECU drives no pin: it reports on EngineMsg
-    }
-}
-
-impl Wiring for ecu_trans::TransEcu {
-    fn drive(s: &ecu_trans::Sensors, bench: &mut Bench<'_>) {
-        let code = s.current_gear.raw();
-        for (bit, line) in ecu_trans::pins::GEAR_ENGAGED.iter().enumerate() {
-            bench.level(line, code >> bit & 1 == 1);
-        }
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_trans::Actuators> {
-        let mut code = 0;
-        for (bit, line) in ecu_trans::pins::GEAR_CMD.iter().enumerate() {
-            code |= i64::from(bench.output(line)?) << bit;
-        }
-        Some(ecu_trans::Actuators {
-            gear_cmd: Gear::from_raw(code)?,
-        })
-    }
-}
-
-impl Wiring for ecu_cabin::CabinEcu {
-    fn drive(s: &ecu_cabin::Sensors, bench: &mut Bench<'_>) {
-        use ecu_cabin::pins::*;
-        bench.analog(&CABIN_TEMP, s.cabin_temp_f);
-        bench.analog(&SET_TEMP, s.set_temp_f);
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_cabin::Actuators> {
-        Some(ecu_cabin::Actuators {
-            fan: bench.pwm(&ecu_cabin::pins::FAN)?,
-        })
-    }
-}
-
-impl Wiring for ecu_diff::DiffEcu {
-    fn drive(s: &ecu_diff::Sensors, bench: &mut Bench<'_>) {
-        bench.analog(&ecu_diff::pins::YAW_RATE_ERROR, s.yaw_rate_error_rad_s);
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_diff::Actuators> {
-        Some(ecu_diff::Actuators {
-            torque_split_nm: bench.pwm(&ecu_diff::pins::TORQUE_SPLIT)?,
-        })
-    }
-}
-
-impl Wiring for ecu_cruise::CruiseEcu {
-    fn drive(s: &ecu_cruise::Sensors, bench: &mut Bench<'_>) {
-        bench.analog(&ecu_cruise::pins::VEHICLE_SPEED, s.vehicle_speed_kmh);
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_cruise::Status> {
-        // The lamp is the board's one output; the command goes out on CAN, and the set
-        // speed stays inside the ECU (0 here: what the bench cannot see).
-        Some(ecu_cruise::Status {
-            engaged: bench.output(&ecu_cruise::pins::ENGAGED_LAMP)?,
-            set_speed_kmh: 0.0,
-            command: 0.0,
-        })
-    }
-}
-
-impl Wiring for ecu_abs::AbsEcu {
-    fn drive(s: &ecu_abs::Sensors, bench: &mut Bench<'_>) {
-        for (input, speed) in ecu_abs::pins::WHEEL_SPEEDS.iter().zip(s.wheel_speed_kmh) {
-            bench.analog(input, speed);
-        }
-    }
-    fn read(bench: &Bench<'_>) -> Option<ecu_abs::Actuators> {
-        let mut brake = [0.0; 4];
-        for (value, output) in brake.iter_mut().zip(&ecu_abs::pins::BRAKES) {
-            *value = bench.pwm(output)?;
-        }
-        Some(ecu_abs::Actuators { brake })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use autoplug_flash::sim::SimFlash;
 
     #[test]
     fn the_choice_is_all_or_named_ecus_in_the_catalogues_order() {
@@ -765,86 +576,5 @@ mod tests {
         assert_eq!(logged_set_speed("1.0 INFO  cruise: disengaged"), None);
         assert_eq!(logged_set_speed("cruise: engaged at NaN km/h"), None);
         assert_eq!(logged_set_speed("cruise: engaged at 90"), None);
-    }
-
-    fn chip() -> Chip {
-        Chip::new(SimFlash::new(1), [0; 3])
-    }
-
-    #[test]
-    fn sensors_reach_the_boards_pins() {
-        let mut chip = chip();
-        let sensors = ecu_steering::Sensors {
-            wheel_angle_deg: 67.5,
-            shift_up_button: true,
-            shift_down_button: false,
-            cruise_on_button: false,
-            cruise_off_button: true,
-        };
-        // The firmware's inputs: pull-ups on the four buttons.
-        for pin in [
-            &ecu_steering::pins::SHIFT_UP,
-            &ecu_steering::pins::SHIFT_DOWN,
-            &ecu_steering::pins::CRUISE_ON,
-            &ecu_steering::pins::CRUISE_OFF,
-        ] {
-            let n = u32::from(pin.pin.number);
-            chip.gpio[pin.pin.port_index()]
-                .write(0x0C, 1 << (2 * n), 3 << (2 * n))
-                .unwrap();
-        }
-        ecu_steering::SteeringEcu::drive(&sensors, &mut Bench::new(&mut chip));
-        // 67.5° of ±135° is three quarters of 3.3 V.
-        assert!((chip.adc.inputs()[0] - 2.475).abs() < 1e-4);
-        let idr = |chip: &Chip, pin: &DigitalIn| {
-            chip.gpio[pin.pin.port_index()].read(0x10).unwrap() >> pin.pin.number & 1
-        };
-        use ecu_steering::pins::*;
-        assert_eq!(idr(&chip, &SHIFT_UP), 0, "pressed: to GND");
-        assert_eq!(idr(&chip, &SHIFT_DOWN), 1, "open: the pull-up");
-        assert_eq!(idr(&chip, &CRUISE_OFF), 0);
-
-        let mut chip = self::chip();
-        let gear = ecu_trans::Sensors {
-            current_gear: Gear::Fifth,
-        };
-        ecu_trans::TransEcu::drive(&gear, &mut Bench::new(&mut chip));
-        let code: u32 = ecu_trans::pins::GEAR_ENGAGED
-            .iter()
-            .enumerate()
-            .map(|(bit, line)| idr(&chip, line) << bit)
-            .sum();
-        assert_eq!(i64::from(code), Gear::Fifth.raw());
-    }
-
-    #[test]
-    fn actuators_are_read_once_the_firmware_drives_the_pins() {
-        let mut chip = chip();
-        assert_eq!(
-            ecu_diff::DiffEcu::read(&Bench::new(&mut chip)),
-            None,
-            "pins not set up"
-        );
-        // PB4 in its alternate function, TIM3 channel 1 in PWM mode 1 at 3/4 duty.
-        let pb4 = ecu_diff::pins::TORQUE_SPLIT.pin;
-        chip.gpio[pb4.port_index()]
-            .write(0x00, 2 << 8, 3 << 8)
-            .unwrap();
-        chip.tim3.write(0x2C, 9_999, u32::MAX, 0).unwrap(); // ARR
-        chip.tim3.write(0x18, 6 << 4, u32::MAX, 0).unwrap(); // CCMR1: OC1M = PWM 1
-        chip.tim3.write(0x34, 7_500, u32::MAX, 0).unwrap(); // CCR1
-        chip.tim3.write(0x20, 1, u32::MAX, 0).unwrap(); // CCER: CC1E
-        chip.tim3.write(0x14, 1, u32::MAX, 0).unwrap(); // EGR: UG loads ARR
-        let split = ecu_diff::DiffEcu::read(&Bench::new(&mut chip)).expect("driven");
-        assert!((split.torque_split_nm - 25.0).abs() < 0.01, "{split:?}");
-
-        // The lamp: PA5 an output, high.
-        let lamp = ecu_cruise::pins::ENGAGED_LAMP.pin;
-        chip.gpio[0].write(0x00, 1 << 10, 3 << 10).unwrap();
-        chip.gpio[0]
-            .write(0x14, 1 << lamp.number, 1 << lamp.number)
-            .unwrap();
-        let status = ecu_cruise::CruiseEcu::read(&Bench::new(&mut chip)).expect("driven");
-        assert!(status.engaged);
     }
 }

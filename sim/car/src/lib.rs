@@ -16,6 +16,7 @@ pub mod scenario;
 pub mod socketcand;
 pub mod sweep;
 pub mod track;
+mod wiring;
 pub mod world;
 
 #[cfg(test)]

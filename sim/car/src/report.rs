@@ -149,7 +149,7 @@ pub struct Summary {
     /// Time the ABS was acting, s.
     pub abs_active_s: f64,
     /// ABS interventions: stretches of the ABS releasing brake pressure on any wheel,
-    /// those less than [`ecu_abs::INTERVENTION_MERGE_GAP_US`] apart counted as one.
+    /// those less than [`autoplug_ecus::abs::INTERVENTION_MERGE_GAP_US`] apart counted as one.
     pub abs_interventions: usize,
     /// Largest yaw-rate error, rad/s.
     pub peak_yaw_rate_error_rad_s: f64,
@@ -193,11 +193,11 @@ pub fn shifts(gears: &[i32]) -> usize {
 }
 
 /// ABS interventions in a trace: stretches of rows with a release on any wheel, merged when
-/// closer than [`ecu_abs::INTERVENTION_MERGE_GAP_US`].
+/// closer than [`autoplug_ecus::abs::INTERVENTION_MERGE_GAP_US`].
 pub fn abs_interventions(trace: &[TraceRow]) -> usize {
     let mut count = 0;
     let mut last_release_s: Option<f64> = None;
-    let merge_gap_s = ecu_abs::INTERVENTION_MERGE_GAP_US as f64 * 1e-6;
+    let merge_gap_s = autoplug_ecus::abs::INTERVENTION_MERGE_GAP_US as f64 * 1e-6;
     for row in trace
         .iter()
         .filter(|r| r.abs_release.iter().any(|x| *x > 0.0))

@@ -1024,11 +1024,15 @@ fn missing_firmware_is_named_all_at_once_with_the_commands_that_build_it() {
     assert!(!error.contains("cruise-fw"), "{error}");
     // The firmware in one build, the bootloader in one of its own.
     assert!(
-        error.contains("cargo build --release --target thumbv7em-none-eabihf -p ecu-engine"),
+        error.contains(
+            "cargo build --profile firmware --target thumbv7em-none-eabihf -p ecu-engine"
+        ),
         "{error}"
     );
     assert!(
-        error.contains("&& cargo build --release --target thumbv7em-none-eabihf -p autoplug-boot"),
+        error.contains(
+            "&& cargo build --profile firmware --target thumbv7em-none-eabihf -p autoplug-boot"
+        ),
         "{error}"
     );
     let commands = crate::firmware::FirmwareChoice::build_commands(&missing);

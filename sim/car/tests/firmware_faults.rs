@@ -3,7 +3,7 @@
 //! resets it, hangs until its watchdog resets it, or writes to a peripheral no model covers. Each gets a clear report
 //! (the registers that say where, the last log lines) and the rest of the car runs on.
 //!
-//! Ignored: they need the firmware built for the MCU (`cargo build --release --target
+//! Ignored: they need the firmware built for the MCU (`cargo build --profile firmware --target
 //! thumbv7em-none-eabihf -p autoplug-boot -p ecu-cruise`); `cargo test -p
 //! autoplug-virtual-car --test firmware_faults -- --ignored` (CI does).
 
@@ -34,7 +34,7 @@ fn patched(patches: &[(&str, &[u16])]) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let read = |name: &str| {
         std::fs::read(release.join(name)).unwrap_or_else(|e| {
-            panic!("{name}: {e} (build the firmware first: cargo build --release --target thumbv7em-none-eabihf -p autoplug-boot -p ecu-cruise)")
+            panic!("{name}: {e} (build the firmware first: cargo build --profile firmware --target thumbv7em-none-eabihf -p autoplug-boot -p ecu-cruise)")
         })
     };
     std::fs::write(dir.path().join("boot"), read("boot")).unwrap();

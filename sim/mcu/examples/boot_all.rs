@@ -3,7 +3,7 @@
 //! control loop, the ECU sends its frames, nothing faults, no model is missing.
 //!
 //! ```text
-//! cargo run --release -p autoplug-mcu --example boot_all -- target/thumbv7em-none-eabihf/release [MILLISECONDS]
+//! cargo run --release -p autoplug-mcu --example boot_all -- target/thumbv7em-none-eabihf/firmware [MILLISECONDS]
 //! ```
 
 use std::process::ExitCode;
@@ -17,7 +17,7 @@ use autoplug_mcu::rtt::RttLog;
 fn ecus() -> impl Iterator<Item = &'static str> {
     autoplug_can::ECUS
         .iter()
-        .map(|&node| autoplug_can::firmware_name(node))
+        .map(|&node| autoplug_ecus::firmware_name(node))
 }
 
 fn main() -> ExitCode {

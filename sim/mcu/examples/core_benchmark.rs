@@ -97,14 +97,14 @@ const LOOP: &[u8] = &[
 fn ecus() -> impl Iterator<Item = &'static str> {
     autoplug_can::ECUS
         .iter()
-        .map(|&node| autoplug_can::firmware_name(node))
+        .map(|&node| autoplug_ecus::firmware_name(node))
 }
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let dir = args
         .first()
-        .map_or("target/thumbv7em-none-eabihf/release", String::as_str);
+        .map_or("target/thumbv7em-none-eabihf/firmware", String::as_str);
     let seconds: u64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(10);
 
     // 1. The core alone.

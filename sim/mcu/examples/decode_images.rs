@@ -4,7 +4,7 @@
 //! the ELF's mapping symbols (`$t` code, `$d` literal pools), as disassemblers do.
 //!
 //! ```text
-//! cargo run --release -p autoplug-mcu --example decode_images -- target/thumbv7em-none-eabihf/release/{boot,*-fw}
+//! cargo run --release -p autoplug-mcu --example decode_images -- target/thumbv7em-none-eabihf/firmware/{boot,*-fw}
 //! ```
 
 use std::process::ExitCode;

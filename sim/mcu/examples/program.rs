@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! cargo run -p autoplug-mcu --example program -- \
-//!     target/thumbv7em-none-eabihf/release/boot target/thumbv7em-none-eabihf/release/cruise-fw
+//!     target/thumbv7em-none-eabihf/firmware/boot target/thumbv7em-none-eabihf/firmware/cruise-fw
 //! ```
 
 use std::process::ExitCode;

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! cargo run --release -p autoplug-mcu --example run -- \
-//!     target/thumbv7em-none-eabihf/release/boot target/thumbv7em-none-eabihf/release/cruise-fw 100
+//!     target/thumbv7em-none-eabihf/firmware/boot target/thumbv7em-none-eabihf/firmware/cruise-fw 100
 //! ```
 
 use std::process::ExitCode;

@@ -1,5 +1,5 @@
 //! An emulated STM32F446 that runs AutoPlug's unmodified firmware images: the
-//! bootloader and an ECU's release ELF files, as `cargo fw-<ecu>` would flash them, boot on
+//! bootloader and an ECU's release ELF files, as `cargo fw -p ecu-<ecu>` would flash them, boot on
 //! it and run their Embassy executors, timers, watchdog, flash writes and CAN.
 //!
 //! - [`cpu`]: the Cortex-M4F core (ARMv7E-M Thumb-2 with DSP and FPv4-SP), its exception

@@ -2,7 +2,7 @@
 //! wheel-speed ADC inputs and the four brake PWM outputs (the `faulty` feature builds the
 //! report's faulty software), and nothing else: every decision is the logic crate's, and
 //! the control loop, CAN and the watchdog are `autoplug-firmware`'s. Build and flash:
-//! `cargo fw-abs`; pin map: `board.rs`.
+//! `cargo fw -p ecu-abs`; pin map: `board.rs`.
 //!
 //! On the host it only says what it is and how to build it for
 //! `--target thumbv7em-none-eabihf`.

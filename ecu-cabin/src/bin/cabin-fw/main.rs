@@ -1,7 +1,7 @@
 //! Firmware of the cabin comfort ECU for a Nucleo-F446RE: wires [`ecu_cabin::CabinEcu`] to
 //! CAN1, the cabin temperature and set-temperature ADC inputs and the fan PWM output, and
 //! nothing else: every decision is the logic crate's, and the control loop, CAN and the
-//! watchdog are `autoplug-firmware`'s. Build and flash: `cargo fw-cabin`; pin map:
+//! watchdog are `autoplug-firmware`'s. Build and flash: `cargo fw -p ecu-cabin`; pin map:
 //! `board.rs`.
 //!
 //! On the host it only says what it is and how to build it for

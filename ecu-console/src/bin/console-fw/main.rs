@@ -1,7 +1,7 @@
 //! Firmware of the console ECU for a Nucleo-F446RE: wires [`ecu_console::ConsoleEcu`] to
 //! CAN1, the headlight, engine-mode and transmission-mode switches and the lamp outputs,
 //! and nothing else: every decision is the logic crate's, and the control loop, CAN and the
-//! watchdog are `autoplug-firmware`'s. Build and flash: `cargo fw-console`; pin map:
+//! watchdog are `autoplug-firmware`'s. Build and flash: `cargo fw -p ecu-console`; pin map:
 //! `board.rs`.
 //!
 //! On the host it only says what it is and how to build it for

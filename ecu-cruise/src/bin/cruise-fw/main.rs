@@ -2,7 +2,7 @@
 //! to CAN1, the vehicle-speed ADC input and the cruise lamp (the `faulty` feature builds
 //! the report's faulty software), and nothing else: every decision is the logic crate's,
 //! and the control loop, CAN and the watchdog are `autoplug-firmware`'s. Build and flash:
-//! `cargo fw-cruise`; pin map: `board.rs`.
+//! `cargo fw -p ecu-cruise`; pin map: `board.rs`.
 //!
 //! On the host it only says what it is and how to build it for
 //! `--target thumbv7em-none-eabihf`.

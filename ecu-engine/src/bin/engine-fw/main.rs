@@ -1,7 +1,7 @@
 //! Firmware of the engine ECU for a Nucleo-F446RE: wires [`ecu_engine::EngineEcu`] to CAN1,
 //! the engine-speed and fuel-level ADC inputs, and nothing else: every decision is the
 //! logic crate's, and the control loop, CAN and the watchdog are `autoplug-firmware`'s.
-//! Build and flash: `cargo fw-engine`; pin map: `board.rs`.
+//! Build and flash: `cargo fw -p ecu-engine`; pin map: `board.rs`.
 //!
 //! On the host it only says what it is and how to build it for
 //! `--target thumbv7em-none-eabihf`.

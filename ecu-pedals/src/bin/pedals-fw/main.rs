@@ -1,7 +1,7 @@
 //! Firmware of the pedals ECU for a Nucleo-F446RE: wires [`ecu_pedals::PedalsEcu`] to CAN1,
 //! the pedal ADC inputs and the command PWM outputs, and nothing else: every decision is
 //! the logic crate's, and the control loop, CAN and the watchdog are `autoplug-firmware`'s.
-//! Build and flash: `cargo fw-pedals`; pin map: `board.rs`.
+//! Build and flash: `cargo fw -p ecu-pedals`; pin map: `board.rs`.
 //!
 //! On the host it only says what it is and how to build it for
 //! `--target thumbv7em-none-eabihf`.

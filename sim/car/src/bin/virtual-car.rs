@@ -569,7 +569,7 @@ fn list(dir: &Path) -> ExitCode {
 }
 
 /// The firmware `choice` needs, built first when files are missing and this is run from
-/// the AutoPlug checkout whose release folder it names (`cargo`, as `cargo build-fw-<ecu>`
+/// the AutoPlug checkout whose release folder it names (`cargo`, as `cargo build-fw -p ecu-<ecu>`
 /// does); elsewhere an error names every missing file and the commands that build them.
 fn firmware_at_hand(choice: FirmwareChoice) -> Result<FirmwareChoice, String> {
     if choice.missing().is_empty() {

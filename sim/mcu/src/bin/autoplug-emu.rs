@@ -150,7 +150,7 @@ fn run(args: &Args) -> Result<u8, String> {
                 let beside = args.elf.with_file_name("boot");
                 if !beside.exists() {
                     return Err(format!(
-                        "{} starts at {start:#010x}, behind the bootloader, and there is no {} (build it: cargo build --release --target thumbv7em-none-eabihf -p autoplug-boot, or give --boot)",
+                        "{} starts at {start:#010x}, behind the bootloader, and there is no {} (build it: cargo build --profile firmware --target thumbv7em-none-eabihf -p autoplug-boot, or give --boot)",
                         args.elf.display(),
                         beside.display()
                     ));
