@@ -454,18 +454,10 @@ fn key_before(before: &str) -> Option<String> {
     })
 }
 
-/// Node names a fault may name.
-const NODE_NAMES: [&str; 9] = [
-    "Engine",
-    "Pedals",
-    "Steering",
-    "Transmission",
-    "Cabin",
-    "Console",
-    "Differential",
-    "Cruise",
-    "ABS",
-];
+/// The node names a fault may name: the ECUs', as the DBC spells them.
+fn node_names() -> impl Iterator<Item = &'static str> {
+    autoplug_can::ECUS.iter().map(|node| node.name())
+}
 
 impl Scenario {
     /// The car's VIN: the scenario's, else one made from the seed (a fixed test-bench
@@ -681,10 +673,10 @@ impl Scenario {
             }
             if let Some(fault) = &c.fault {
                 for name in fault.silence.iter().chain(fault.restore.iter()) {
-                    if !NODE_NAMES.contains(&name.as_str()) {
+                    if !node_names().any(|n| n == name) {
                         return Err(format!(
                             "{at}fault names node \"{name}\"; the nodes are {}",
-                            NODE_NAMES.join(", ")
+                            node_names().collect::<Vec<_>>().join(", ")
                         ));
                     }
                 }
