@@ -551,14 +551,16 @@ await run(async () => {
   await drivingTab.bringToFront();
   await drivingTab.keyboard.down('ArrowUp');
   const lags = [];
-  for (let i = 0; i < 15; i++) {
+  // One round first, not counted: right after the tab switch it measures the new page
+  // settling in the background (once, 312 ms on a busy 2-core machine), not the stream.
+  for (let i = 0; i < 16; i++) {
     const sent = Date.now();
     const onBus = (await state()).signals['Vehicle.Speed'];
     await until('the page to show the bus speed', async () => {
       const shown = await shownSpeed(watcher);
       return Math.abs(shown - onBus) <= 1 || shown > onBus;
     }, 2_000);
-    lags.push(Date.now() - sent);
+    if (i > 0) lags.push(Date.now() - sent);
     await new Promise((r) => setTimeout(r, 150));
   }
   await drivingTab.keyboard.up('ArrowUp');
