@@ -240,7 +240,9 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
     draw(now);
     if (now - lastInfo > 250) {
       lastInfo = now;
-      setText(fpsText, `${fps} frames/s`);
+      // The 3-D view says when it draws coarser than the display to keep its frame rate.
+      const coarser = mode !== 'top' && scene?.coarser;
+      setText(fpsText, coarser ? `${fps} frames/s at ${scene!.pixelRatio}× resolution` : `${fps} frames/s`);
       el.dataset.fps = String(fps);
     }
   };
@@ -256,7 +258,10 @@ export function worldView(live: Live): { el: HTMLElement; destroy(): void } {
     if (mode !== 'top') {
       if (scene && scene.mode !== mode) scene.mode = mode === 'cockpit' ? 'cockpit' : 'chase';
       const drawn = scene?.draw(now, live.session?.driver ?? null) ?? false;
-      if (drawn && scene) el.dataset.triangles = String(scene.triangles);
+      if (drawn && scene) {
+        el.dataset.triangles = String(scene.triangles);
+        el.dataset.pixelRatio = String(scene.pixelRatio);
+      }
       if (!drawn) setText(info, problem3d ?? (d ? 'waiting for the car…' : scene ? 'no world: this bus is not the virtual car’s' : 'loading the 3-D view…'));
     } else {
       drawTopCanvas(pose, d);

@@ -16,6 +16,15 @@ export type Camera3D = 'chase' | 'cockpit';
 const VERGE_M = 40;
 /** How far one sees, m (fog from a third of it). */
 const VIEW_M = 600;
+/** The sharpest the view is drawn, device pixels per CSS pixel: beyond it a phone's GPU spends
+ *  its time on pixels one cannot tell apart. */
+const MAX_PIXEL_RATIO = 1.5;
+/** The coarsest: the view stays legible at three device pixels for four CSS pixels. */
+const MIN_PIXEL_RATIO = 0.75;
+/** A frame later than this (median of a window) misses a 60 Hz display's every other refresh. */
+const SLOW_FRAME_MS = 20;
+/** Frames in the window that decides whether the view is drawn coarser. */
+const FRAME_WINDOW = 30;
 
 const v3 = (x: number, y: number, z: number) => new THREE.Vector3(x, z, -y);
 
@@ -50,11 +59,16 @@ export class World3D {
   private halves: THREE.Mesh[] = [];
   private friction = '';
   private chaseHeading: number | null = null;
+  // Dynamic resolution (as games hold their frame rate): a window of frame intervals whose
+  // median is slow lowers the pixel ratio a step; it never rises again in this view, so it
+  // cannot swing between a sharp slow picture and a coarse fluid one.
+  private frameIntervals: number[] = [];
+  private lastFrame = 0;
   mode: Camera3D = 'chase';
 
   constructor(private canvas: HTMLCanvasElement, private world: World) {
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: false, powerPreference: 'high-performance' });
-    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 1.5));
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, MAX_PIXEL_RATIO));
     const sky = new THREE.Color('#a9c8e6');
     this.scene.background = sky;
     this.scene.fog = new THREE.Fog(sky, VIEW_M / 3, VIEW_M);
@@ -86,6 +100,7 @@ export class World3D {
     }
     const w = this.canvas.clientWidth, h = this.canvas.clientHeight;
     if (w === 0 || h === 0) return false;
+    this.adaptResolution(now);
     const ratio = this.renderer.getPixelRatio();
     if (this.canvas.width !== Math.floor(w * ratio) || this.canvas.height !== Math.floor(h * ratio)) {
       this.renderer.setSize(w, h, false);
@@ -106,6 +121,35 @@ export class World3D {
     this.plain.position.z = -pose[2];
     this.renderer.render(this.scene, this.camera);
     return true;
+  }
+
+  /** Lowers the pixel ratio a step when the last window of frames came too slowly. A gap
+   *  (the tab hidden, the top view shown) starts a new window rather than counting as slow. */
+  private adaptResolution(now: number): void {
+    const interval = now - this.lastFrame;
+    this.lastFrame = now;
+    if (interval > 250) {
+      this.frameIntervals.length = 0;
+      return;
+    }
+    this.frameIntervals.push(interval);
+    if (this.frameIntervals.length < FRAME_WINDOW) return;
+    const median = [...this.frameIntervals].sort((a, b) => a - b)[FRAME_WINDOW >> 1];
+    this.frameIntervals.length = 0;
+    const ratio = this.renderer.getPixelRatio();
+    if (median > SLOW_FRAME_MS && ratio > MIN_PIXEL_RATIO) {
+      this.renderer.setPixelRatio(Math.max(MIN_PIXEL_RATIO, ratio - 0.25));
+    }
+  }
+
+  /** Device pixels drawn per CSS pixel (lower than the display's when frames came slowly). */
+  get pixelRatio(): number {
+    return this.renderer.getPixelRatio();
+  }
+
+  /** Whether the view is drawn coarser than it would be for its frame rate's sake. */
+  get coarser(): boolean {
+    return this.pixelRatio < Math.min(window.devicePixelRatio || 1, MAX_PIXEL_RATIO);
   }
 
   /** Triangles in the last frame drawn (the page shows it to its tests). */
