@@ -1,34 +1,3 @@
-use crate::test_cases;
-
-macro_rules! shared_cases {
-    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
-}
-
-shared_cases!(
-    publishes_its_messages_every_10_ms,
-    light_braking_passes_the_command_through,
-    pressing_the_brake_asks_for_a_step_at_once,
-    slipping_wheel_is_released,
-    a_wheel_locking_while_the_pressure_builds_holds_it,
-    full_braking_stops_short_without_locking,
-    full_braking_on_low_friction,
-    faulty_build_locks_the_wheels,
-    rear_axle_is_select_low,
-    front_axle_yaw_moment_builds_up_slowly,
-    saturated_brake_resets_the_controller,
-    released_wheel_teaches_the_friction_peak,
-    peak_seeking_follows_the_tyre_either_side_of_the_fixed_target,
-    abs_inactive_below_the_minimum_speed,
-    abs_times_out_after_it_stops_acting,
-    traction_control_cuts_on_a_spinning_wheel,
-    friction_change_during_a_stop,
-    stale_vehicle_speed_passes_the_brake_through,
-    stale_pedal_brake_holds_then_stops_the_car,
-    invalid_frames_record_invalid_data,
-    implausible_wheel_speed_disables_abs,
-    outputs_stay_within_limits,
-);
-
 mod properties {
     use crate::*;
     use autoplug_can::CanMessage;

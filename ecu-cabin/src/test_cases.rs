@@ -383,3 +383,12 @@ pub fn knob_limits_and_invalid_readings() {
     }
     assert_eq!(ecu.dtcs().records().count(), 0);
 }
+
+autoplug_ecu::test_cases!(
+    publishes_temperatures_and_fan_every_100_ms,
+    fan_rises_when_the_cabin_is_warmer_than_set,
+    set_point_step_down_settles_within_one_degree,
+    integrator_stays_within_the_fan_range,
+    sensor_noise_is_filtered,
+    knob_limits_and_invalid_readings,
+);

@@ -2,19 +2,6 @@ use crate::test_cases;
 use crate::*;
 use proptest::prelude::*;
 
-macro_rules! shared_cases {
-    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
-}
-
-shared_cases!(
-    publishes_temperatures_and_fan_every_100_ms,
-    fan_rises_when_the_cabin_is_warmer_than_set,
-    set_point_step_down_settles_within_one_degree,
-    integrator_stays_within_the_fan_range,
-    sensor_noise_is_filtered,
-    knob_limits_and_invalid_readings,
-);
-
 proptest! {
     /// Whatever the readings (NaN, infinities, anything): the fan stays within 0..=100 %
     /// and the published values are valid frames.

@@ -196,3 +196,10 @@ pub fn invalid_brake_frame_records_a_dtc() {
     assert!(out.brake_lights);
     assert!(ecu.dtcs().is_active(lost_communication(Node::Pedals)));
 }
+
+autoplug_ecu::test_cases!(
+    reports_the_switches,
+    brake_lights_follow_the_brake_command,
+    stale_brake_command_turns_the_brake_lights_on,
+    invalid_brake_frame_records_a_dtc,
+);

@@ -1,18 +1,6 @@
-use crate::test_cases;
 use crate::*;
 use autoplug_can::Message;
 use proptest::prelude::*;
-
-macro_rules! shared_cases {
-    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
-}
-
-shared_cases!(
-    reports_the_switches,
-    brake_lights_follow_the_brake_command,
-    stale_brake_command_turns_the_brake_lights_on,
-    invalid_brake_frame_records_a_dtc,
-);
 
 proptest! {
     /// Any switches and any PedalBrake bytes (or none): AccMsg always reports the lamps as

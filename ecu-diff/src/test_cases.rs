@@ -430,3 +430,15 @@ pub fn invalid_inputs_are_refused() {
         assert_eq!(bench.ecu.status().yaw_rate_error_rad_s, 0.0);
     }
 }
+
+autoplug_ecu::test_cases!(
+    publishes_split_and_yaw_error_every_10_ms,
+    split_sign_follows_the_yaw_error,
+    dead_band_with_hysteresis,
+    control_only_when_fast_turning_and_not_braking,
+    split_is_clamped_without_windup,
+    closed_loop_drives_the_yaw_error_back,
+    yaw_oscillation_is_damped,
+    stale_inputs_open_the_differential,
+    invalid_inputs_are_refused,
+);

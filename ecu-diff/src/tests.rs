@@ -1,23 +1,6 @@
-use crate::test_cases;
 use crate::*;
 use autoplug_can::{AbsMsg, SteeringMsg, VehicleSpeedMsg};
 use proptest::prelude::*;
-
-macro_rules! shared_cases {
-    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
-}
-
-shared_cases!(
-    publishes_split_and_yaw_error_every_10_ms,
-    split_sign_follows_the_yaw_error,
-    dead_band_with_hysteresis,
-    control_only_when_fast_turning_and_not_braking,
-    split_is_clamped_without_windup,
-    closed_loop_drives_the_yaw_error_back,
-    yaw_oscillation_is_damped,
-    stale_inputs_open_the_differential,
-    invalid_inputs_are_refused,
-);
 
 proptest! {
     /// Whatever the inputs: the split stays within ±50 N·m and is 0 whenever a condition

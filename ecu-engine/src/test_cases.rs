@@ -280,3 +280,11 @@ pub fn counts_fuel_used() {
         status.fuel_used_ml
     );
 }
+
+autoplug_ecu::test_cases!(
+    reports_rpm_and_fuel,
+    echoes_the_engine_mode,
+    stale_console_reports_economy,
+    invalid_console_frame_records_a_dtc,
+    counts_fuel_used,
+);

@@ -1,18 +1,5 @@
-use crate::test_cases;
 use crate::*;
 use proptest::prelude::*;
-
-macro_rules! shared_cases {
-    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
-}
-
-shared_cases!(
-    reports_rpm_and_fuel,
-    echoes_the_engine_mode,
-    stale_console_reports_economy,
-    invalid_console_frame_records_a_dtc,
-    counts_fuel_used,
-);
 
 proptest! {
     /// Any readings: the status stays within what EngineMsg carries and the frame sent

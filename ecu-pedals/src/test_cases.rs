@@ -558,3 +558,17 @@ pub fn commands_stay_within_limits() {
         }
     }
 }
+
+autoplug_ecu::test_cases!(
+    reports_the_driver_pedals,
+    cruise_command_drives_the_commands,
+    brake_press_cancels_cruise_until_off_is_seen,
+    accelerator_press_cancels_cruise,
+    no_cancel_below_the_threshold_or_with_cruise_off,
+    brake_overrides_the_accelerator,
+    traction_cut_reduces_the_accelerator,
+    stale_cruise_mode_passes_the_pedals_through,
+    stale_cruise_command_means_no_cruise_outputs,
+    invalid_frames_record_dtcs,
+    commands_stay_within_limits,
+);

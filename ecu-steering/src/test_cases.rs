@@ -486,3 +486,15 @@ pub fn invalid_cancel_records_a_dtc() {
     assert_eq!(ecu.dtcs().records().count(), 1, "only the invalid cancel");
     assert_eq!(CruiseModeMsg::DLC, 1);
 }
+
+autoplug_ecu::test_cases!(
+    reports_the_wheel_angle,
+    buttons_are_debounced,
+    shift_paddle_sends_a_pulse,
+    a_press_during_a_pulse_is_ignored,
+    both_paddles_mean_no_request,
+    cruise_buttons_set_the_state,
+    adopts_a_cancel_from_the_pedals,
+    cruise_mode_input_is_not_supervised,
+    invalid_cancel_records_a_dtc,
+);

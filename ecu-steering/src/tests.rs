@@ -1,22 +1,5 @@
-use crate::test_cases;
 use crate::*;
 use proptest::prelude::*;
-
-macro_rules! shared_cases {
-    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
-}
-
-shared_cases!(
-    reports_the_wheel_angle,
-    buttons_are_debounced,
-    shift_paddle_sends_a_pulse,
-    a_press_during_a_pulse_is_ignored,
-    both_paddles_mean_no_request,
-    cruise_buttons_set_the_state,
-    adopts_a_cancel_from_the_pedals,
-    cruise_mode_input_is_not_supervised,
-    invalid_cancel_records_a_dtc,
-);
 
 fn any_sensors() -> impl Strategy<Value = Sensors> {
     (

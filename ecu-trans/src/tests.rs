@@ -1,28 +1,6 @@
-use crate::test_cases;
 use crate::*;
 use autoplug_can::{AccMsg, CanMessage, EngineMsg, ShiftMsg, VehicleSpeedMsg};
 use proptest::prelude::*;
-
-macro_rules! shared_cases {
-    ($($name:ident),* $(,)?) => { $( #[test] fn $name() { test_cases::$name(); } )* };
-}
-
-shared_cases!(
-    publishes_gear_and_mode_every_20_ms,
-    calibration_and_schedules_are_consistent,
-    automatic_steps_through_the_gears_without_hunting,
-    sport_shifts_later_than_economy,
-    shift_timeout_limits_the_shift_rate,
-    manual_requests_shift_one_gear_per_press,
-    neutral_and_reverse_in_automatic,
-    manual_downshift_that_would_over_rev_is_refused,
-    stale_vehicle_speed_holds_the_gear,
-    stale_shift_requests_are_ignored,
-    stale_engine_selects_economy_and_refuses_downshifts,
-    stale_console_keeps_the_shift_mode,
-    invalid_frames_are_refused,
-    gear_not_engaged_is_recorded,
-);
 
 fn any_gear() -> impl Strategy<Value = Gear> {
     proptest::sample::select(Gear::ALL.to_vec())

@@ -158,5 +158,29 @@ fn sender_of<M: CanMessage>() -> Node {
 #[cfg(any(test, feature = "test-cases"))]
 pub mod test_cases;
 
+/// Lists an ECU's shared test cases (functions of its `test_cases` module) once, for both
+/// runners: `CASES`, name and function, for the on-target suite that runs every ECU's cases
+/// from a table; and a host `#[test]` per case (module `each_case`).
+///
+/// Written where the cases are (`test_cases!(a_case, another_case);` at the end of the
+/// module), so a case added there is run on the host and on the target alike.
+#[macro_export]
+macro_rules! test_cases {
+    ($($case:ident),* $(,)?) => {
+        /// Every case of this module by name, in the order listed.
+        pub const CASES: &[(&str, fn())] = &[$((stringify!($case), $case)),*];
+
+        #[cfg(test)]
+        mod each_case {
+            $(
+                #[test]
+                fn $case() {
+                    super::$case();
+                }
+            )*
+        }
+    };
+}
+
 #[cfg(test)]
 mod tests;
