@@ -696,6 +696,8 @@ fn emit_nodes(db: &Database, w: &mut String) -> Result<(), GenerateError> {
     line(w, "        }");
     line(w, "    }");
     line(w, "");
+    line(w, "");
+    network_dtc_method(db, w)?;
     node_ids_method(
         db,
         w,
@@ -713,6 +715,87 @@ fn emit_nodes(db: &Database, w: &mut String) -> Result<(), GenerateError> {
     line(w, "}");
     line(w, "");
     Ok(())
+}
+
+/// `pub const fn network_dtc_codes(self) -> (u16, u16)`: the node's "lost communication"
+/// and "invalid data" trouble codes (attributes `LostCommunicationDtc`, `InvalidDataDtc`, as
+/// `U0100`), as the code's 16 bits without its failure type.
+/// A DBC that defines neither attribute (a catalogue without trouble codes) gets no method.
+fn network_dtc_method(db: &Database, w: &mut String) -> Result<(), GenerateError> {
+    let attributes = ["LostCommunicationDtc", "InvalidDataDtc"];
+    if db
+        .nodes
+        .iter()
+        .all(|n| attributes.iter().all(|a| db.node_attribute(n, a).is_none()))
+    {
+        return Ok(());
+    }
+    line(
+        w,
+        "    /// The trouble codes recorded against this node as an input's sender: \"lost",
+    );
+    line(
+        w,
+        "    /// communication with\" and \"invalid data received from\" (attributes",
+    );
+    line(
+        w,
+        "    /// `LostCommunicationDtc` and `InvalidDataDtc`, SAE J2012's U-codes), as a DTC's",
+    );
+    line(w, "    /// high 16 bits: (`U0100` → `0xC100`, ...).");
+    line(
+        w,
+        "    pub const fn network_dtc_codes(self) -> (u16, u16) {",
+    );
+    line(w, "        match self {");
+    for n in &db.nodes {
+        let code = |attribute: &str| -> Result<u16, GenerateError> {
+            let text = match db.node_attribute(n, attribute) {
+                Some(AttributeValue::Str(text)) => text.as_str(),
+                _ => "",
+            };
+            u_code_bits(text).ok_or_else(|| {
+                gen_err(
+                    0,
+                    format!(
+                        "node {}: {attribute} must be a network trouble code such as \"U0100\"; it is \"{text}\"",
+                        n.name
+                    ),
+                )
+            })
+        };
+        let (lost, invalid) = (code("LostCommunicationDtc")?, code("InvalidDataDtc")?);
+        line(
+            w,
+            &format!(
+                "            Node::{} => (0x{lost:04X}, 0x{invalid:04X}),",
+                variant_ident(&n.name)
+            ),
+        );
+    }
+    line(w, "        }");
+    line(w, "    }");
+    line(w, "");
+    Ok(())
+}
+
+/// `U0100` → 0xC100: SAE J2012's letter (P, C, B, U) in the top two bits, then the four hex
+/// digits' 14 bits (the first digit 0–3).
+fn u_code_bits(text: &str) -> Option<u16> {
+    let mut chars = text.chars();
+    let system = match chars.next()? {
+        'P' => 0,
+        'C' => 1,
+        'B' => 2,
+        'U' => 3,
+        _ => return None,
+    };
+    let digits = chars.as_str();
+    if digits.len() != 4 || !digits.chars().all(|c| c.is_ascii_hexdigit()) {
+        return None;
+    }
+    let value = u16::from_str_radix(digits, 16).ok()?;
+    (value <= 0x3FFF).then_some((system << 14) | value)
 }
 
 /// `pub const fn NAME(self) -> &'static [u16]`: per node, the identifiers of the messages

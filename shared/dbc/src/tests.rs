@@ -276,3 +276,38 @@ fn diagnostic_identifiers_follow_the_node_numbers() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn network_trouble_codes_come_from_the_node_attributes() {
+    let defs =
+        "BA_DEF_ BU_ \"LostCommunicationDtc\" STRING ;\nBA_DEF_ BU_ \"InvalidDataDtc\" STRING ;\n\
+                BA_DEF_DEF_ \"LostCommunicationDtc\" \"\";\nBA_DEF_DEF_ \"InvalidDataDtc\" \"\";\n";
+    let codes = |a: &str, t: &str| {
+        format!(
+            "BA_ \"LostCommunicationDtc\" BU_ A \"{a}\";\nBA_ \"InvalidDataDtc\" BU_ A \"U0401\";\n\
+             BA_ \"LostCommunicationDtc\" BU_ T \"{t}\";\nBA_ \"InvalidDataDtc\" BU_ T \"U0446\";\n"
+        )
+    };
+    let source = compile(&diag_network(
+        0x703,
+        &format!("{defs}{}", codes("U0100", "U0146")),
+    ))
+    .expect("a catalogue with its trouble codes");
+    assert!(source.contains("Node::A => (0xC100, 0xC401),"), "{source}");
+    assert!(source.contains("Node::T => (0xC146, 0xC446),"), "{source}");
+    // Without the attributes there is no method; with them, every node needs a sound code.
+    assert!(!compile(&diag_network(0x703, ""))
+        .expect("sound")
+        .contains("network_dtc_codes"));
+    for (a, t, expected) in [
+        ("U0100", "", "node T: LostCommunicationDtc"),
+        ("U4100", "U0146", "node A: LostCommunicationDtc"),
+        ("X0100", "U0146", "\"X0100\""),
+        ("U01000", "U0146", "\"U01000\""),
+    ] {
+        match compile(&diag_network(0x703, &format!("{defs}{}", codes(a, t)))) {
+            Err(Error::Generate(e)) => assert!(e.to_string().contains(expected), "{expected}: {e}"),
+            other => panic!("expected {expected:?}, got {other:?}"),
+        }
+    }
+}

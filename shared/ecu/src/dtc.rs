@@ -41,6 +41,13 @@ impl Dtc {
         Self((code << 8) | failure_type as u32)
     }
 
+    /// A DTC from its code's 16 bits (the system letter's two, then the digits': `0xC100`
+    /// for `U0100`) and its failure-type byte. The network codes per node are the DBC's
+    /// (`LostCommunicationDtc`, `InvalidDataDtc`: [`Node::network_dtc_codes`]).
+    pub const fn from_code(code: u16, failure_type: u8) -> Self {
+        Self(((code as u32) << 8) | failure_type as u32)
+    }
+
     /// The 3 bytes UDS sends (high byte first), as a number.
     pub const fn to_u24(self) -> u32 {
         self.0
@@ -71,32 +78,14 @@ impl fmt::Display for Dtc {
     }
 }
 
-/// Network DTC digits per node, in the style of SAE J2012: lost communication U01xx,
-/// invalid data U04xx. The assignment per AutoPlug node is this project's (documented in
-/// docs/src/ecus-and-bench.md); the engine and transmission keep J2012's ECM/TCM numbers.
-const fn network_digits(node: Node) -> (u16, u16) {
-    match node {
-        Node::Engine => (0x0100, 0x0401),
-        Node::Transmission => (0x0101, 0x0402),
-        Node::Cruise => (0x0104, 0x0404),
-        Node::Differential => (0x0114, 0x0414),
-        Node::ABS => (0x0121, 0x0415),
-        Node::Steering => (0x0126, 0x0428),
-        Node::Pedals => (0x0129, 0x0429),
-        Node::Console => (0x0140, 0x0422),
-        Node::Cabin => (0x0164, 0x0424),
-        Node::Gateway => (0x0146, 0x0446),
-    }
-}
-
 /// "Lost communication with `node`": an input from it went stale.
 pub const fn lost_communication(node: Node) -> Dtc {
-    Dtc::new(DtcSystem::U, network_digits(node).0, FTB_MISSING_MESSAGE)
+    Dtc::from_code(node.network_dtc_codes().0, FTB_MISSING_MESSAGE)
 }
 
 /// "Invalid data received from `node`": a frame from it was refused.
 pub const fn invalid_data(node: Node) -> Dtc {
-    Dtc::new(DtcSystem::U, network_digits(node).1, FTB_SIGNAL_INVALID)
+    Dtc::from_code(node.network_dtc_codes().1, FTB_SIGNAL_INVALID)
 }
 
 /// DTC status bits of ISO 14229-1.
