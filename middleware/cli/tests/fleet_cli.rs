@@ -331,7 +331,12 @@ fn fleet_simulate_runs_its_cars_reports_them_to_the_broker_and_writes_its_truth(
             ReportKind::Inventory => {
                 let report: InventoryReport = serde_json::from_slice(&message.payload).unwrap();
                 assert_eq!(report.vin, vin);
-                assert_eq!(report.ecus.len(), 9, "{vin}: {:?}", report.ecus);
+                assert_eq!(
+                    report.ecus.len(),
+                    Node::ECUS.len(),
+                    "{vin}: {:?}",
+                    report.ecus
+                );
                 inventories.insert(vin);
             }
             ReportKind::Trip => {

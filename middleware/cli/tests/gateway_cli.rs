@@ -34,7 +34,7 @@ fn diagnose_flags_the_faulty_cruise_with_its_number_and_exit_status_3() {
     let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     assert_eq!(json["any_faulty"], true);
     let ecus = json["ecus"].as_array().unwrap();
-    assert_eq!(ecus.len(), 9);
+    assert_eq!(ecus.len(), autoplug_can::Node::ECUS.len());
     for ecu in ecus {
         let name = ecu["ecu"].as_str().unwrap();
         let expected = if name == "cruise" { "faulty" } else { "ok" };
@@ -195,7 +195,10 @@ fn a_blf_cut_short_keeps_what_precedes_the_damage() {
             "{why}"
         );
         assert!(err.contains("incomplete") && err.contains(why), "{err}");
-        assert_eq!(json["ecus"].as_array().unwrap().len(), 9);
+        assert_eq!(
+            json["ecus"].as_array().unwrap().len(),
+            autoplug_can::Node::ECUS.len()
+        );
     }
 
     let replay = autoplug(&["replay", path]);

@@ -97,7 +97,11 @@ fn the_live_gateway_records_the_bus_and_stores_the_trip() {
     assert_eq!(trip.status, TripStatus::Closed);
     assert!(trip.stats.hard_brakings == 1 && trip.stats.abs_interventions >= 1);
     let detail = store.trip(trip.id).unwrap().unwrap();
-    assert_eq!(detail.verdicts.len(), 9, "{detail:?}");
+    assert_eq!(
+        detail.verdicts.len(),
+        autoplug_can::Node::ECUS.len(),
+        "{detail:?}"
+    );
     // A stop from 100 km/h never engages cruise: its routine had nothing to judge, and
     // the trip says so rather than a green OK it did not earn.
     for v in &detail.verdicts {
@@ -271,7 +275,11 @@ fn a_transmitting_gateway_keeps_the_inventory_and_the_trouble_codes_a_replay_fin
         "{stdout}"
     );
     let inventory = store.inventory("JA3AP47H3YF000777").unwrap();
-    assert_eq!(inventory.len(), 9, "{inventory:?}");
+    assert_eq!(
+        inventory.len(),
+        autoplug_can::Node::ECUS.len(),
+        "{inventory:?}"
+    );
     assert!(inventory.iter().all(|(e, _, _)| e.part_number.is_some()
         && e.software_version.as_deref()
             == Some(if e.ecu == "cruise" { "1.1.0" } else { "1.0.0" })));
