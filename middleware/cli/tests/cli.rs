@@ -568,8 +568,12 @@ fn ids_and_flash_over_socketcand() {
     let output = autoplug(&args);
     assert!(output.status.success(), "{}", stderr(&output));
     let table = stdout(&output);
-    // A header, nine ECUs and the vehicle they all name.
-    assert_eq!(table.lines().count(), 11, "{table}");
+    // A header, every ECU and the vehicle they all name.
+    assert_eq!(
+        table.lines().count(),
+        autoplug_can::Node::ECUS.len() + 2,
+        "{table}"
+    );
     assert!(
         table
             .lines()

@@ -124,7 +124,7 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
     // Bad requests get the reason, and the server goes on.
     let bad: [(&str, &[u8], u16, &str); 6] = [
         ("/api/recording", b"{\"on\":", 400, "body"),
-        ("/api/ecus/wiper/clear-dtcs", b"", 409, "wiper"),
+        ("/api/ecus/radio/clear-dtcs", b"", 409, "radio"),
         (
             "/api/ecus/cruise/flash",
             b"this is not an image",
