@@ -288,7 +288,7 @@ fn the_dashboard_serves_its_page_takes_writes_only_with_the_token_and_says_what_
     assert_eq!(session["source"]["drive"], true);
     assert_eq!(
         session["inventory"].as_array().unwrap().len(),
-        9,
+        autoplug_can::Node::ECUS.len(),
         "{session}"
     );
     // F1A0 of every ECU: the virtual car's ECUs start from a confirmed slot A.

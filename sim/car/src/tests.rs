@@ -1,6 +1,6 @@
 use crate::driver::Timeline;
 use crate::scenario::{Button, GearName, Scenario, Software};
-use autoplug_can::Frame;
+use autoplug_can::{Frame, Node};
 
 const EXAMPLE: &str = r#"
 name = "cruise-hold"
@@ -737,12 +737,16 @@ fn communication_control_silences_the_application_frames() {
     run_ms(&mut car, 10);
     car.inject(Frame::new(0x7DF, &[0x03, 0x28, 0x03, 0x01, 0, 0, 0, 0]).unwrap());
     let answers = run_ms(&mut car, 20);
+    let responses: Vec<u16> = Node::ECUS
+        .iter()
+        .filter_map(|n| n.diag_response_id())
+        .collect();
     assert_eq!(
         answers
             .iter()
-            .filter(|f| (0x783..=0x78E).contains(&f.id()) && f.data()[1] == 0x68)
+            .filter(|f| responses.contains(&f.id()) && f.data()[1] == 0x68)
             .count(),
-        9,
+        Node::ECUS.len(),
         "every ECU confirms"
     );
     let before = car.log().len();
