@@ -61,3 +61,48 @@ fn a_period_survives_jittered_polls() {
     assert!(tx.poll(Instant::from_micros(830_000)).is_some());
     assert_eq!(tx.next_due(), Some(Instant::from_micros(840_000)));
 }
+
+/// The book's table of network trouble codes says what the DBC assigns, node by node.
+#[test]
+fn the_docs_network_code_table_is_the_dbcs() {
+    use crate::{invalid_data, lost_communication, Dtc};
+    use autoplug_can::Node;
+    use std::string::{String, ToString};
+    use std::vec::Vec;
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../docs/src/ecus-and-bench.md"
+    );
+    let page = std::fs::read_to_string(path).expect("the ECUs' page");
+    let rows: Vec<Vec<String>> = page
+        .lines()
+        .skip_while(|l| !l.starts_with("| sender | lost communication | invalid data |"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            l.split('|')
+                .map(|c| c.trim().to_string())
+                .filter(|c| !c.is_empty())
+                .collect()
+        })
+        .collect();
+    let code = |dtc: Dtc| dtc.to_string().split('-').next().unwrap().to_string();
+    let expected: Vec<Vec<String>> = Node::ECUS
+        .iter()
+        .map(|&n| {
+            std::vec![
+                n.name().to_string(),
+                code(lost_communication(n)),
+                code(invalid_data(n))
+            ]
+        })
+        .collect();
+    let mut sorted = rows.clone();
+    sorted.sort();
+    let mut expected_sorted = expected;
+    expected_sorted.sort();
+    assert_eq!(
+        sorted, expected_sorted,
+        "{path}: the table, against the DBC"
+    );
+}
