@@ -301,6 +301,9 @@ pub struct VirtualBus {
     faults: Faults,
     rng: XorShift64,
     id_stats: Vec<IdStats>,
+    /// Each identifier's last frame sent and its length on the wire: periodic frames
+    /// often repeat their data, and the CRC and stuffing need not be worked out again.
+    last_bits: Vec<Option<(Frame, FrameBits)>>,
     load: LoadMeter,
     counters: BusCounters,
     events: Vec<BusEvent>,
@@ -325,6 +328,7 @@ impl VirtualBus {
             faults: Faults::default(),
             rng: XorShift64::new(config.seed),
             id_stats: vec![IdStats::default(); usize::from(Frame::MAX_ID) + 1],
+            last_bits: vec![None; usize::from(Frame::MAX_ID) + 1],
             load: LoadMeter::new(timing.ns_to_bits_floor(config.load_window_ns)),
             counters: BusCounters::default(),
             events: Vec::with_capacity(config.event_log_capacity),
@@ -402,10 +406,18 @@ impl VirtualBus {
             return Err(TxError::QueueFull { capacity });
         }
         self.next_seq += 1;
+        let bits = match &mut self.last_bits[usize::from(frame.id())] {
+            Some((last, bits)) if *last == frame => *bits,
+            entry => {
+                let bits = frame_bits(&frame);
+                *entry = Some((frame, bits));
+                bits
+            }
+        };
         slot.enqueue(
             Pending {
                 frame,
-                bits: frame_bits(&frame),
+                bits,
                 enqueued_ns: now_ns,
                 seq,
             },

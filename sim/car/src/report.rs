@@ -70,7 +70,7 @@ fn run_observed(
     each_row(&row);
     trace.push(row);
     let summary = Summary::compute(scenario, &trace, &car);
-    let log = car.log().to_vec();
+    let log = car.take_log();
     RunRecord {
         trace,
         log,

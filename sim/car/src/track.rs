@@ -15,6 +15,10 @@ pub struct OnTrack {
     wheels: [Surface; 4],
     /// The rear axle's station at the last tick.
     rear_axle_station: f64,
+    /// How far along the road each wheel, then the rear axle, moved in the last tick, m:
+    /// the next search starts where that motion would take it, so that one Newton step
+    /// usually settles it.
+    moved: [f64; 5],
 }
 
 impl OnTrack {
@@ -30,6 +34,7 @@ impl OnTrack {
             track,
             wheels,
             rear_axle_station,
+            moved: [0.0; 5],
         }
     }
 
@@ -62,8 +67,9 @@ impl OnTrack {
         let heading = vehicle.state().heading_rad;
         let mut env = *base;
         for (i, (x, y)) in vehicle.wheel_positions().into_iter().enumerate() {
-            let near = Some(self.wheels[i].location.station_m);
-            let surface = road.surface(x, y, near);
+            let was = self.wheels[i].location.station_m;
+            let surface = road.surface(x, y, Some(was + self.moved[i]));
+            self.moved[i] = moved_along(road, was, surface.location.station_m);
             env.mu[i] = match (surface.on_road, surface.patch) {
                 (true, None) if surface.location.lateral_m >= 0.0 => base.mu[0],
                 (true, None) => base.mu[1],
@@ -73,10 +79,24 @@ impl OnTrack {
             self.wheels[i] = surface;
         }
         let rear = rear_axle(vehicle);
+        let was = self.rear_axle_station;
         self.rear_axle_station = road
-            .locate(rear.x_m, rear.y_m, Some(self.rear_axle_station))
+            .locate(rear.x_m, rear.y_m, Some(was + self.moved[4]))
             .station_m;
+        self.moved[4] = moved_along(road, was, self.rear_axle_station);
         env
+    }
+}
+
+/// How far a point moved along `road` from station `from_m` to `to_m`, m (the short way
+/// round a closed road's start).
+fn moved_along(road: &Road, from_m: f64, to_m: f64) -> f64 {
+    let moved = to_m - from_m;
+    if road.is_closed() {
+        let lap = road.length_m();
+        moved - (moved / lap).round() * lap
+    } else {
+        moved
     }
 }
 
@@ -84,7 +104,7 @@ impl OnTrack {
 pub fn rear_axle(vehicle: &Vehicle) -> Pose {
     let s = vehicle.state();
     let b = vehicle.params().chassis.cg_to_rear_axle_m();
-    let (sin, cos) = s.heading_rad.sin_cos();
+    let (sin, cos) = vehicle.heading_sin_cos();
     Pose {
         x_m: s.x_m - b * cos,
         y_m: s.y_m - b * sin,

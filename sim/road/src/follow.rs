@@ -35,13 +35,11 @@ pub fn pure_pursuit(
     lookahead_m: f64,
     lane_m: f64,
 ) -> f64 {
-    let aim = road.pose_at(station_m + lookahead_m);
-    let (tx, ty) = (
-        aim.x_m - lane_m * aim.heading_rad.sin(),
-        aim.y_m + lane_m * aim.heading_rad.cos(),
-    );
+    let (aim, (cos, sin)) = road.pose_and_direction_at(station_m + lookahead_m);
+    let (tx, ty) = (aim.x_m - lane_m * sin, aim.y_m + lane_m * cos);
     let (dx, dy) = (tx - rear_axle.x_m, ty - rear_axle.y_m);
-    let distance = dx.hypot(dy);
+    // Metres on a road: no overflow for `hypot` to guard against.
+    let distance = (dx * dx + dy * dy).sqrt();
     if distance < 1e-6 {
         return 0.0;
     }

@@ -205,6 +205,10 @@ impl Surface {
     /// cosine between the car's heading and the road's (uphill ahead positive), which is
     /// what `autoplug_vehicle::Environment::grade_percent` takes.
     pub fn grade_along(&self, heading_rad: f64) -> f64 {
+        if self.grade_percent == 0.0 {
+            // Most of a road is level: no cosine to take.
+            return 0.0;
+        }
         self.grade_percent * (heading_rad - self.location.heading_rad).cos()
     }
 }
@@ -283,13 +287,60 @@ impl fmt::Display for RoadError {
 
 impl std::error::Error for RoadError {}
 
-/// A centreline sample.
+/// A centreline sample, with its heading's cosine and sine (a query turns them by the
+/// small angle to its station rather than calling the trigonometric functions).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Sample {
     s: f64,
     x: f64,
     y: f64,
     heading: f64,
+    cos: f64,
+    sin: f64,
+}
+
+impl Sample {
+    fn new(s: f64, x: f64, y: f64, heading: f64) -> Self {
+        let (sin, cos) = heading.sin_cos();
+        Self {
+            s,
+            x,
+            y,
+            heading,
+            cos,
+            sin,
+        }
+    }
+
+    /// The direction (cosine, sine) at `delta` radians from this sample's heading, for
+    /// the small angles a query turns by within a sample step (at most the tightest
+    /// curvature times [`SAMPLE_M`], 0.05 rad): Taylor series to the 9th power, whose
+    /// remainder (below 3e-20) is far under an f64's rounding.
+    fn turned(&self, delta: f64) -> (f64, f64) {
+        // Horner's form with the reciprocals as constants: divisions would chain.
+        const C: [f64; 4] = [1.0 / 2.0, 1.0 / 12.0, 1.0 / 30.0, 1.0 / 56.0];
+        const S: [f64; 4] = [1.0 / 6.0, 1.0 / 20.0, 1.0 / 42.0, 1.0 / 72.0];
+        let d2 = delta * delta;
+        let cos_d = 1.0 - d2 * C[0] * (1.0 - d2 * C[1] * (1.0 - d2 * C[2] * (1.0 - d2 * C[3])));
+        let sin_d =
+            delta * (1.0 - d2 * S[0] * (1.0 - d2 * S[1] * (1.0 - d2 * S[2] * (1.0 - d2 * S[3]))));
+        (
+            self.cos * cos_d - self.sin * sin_d,
+            self.sin * cos_d + self.cos * sin_d,
+        )
+    }
+}
+
+/// Where a segment's samples are: the index of the sample at its start and the spacing
+/// of those after it (a station's sample is then found by division, not a search).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct SampleRun {
+    first: usize,
+    steps: usize,
+    /// 1 / the spacing, 1/m.
+    per_m: f64,
+    /// How fast the curvature changes, halved: (κ_end − κ_start) / (2·length), 1/m².
+    half_rate: f64,
 }
 
 /// A road: its centreline, width, surfaces and grades.
@@ -301,6 +352,8 @@ pub struct Road {
     segment_starts: Vec<f64>,
     /// The heading where each segment starts, radians (queries run every step).
     segment_headings: Vec<f64>,
+    /// Each segment's samples.
+    segment_samples: Vec<SampleRun>,
     width_m: f64,
     closed: bool,
     patches: Vec<Patch>,
@@ -334,19 +387,22 @@ impl Road {
         }
         let mut segment_starts = Vec::with_capacity(segments.len());
         let mut segment_headings = Vec::with_capacity(segments.len());
+        let mut segment_samples = Vec::with_capacity(segments.len());
         let mut samples = Vec::with_capacity((length_m / SAMPLE_M) as usize + segments.len() + 1);
         let (mut x, mut y, mut heading, mut s0) = (start.x_m, start.y_m, start.heading_rad, 0.0);
-        samples.push(Sample {
-            s: 0.0,
-            x,
-            y,
-            heading,
-        });
+        samples.push(Sample::new(0.0, x, y, heading));
         for segment in &segments {
             segment_starts.push(s0);
             segment_headings.push(heading);
             let steps = (segment.length_m / SAMPLE_M).ceil().max(1.0) as usize;
             let step = segment.length_m / steps as f64;
+            segment_samples.push(SampleRun {
+                first: samples.len() - 1,
+                steps,
+                per_m: 1.0 / step,
+                half_rate: (segment.curvature_end - segment.curvature_start)
+                    / (2.0 * segment.length_m),
+            });
             let base = heading;
             for i in 0..steps {
                 let (a, b) = (i as f64 * step, (i + 1) as f64 * step);
@@ -357,12 +413,7 @@ impl Road {
                 let (ha, hm, hb) = (h(a), h(m), h(b));
                 x += step / 6.0 * (ha.cos() + 4.0 * hm.cos() + hb.cos());
                 y += step / 6.0 * (ha.sin() + 4.0 * hm.sin() + hb.sin());
-                samples.push(Sample {
-                    s: s0 + b,
-                    x,
-                    y,
-                    heading: hb,
-                });
+                samples.push(Sample::new(s0 + b, x, y, hb));
             }
             heading = base + segment.turn();
             s0 += segment.length_m;
@@ -372,6 +423,7 @@ impl Road {
             segments,
             segment_starts,
             segment_headings,
+            segment_samples,
             width_m,
             closed: false,
             patches: Vec::new(),
@@ -500,18 +552,27 @@ impl Road {
     /// within one segment).
     pub fn pose_at(&self, station_m: f64) -> Pose {
         let s = self.wrap(station_m);
-        let a = self.samples[self.sample_index(s)];
-        let h = s - a.s;
-        let (ha, hm, hb) = (
-            self.heading_at(a.s.max(s - h)),
-            self.heading_at(a.s + 0.5 * h),
-            self.heading_at(s),
-        );
+        let point = self.centre_at(self.segment_index(s), s);
         Pose {
-            x_m: a.x + h / 6.0 * (ha.cos() + 4.0 * hm.cos() + hb.cos()),
-            y_m: a.y + h / 6.0 * (ha.sin() + 4.0 * hm.sin() + hb.sin()),
-            heading_rad: hb,
+            x_m: point.x,
+            y_m: point.y,
+            heading_rad: point.heading,
         }
+    }
+
+    /// The centreline's position at `station_m` (see [`Road::wrap`]) with its direction's
+    /// cosine and sine: [`Road::pose_at`] without the trigonometry a caller would do.
+    pub(crate) fn pose_and_direction_at(&self, station_m: f64) -> (Pose, (f64, f64)) {
+        let s = self.wrap(station_m);
+        let point = self.centre_at(self.segment_index(s), s);
+        (
+            Pose {
+                x_m: point.x,
+                y_m: point.y,
+                heading_rad: point.heading,
+            },
+            (point.cos, point.sin),
+        )
     }
 
     /// The road's heading at `station_m`, exact (from the segment's curvature).
@@ -559,10 +620,19 @@ impl Road {
     }
 
     /// Where the point (`x_m`, `y_m`) lies: the nearest point of the centreline. `near`: a
-    /// station it was near a moment ago (the search then looks only around it, as a car
-    /// moves little in a step; without one, or when the point has left that
-    /// neighbourhood, the whole road is searched).
+    /// station it was near a moment ago (a car moves millimetres in a step, so the search
+    /// starts there and takes a few Newton steps; when the point has left that
+    /// neighbourhood, the samples around it are searched, and without one, or when the
+    /// point is further still, the whole road).
     pub fn locate(&self, x_m: f64, y_m: f64, near: Option<f64>) -> Location {
+        let near = near.filter(|s| s.is_finite()).map(|s| self.wrap(s));
+        if let Some(near) = near {
+            if let Some(found) = self.refine(x_m, y_m, near) {
+                if self.distance_along(found.station_m, near) < SEARCH_WINDOW_M {
+                    return found;
+                }
+            }
+        }
         let n = self.samples.len();
         let nearest = |range: &mut dyn Iterator<Item = usize>| {
             range
@@ -575,16 +645,15 @@ impl Road {
         };
         let window = (SEARCH_WINDOW_M / SAMPLE_M) as isize;
         let mut best = None;
-        if let Some(near) = near.filter(|s| s.is_finite()) {
-            let centre = self.sample_index(self.wrap(near)) as isize;
-            let indices = (centre - window..=centre + window).filter_map(|i| {
+        if let Some(near) = near {
+            let centre = self.sample_index(near) as isize;
+            let mut indices = (centre - window..=centre + window).filter_map(|i| {
                 if self.closed {
                     Some(i.rem_euclid(n as isize - 1) as usize)
                 } else {
                     (0..n as isize).contains(&i).then_some(i as usize)
                 }
             });
-            let mut indices = indices;
             let found = nearest(&mut indices);
             // At the window's edge the point may be nearer elsewhere: search it all.
             best = found.filter(|&i| {
@@ -595,31 +664,101 @@ impl Road {
         }
         let i = best.unwrap_or_else(|| nearest(&mut (0..n)).unwrap_or(0));
         let on_chord = self.project(i, x_m, y_m);
-        // The chord leaves the curve by up to Δs²/8r (1.6 mm on a 5 m radius): one Newton
-        // step onto the exact centreline, then the offset along its normal.
-        let mut station = on_chord.station_m;
-        for _ in 0..2 {
-            let p = self.pose_at(station);
-            let along = (x_m - p.x_m) * p.heading_rad.cos() + (y_m - p.y_m) * p.heading_rad.sin();
-            station = if self.closed {
-                station + along
+        // The chord leaves the curve by up to Δs²/8r (1.6 mm on a 5 m radius): Newton's
+        // steps onto the exact centreline, then the offset along its normal.
+        self.refine(x_m, y_m, on_chord)
+            .unwrap_or_else(|| self.location_at(x_m, y_m, on_chord))
+    }
+
+    /// The nearest centreline point to (`x_m`, `y_m`) by Newton's method on the distance's
+    /// derivative, from station `from_m`: `None` where it does not settle (the point near a
+    /// bend's centre of curvature, where the nearest point is ill defined or far away).
+    /// Along a straight one step is exact; in a bend each step squares the error.
+    fn refine(&self, x_m: f64, y_m: f64, from_m: f64) -> Option<Location> {
+        const MAX_STEPS: usize = 8;
+        // Below this, a step moves the station by less than rounding moves the point.
+        const SETTLED_M: f64 = 1e-9;
+        // A step this small is the last one needed (see below).
+        const FINAL_STEP_M: f64 = 1e-4;
+        let mut s = from_m;
+        let mut k = self.segment_index(s);
+        for _ in 0..MAX_STEPS {
+            let c = self.centre_at(k, s);
+            let (dx, dy) = (x_m - c.x, y_m - c.y);
+            let along = dx * c.cos + dy * c.sin;
+            let lateral = dy * c.cos - dx * c.sin;
+            // d(along)/ds = -(1 - κ·lateral): it vanishes at the centre of curvature.
+            let stiffness = 1.0 - c.curvature * lateral;
+            if stiffness < 0.25 {
+                return None;
+            }
+            let step = along / stiffness;
+            if step.abs() < FINAL_STEP_M {
+                // The last step, taken without evaluating the centreline again: the
+                // station's error after it is about κ·step² and the lateral offset is
+                // stationary at the nearest point (its error about κ·step²/2), both far
+                // below a micrometre.
+                let station = s + step;
+                if self.closed || (0.0..=self.length_m).contains(&station) {
+                    return Some(Location {
+                        station_m: if self.closed {
+                            self.wrap(station)
+                        } else {
+                            station
+                        },
+                        lateral_m: lateral,
+                        heading_rad: c.heading + c.curvature * step,
+                    });
+                }
+            }
+            let next = if self.closed {
+                self.wrap(s + step)
             } else {
-                (station + along).clamp(0.0, self.length_m)
+                (s + step).clamp(0.0, self.length_m)
             };
+            let moved = if self.closed {
+                step.abs()
+            } else {
+                (next - s).abs()
+            };
+            if moved < SETTLED_M {
+                return Some(Location {
+                    station_m: s,
+                    lateral_m: lateral,
+                    heading_rad: c.heading,
+                });
+            }
+            s = next;
+            k = self.segment_near(k, s);
         }
-        let p = self.pose_at(station);
-        let lateral = -(x_m - p.x_m) * p.heading_rad.sin() + (y_m - p.y_m) * p.heading_rad.cos();
+        None
+    }
+
+    /// Where the point lies seen from the centreline at station `s`.
+    fn location_at(&self, x_m: f64, y_m: f64, s: f64) -> Location {
+        let c = self.centre_at(self.segment_index(s), s);
         Location {
-            station_m: self.wrap(station),
-            lateral_m: lateral,
-            heading_rad: p.heading_rad,
+            station_m: s,
+            lateral_m: (y_m - c.y) * c.cos - (x_m - c.x) * c.sin,
+            heading_rad: c.heading,
         }
     }
 
-    /// The point projected onto the chords either side of sample `i`.
-    fn project(&self, i: usize, x_m: f64, y_m: f64) -> Location {
+    /// How far apart two stations are along the road (around the lap's end on a closed
+    /// road).
+    fn distance_along(&self, a: f64, b: f64) -> f64 {
+        let d = (a - b).abs();
+        if self.closed {
+            d.min(self.length_m - d)
+        } else {
+            d
+        }
+    }
+
+    /// The station of the point projected onto the chords either side of sample `i`.
+    fn project(&self, i: usize, x_m: f64, y_m: f64) -> f64 {
         let n = self.samples.len();
-        let mut best: Option<(f64, Location)> = None;
+        let mut best: Option<(f64, f64)> = None;
         for (a, b) in [
             (i.checked_sub(1), Some(i)),
             (Some(i), (i + 1 < n).then_some(i + 1)),
@@ -632,27 +771,12 @@ impl Road {
                 continue;
             }
             let t = (((x_m - pa.x) * dx + (y_m - pa.y) * dy) / chord).clamp(0.0, 1.0);
-            let (px, py) = (pa.x + dx * t, pa.y + dy * t);
-            let distance = (x_m - px).hypot(y_m - py);
-            let side = dx * (y_m - pa.y) - dy * (x_m - pa.x);
-            let station = pa.s + (pb.s - pa.s) * t;
-            let location = Location {
-                station_m: station,
-                lateral_m: distance.copysign(side),
-                heading_rad: self.heading_at(station),
-            };
+            let distance = (x_m - pa.x - dx * t).hypot(y_m - pa.y - dy * t);
             if best.is_none_or(|(d, _)| distance < d) {
-                best = Some((distance, location));
+                best = Some((distance, pa.s + (pb.s - pa.s) * t));
             }
         }
-        best.map_or(
-            Location {
-                station_m: self.samples[i].s,
-                lateral_m: (x_m - self.samples[i].x).hypot(y_m - self.samples[i].y),
-                heading_rad: self.samples[i].heading,
-            },
-            |(_, location)| location,
-        )
+        best.map_or(self.samples[i].s, |(_, station)| station)
     }
 
     /// The surface under the point (`x_m`, `y_m`); `near` as for [`Road::locate`].
@@ -708,10 +832,17 @@ impl Road {
 
     /// The index of the last sample at or before `s` (a station within the road).
     fn sample_index(&self, s: f64) -> usize {
-        self.samples
-            .partition_point(|p| p.s <= s)
-            .saturating_sub(1)
-            .min(self.samples.len() - 1)
+        self.sample_in(self.segment_index(s), s)
+    }
+
+    /// The index of the sample at or before `s` within segment `k` (by division: a
+    /// segment's samples are evenly spaced).
+    fn sample_in(&self, k: usize, s: f64) -> usize {
+        let run = self.segment_samples[k];
+        // `as` truncates towards 0 and saturates: below 0 (rounding at the segment's
+        // start) and NaN give 0.
+        let j = ((s - self.segment_starts[k]) * run.per_m) as usize;
+        run.first + j.min(run.steps - 1)
     }
 
     /// The index of the segment `s` is in.
@@ -720,6 +851,67 @@ impl Road {
             .partition_point(|&start| start <= s)
             .saturating_sub(1)
     }
+
+    /// The segment `s` is in, looked for from segment `k` (a query's next station is
+    /// almost always in the same segment or the next).
+    fn segment_near(&self, k: usize, s: f64) -> usize {
+        let last = self.segments.len() - 1;
+        let starts = |k: usize| self.segment_starts[k];
+        if s >= starts(k) && (k == last || s < starts(k + 1)) {
+            k
+        } else if k < last && s >= starts(k + 1) && (k + 1 == last || s < starts(k + 2)) {
+            k + 1
+        } else {
+            self.segment_index(s)
+        }
+    }
+
+    /// The centreline at station `s` (within the road) of segment `k`: Simpson's rule over
+    /// the step from the sample before it, the directions turned from the sample's by the
+    /// heading's exact change (a quadratic in the distance).
+    fn centre_at(&self, k: usize, s: f64) -> CentrePoint {
+        let k0 = self.segments[k].curvature_start;
+        let run = self.segment_samples[k];
+        let a = self.samples[self.sample_in(k, s)];
+        let u = a.s - self.segment_starts[k];
+        let h = s - a.s;
+        if k0 == 0.0 && run.half_rate == 0.0 {
+            // A straight: the sample's direction, carried on.
+            return CentrePoint {
+                x: a.x + h * a.cos,
+                y: a.y + h * a.sin,
+                heading: a.heading,
+                cos: a.cos,
+                sin: a.sin,
+                curvature: 0.0,
+            };
+        }
+        // The turn from the sample to `t` further on: κ0·t + rate/2·((u + t)² − u²).
+        let turn = |t: f64| t * (k0 + run.half_rate * (2.0 * u + t));
+        let (cos_m, sin_m) = a.turned(turn(0.5 * h));
+        let end_turn = turn(h);
+        let (cos, sin) = a.turned(end_turn);
+        let sixth = h * (1.0 / 6.0);
+        CentrePoint {
+            x: a.x + sixth * (a.cos + 4.0 * cos_m + cos),
+            y: a.y + sixth * (a.sin + 4.0 * sin_m + sin),
+            heading: a.heading + end_turn,
+            cos,
+            sin,
+            curvature: k0 + 2.0 * run.half_rate * (u + h),
+        }
+    }
+}
+
+/// A point of the centreline with its direction and curvature.
+#[derive(Clone, Copy, Debug)]
+struct CentrePoint {
+    x: f64,
+    y: f64,
+    heading: f64,
+    cos: f64,
+    sin: f64,
+    curvature: f64,
 }
 
 #[cfg(test)]

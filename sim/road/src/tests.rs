@@ -358,3 +358,91 @@ fn a_road_file_with_a_mistake_names_the_entry_and_what_is_wrong() {
         "{missing}"
     );
 }
+
+/// The centreline by brute force: Simpson's rule from the segment's start in steps of
+/// 1 mm with the library's trigonometry, against the pose a query gets from the samples
+/// (turned by series, not by `sin_cos`).
+#[test]
+fn poses_between_samples_match_a_fine_integration_with_trigonometry() {
+    let road = file::load(&shipped("handling-circuit.toml")).unwrap().road;
+    let origin = road.pose_at(0.0);
+    let (mut start_s, mut x, mut y, mut heading) =
+        (0.0, origin.x_m, origin.y_m, origin.heading_rad);
+    for segment in road.segments() {
+        let base = heading;
+        let h = |s: f64| base + segment.turn_at(s);
+        // Stations a third and two thirds between the samples, and the segment's end.
+        let mut checks: Vec<f64> = (0..(segment.length_m / SAMPLE_M) as usize)
+            .flat_map(|i| [(i as f64 + 0.37) * SAMPLE_M, (i as f64 + 0.81) * SAMPLE_M])
+            .filter(|&s| s < segment.length_m)
+            .step_by(97)
+            .collect();
+        checks.push(segment.length_m);
+        let (mut s, mut px, mut py) = (0.0, x, y);
+        for target in checks {
+            while s < target {
+                let step = (target - s).min(1e-3);
+                let (a, m, b) = (h(s), h(s + step / 2.0), h(s + step));
+                px += step / 6.0 * (a.cos() + 4.0 * m.cos() + b.cos());
+                py += step / 6.0 * (a.sin() + 4.0 * m.sin() + b.sin());
+                s += step;
+            }
+            if start_s + target >= road.length_m() {
+                break; // a closed road's end is its start again
+            }
+            let pose = road.pose_at(start_s + target);
+            assert!(
+                close(pose.x_m, px, 1e-6) && close(pose.y_m, py, 1e-6),
+                "at {:.3} m: {pose:?} against ({px}, {py})",
+                start_s + target
+            );
+            assert!(close(pose.heading_rad, h(target), 1e-9), "{pose:?}");
+        }
+        (x, y, heading) = (px, py, base + segment.turn());
+        start_s += segment.length_m;
+    }
+}
+
+proptest! {
+    /// On the shipped circuit (straights, arcs, clothoids, both directions), a search from
+    /// where a tyre was a step ago, or a few metres off, finds what a search of the whole
+    /// road finds, on the road and on the grass beside it.
+    #[test]
+    fn a_search_from_where_the_tyre_was_finds_what_a_full_search_finds(
+        station in 0.0f64..3221.0,
+        lateral in -8.0f64..8.0,
+        hint_off in prop_oneof![-0.1f64..0.1, -5.0f64..5.0],
+    ) {
+        let road = file::load(&shipped("handling-circuit.toml")).unwrap().road;
+        let centre = road.pose_at(station);
+        let (x, y) = (
+            centre.x_m - lateral * centre.heading_rad.sin(),
+            centre.y_m + lateral * centre.heading_rad.cos(),
+        );
+        let full = road.locate(x, y, None);
+        let warm = road.locate(x, y, Some(station + hint_off));
+        prop_assert!((full.lateral_m - lateral).abs() < 1e-6, "{full:?} against {lateral}");
+        prop_assert!((warm.lateral_m - full.lateral_m).abs() < 1e-8, "{warm:?} {full:?}");
+        let ds = (warm.station_m - full.station_m).abs();
+        prop_assert!(ds < 1e-6 || (road.length_m() - ds) < 1e-6, "{warm:?} {full:?}");
+        prop_assert!((warm.heading_rad - full.heading_rad).abs() < 1e-9, "{warm:?} {full:?}");
+    }
+}
+
+/// The series a query turns a sample's direction by agrees with `sin_cos` to within
+/// rounding over every angle a sample step can turn (and a margin beyond).
+#[test]
+fn a_samples_direction_turns_as_sin_cos_would() {
+    for heading in [0.0, 0.7, 2.0, -2.9, 4.5] {
+        let sample = Sample::new(0.0, 0.0, 0.0, heading);
+        for i in -600..=600 {
+            let delta = f64::from(i) * 1e-4; // ±0.06 rad: κ 0.2/m over 0.25 m is 0.05
+            let (cos, sin) = sample.turned(delta);
+            let (sin_ref, cos_ref) = (heading + delta).sin_cos();
+            assert!(
+                close(cos, cos_ref, 2e-15) && close(sin, sin_ref, 2e-15),
+                "{heading} + {delta}: ({cos}, {sin}) against ({cos_ref}, {sin_ref})"
+            );
+        }
+    }
+}

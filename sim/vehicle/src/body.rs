@@ -69,6 +69,9 @@ pub(crate) struct Body {
     pub(crate) x: f64,
     pub(crate) y: f64,
     pub(crate) heading: f64,
+    /// The heading's sine and cosine, kept with it: the wheels' positions and the road's
+    /// queries need them every step.
+    pub(crate) heading_sin_cos: (f64, f64),
     /// Velocity of the CG in the body frame, m/s.
     pub(crate) vx: f64,
     pub(crate) vy: f64,
@@ -89,6 +92,7 @@ impl Body {
             x,
             y,
             heading,
+            heading_sin_cos: heading.sin_cos(),
             vx,
             vy: 0.0,
             yaw_rate: 0.0,
@@ -143,7 +147,8 @@ impl Body {
         self.vy = flush_tiny(vy);
 
         self.heading += dt * self.yaw_rate;
-        let (sin, cos) = self.heading.sin_cos();
+        self.heading_sin_cos = self.heading.sin_cos();
+        let (sin, cos) = self.heading_sin_cos;
         self.x += dt * (self.vx * cos - self.vy * sin);
         self.y += dt * (self.vx * sin + self.vy * cos);
         self.distance += dt * (self.vx * self.vx + self.vy * self.vy).sqrt();

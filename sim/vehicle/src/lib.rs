@@ -216,7 +216,7 @@ impl Vehicle {
     /// Where each wheel touches the road, world frame (x, y), m, FL FR RL RR: what
     /// decides the surface under each tyre.
     pub fn wheel_positions(&self) -> [(f64, f64); 4] {
-        let (sin, cos) = self.body.heading.sin_cos();
+        let (sin, cos) = self.body.heading_sin_cos;
         std::array::from_fn(|i| {
             let (x, y) = (self.geometry.wheel_x[i], self.geometry.wheel_y[i]);
             (
@@ -224,6 +224,12 @@ impl Vehicle {
                 self.body.y + x * sin + y * cos,
             )
         })
+    }
+
+    /// The sine and cosine of the car's heading (`state().heading_rad`), as the model
+    /// keeps them.
+    pub fn heading_sin_cos(&self) -> (f64, f64) {
+        self.body.heading_sin_cos
     }
 
     /// Advances the model by `dt` seconds under `actuators` (held for the whole step).
