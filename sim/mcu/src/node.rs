@@ -5,11 +5,11 @@
 //!
 //! [`run_together`] advances the bus and the MCUs in lockstep. The MCUs run to the next
 //! moment the bus hands something over (the end of the frame on the wire) or at most
-//! [`WINDOW_NS`] ahead; their transmit requests then reach the bus at the simulated time
+//! [`WINDOW_BITS`] ahead; their transmit requests then reach the bus at the simulated time
 //! they were made, in time order across the MCUs, before the bus decides its next
-//! arbitration. A window is shorter than the shortest frame (47 bits, 94 µs at 500
-//! kbit/s), so a frame started inside a window ends in a later one: every delivery and
-//! every transmit confirmation reaches an MCU at the very time the bus completes it.
+//! arbitration. A window is shorter than the shortest frame, so a frame started inside a
+//! window ends in a later one: every delivery and every transmit confirmation reaches an
+//! MCU at the very time the bus completes it.
 
 use autoplug_can::Frame;
 use autoplug_virtual_bus::{
@@ -19,8 +19,14 @@ use autoplug_virtual_bus::{
 use crate::chip::can::CanFrame;
 use crate::mcu::{Mcu, Stop};
 
-/// The longest step the MCUs run ahead of the bus: 40 µs, under the shortest frame.
-pub const WINDOW_NS: u64 = 40_000;
+/// The longest step the MCUs run ahead of the bus, in bit times: under the shortest frame
+/// (a data frame without data: 44 bits from SOF to the end of EOF, the 3-bit intermission
+/// not counted; an error frame is longer), so that a frame started inside a window ends
+/// in a later one. 43 bits: 86 µs at 500 kbit/s. The longer the step, the less the MCUs'
+/// bookkeeping costs per simulated second (most of them sleep through most windows).
+pub const WINDOW_BITS: u64 = (autoplug_virtual_bus::FrameBits::unstuffed_with_ifs(0)
+    - autoplug_virtual_bus::INTERMISSION_BITS) as u64
+    - 1;
 
 /// An emulated MCU on the bus.
 pub struct BusNode {
@@ -151,12 +157,13 @@ pub fn run_together(
     nodes: &mut [BusNode],
     until_ns: u64,
 ) -> Result<(), (usize, Stop)> {
+    let window_ns = bus.timing().bits_to_ns(WINDOW_BITS);
     loop {
         let now = bus.now_ns();
         if now >= until_ns {
             return Ok(());
         }
-        let window_end = until_ns.min(now + WINDOW_NS);
+        let window_end = until_ns.min(now + window_ns);
         let next = match bus.wire_busy_until_ns() {
             Some(end) if end > now => window_end.min(end),
             _ => window_end,

@@ -171,12 +171,43 @@ const PERIPHERAL_MAP: &[Peripheral] = &[
     Peripheral::named(0x5005_0000, "DCMI"),
 ];
 
-/// The peripheral whose register block holds `address`.
+/// The peripheral whose register block holds `address`: by [`PERIPHERAL_INDEX`] on the
+/// APB and AHB1 buses (every access a firmware makes to its peripherals), by a search
+/// of the map above them.
 fn peripheral_at(address: u32) -> Option<&'static Peripheral> {
+    let offset = address.wrapping_sub(INDEXED.start);
+    if offset < INDEXED.end - INDEXED.start {
+        return PERIPHERAL_MAP.get(usize::from(
+            PERIPHERAL_INDEX[(offset / PERIPHERAL_SIZE) as usize],
+        ));
+    }
+    search_peripheral(address)
+}
+
+fn search_peripheral(address: u32) -> Option<&'static Peripheral> {
     let after = PERIPHERAL_MAP.partition_point(|p| p.base <= address);
     let p = PERIPHERAL_MAP.get(after.checked_sub(1)?)?;
     (address - p.base < PERIPHERAL_SIZE).then_some(p)
 }
+
+/// The addresses [`PERIPHERAL_INDEX`] covers: APB1, APB2 and AHB1.
+const INDEXED: core::ops::Range<u32> = 0x4000_0000..0x4008_0000;
+
+/// For each 1 KiB block of [`INDEXED`], the index of its peripheral in
+/// [`PERIPHERAL_MAP`] (`u8::MAX`: none), built from the map at compile time.
+const PERIPHERAL_INDEX: [u8; ((INDEXED.end - INDEXED.start) / PERIPHERAL_SIZE) as usize] = {
+    let mut index = [u8::MAX; ((INDEXED.end - INDEXED.start) / PERIPHERAL_SIZE) as usize];
+    let mut i = 0;
+    while i < PERIPHERAL_MAP.len() {
+        let base = PERIPHERAL_MAP[i].base;
+        assert!(base % PERIPHERAL_SIZE == 0 && i < u8::MAX as usize);
+        if base >= INDEXED.start && base < INDEXED.end {
+            index[((base - INDEXED.start) / PERIPHERAL_SIZE) as usize] = i as u8;
+        }
+        i += 1;
+    }
+    index
+};
 
 /// The name of the peripheral at `address`.
 pub fn peripheral_name(address: u32) -> &'static str {
@@ -675,6 +706,19 @@ impl Bus for Chip {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_index_finds_what_a_search_of_the_map_finds() {
+        for block in (0x3FFF_F000u32..0x5006_0000).step_by(0x100) {
+            for address in [block, block + 0xFC] {
+                assert_eq!(
+                    peripheral_at(address).map(|p| p.base),
+                    search_peripheral(address).map(|p| p.base),
+                    "{address:#010x}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn one_table_names_every_peripheral_and_routes_the_modelled_ones() {

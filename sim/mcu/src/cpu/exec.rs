@@ -181,8 +181,12 @@ impl Cpu {
         }
     }
 
-    /// Executes one decoded instruction. `in_it`: inside an IT block.
-    #[inline]
+    /// Executes one decoded instruction. `in_it`: inside an IT block. The instructions a
+    /// firmware runs most (data processing, loads and stores with an immediate offset,
+    /// branches, IT) are handled here, inlined into the core's loop; the rest in
+    /// [`Cpu::execute_other`], a call of its own, so that their code does not burden
+    /// every instruction's.
+    #[inline(always)]
     pub(super) fn execute<B: Bus>(&mut self, bus: &mut B, op: Op, in_it: bool) -> Result<(), Trap> {
         match op {
             Op::AluImm {
@@ -215,6 +219,67 @@ impl Cpu {
                 let a = self.r[rn as usize];
                 self.alu(op, s, rd, a, b, carry);
             }
+            Op::Branch { cond, target } => {
+                if cond == 14 || self.condition(cond) {
+                    self.next = target;
+                    self.cycles += 2;
+                }
+            }
+            Op::CompareBranch {
+                nonzero,
+                rn,
+                target,
+            } => {
+                if (self.r[rn as usize] != 0) == nonzero {
+                    self.next = target;
+                    self.cycles += 2;
+                }
+            }
+            Op::It { state } => self.it = state,
+            Op::LoadStoreImm {
+                load,
+                width,
+                rt,
+                rn,
+                offset,
+                index,
+            } => {
+                let base = self.r[rn as usize];
+                let offset_address = base.wrapping_add(offset as u32);
+                let address = if index == Index::Post {
+                    base
+                } else {
+                    offset_address
+                };
+                self.cycles += 1;
+                if load {
+                    let value = self.load_width(bus, address, width)?;
+                    if index != Index::Offset {
+                        self.set(rn, offset_address);
+                    }
+                    self.load_to(bus, rt, value)?;
+                } else {
+                    self.store_width(bus, address, width, self.r[rt as usize])?;
+                    if index != Index::Offset {
+                        self.set(rn, offset_address);
+                    }
+                }
+            }
+            other => return self.execute_other(bus, other, in_it),
+        }
+        Ok(())
+    }
+
+    /// [`Cpu::execute`] for the instructions it does not handle itself.
+    #[inline(never)]
+    fn execute_other<B: Bus>(&mut self, bus: &mut B, op: Op, in_it: bool) -> Result<(), Trap> {
+        match op {
+            hot @ (Op::AluImm { .. }
+            | Op::AluReg { .. }
+            | Op::Branch { .. }
+            | Op::CompareBranch { .. }
+            | Op::It { .. }
+            | Op::LoadStoreImm { .. }) => return self.execute(bus, hot, in_it),
             Op::ShiftReg {
                 s,
                 rd,
@@ -506,12 +571,6 @@ impl Cpu {
                 self.r[rdlo as usize] = result as u32;
                 self.r[rdhi as usize] = (result >> 32) as u32;
             }
-            Op::Branch { cond, target } => {
-                if cond == 14 || self.condition(cond) {
-                    self.next = target;
-                    self.cycles += 2;
-                }
-            }
             Op::BranchLink { target } => {
                 self.r[14] = self.next | 1;
                 self.next = target;
@@ -525,16 +584,6 @@ impl Cpu {
                 self.cycles += 2;
                 self.bx_write_pc(bus, target)?;
             }
-            Op::CompareBranch {
-                nonzero,
-                rn,
-                target,
-            } => {
-                if (self.r[rn as usize] != 0) == nonzero {
-                    self.next = target;
-                    self.cycles += 2;
-                }
-            }
             Op::TableBranch { half, rn, rm } => {
                 let base = self.r[rn as usize];
                 let index = self.r[rm as usize];
@@ -545,36 +594,6 @@ impl Cpu {
                 };
                 self.next = self.r[15].wrapping_add(offset << 1);
                 self.cycles += 3;
-            }
-            Op::It { state } => self.it = state,
-            Op::LoadStoreImm {
-                load,
-                width,
-                rt,
-                rn,
-                offset,
-                index,
-            } => {
-                let base = self.r[rn as usize];
-                let offset_address = base.wrapping_add(offset as u32);
-                let address = if index == Index::Post {
-                    base
-                } else {
-                    offset_address
-                };
-                self.cycles += 1;
-                if load {
-                    let value = self.load_width(bus, address, width)?;
-                    if index != Index::Offset {
-                        self.set(rn, offset_address);
-                    }
-                    self.load_to(bus, rt, value)?;
-                } else {
-                    self.store_width(bus, address, width, self.r[rt as usize])?;
-                    if index != Index::Offset {
-                        self.set(rn, offset_address);
-                    }
-                }
             }
             Op::LoadStoreReg {
                 load,
@@ -711,7 +730,7 @@ impl Cpu {
         Ok(())
     }
 
-    #[inline]
+    #[inline(always)]
     fn alu(&mut self, op: Alu, s: bool, rd: u8, a: u32, b: u32, shifter_carry: bool) {
         let (result, arithmetic) = match op {
             Alu::And | Alu::Tst => (a & b, None),
