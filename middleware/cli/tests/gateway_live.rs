@@ -334,7 +334,7 @@ fn serve_car(
             }
             from_client.pop_front();
         }
-        for entry in car.take_log().iter().filter(|e| e.sender != "External") {
+        for entry in car.take_log().iter().filter(|e| e.sender.is_some()) {
             server.broadcast(entry.t_us, &entry.frame, None);
         }
         if car.time_us() % 10_000 == 0 {

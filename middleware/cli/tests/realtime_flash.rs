@@ -18,7 +18,7 @@ use autoplug_tester::driver;
 use autoplug_tester::{FlashConfig, FlashJob, IdentJob, TesterConfig};
 use autoplug_transport::{Incoming, Timestamp, Transport, TransportError};
 use autoplug_uds::DEV_SECURITY_SECRET;
-use autoplug_virtual_car::car::{LoggedFrame, VirtualCar, EXTERNAL_SENDER};
+use autoplug_virtual_car::car::{LoggedFrame, VirtualCar};
 use autoplug_virtual_car::diag::{build_image, FACTORY_PAYLOAD_LEN};
 use autoplug_virtual_car::scenario::Scenario;
 use autoplug_virtual_car::socketcand::{CarBridge, SocketcandServer};
@@ -81,7 +81,7 @@ impl PacedCar {
             self.car.tick();
             self.car.swap_log(&mut self.log);
             for entry in &self.log {
-                if entry.sender == EXTERNAL_SENDER {
+                if entry.sender.is_none() {
                     if let Some(i) = self.queued.iter().position(|f| *f == entry.frame) {
                         self.queued.remove(i);
                         self.incoming.push_back(Incoming::Sent);

@@ -44,8 +44,16 @@ pub struct LoggedFrame {
     pub t_us: u64,
     /// The frame.
     pub frame: Frame,
-    /// The sender's DBC name, or [`EXTERNAL_SENDER`] for a socketcand client or a tester.
-    pub sender: &'static str,
+    /// The sender: an ECU, or `None` for the external node (a socketcand client or a
+    /// tester). One byte rather than a name: a drive's log holds a frame per millisecond.
+    pub sender: Option<Node>,
+}
+
+impl LoggedFrame {
+    /// The sender's DBC name, or [`EXTERNAL_SENDER`].
+    pub fn sender_name(&self) -> &'static str {
+        self.sender.map_or(EXTERNAL_SENDER, |n| n.name())
+    }
 }
 
 /// One ECU on the bus: its logic, and its diagnostic half (UDS, flash, bootloader); or,
@@ -418,7 +426,7 @@ pub struct VirtualCar {
     /// emulated ECUs (0 for a car on host logic).
     start_us: u64,
     log: Vec<LoggedFrame>,
-    node_names: Vec<&'static str>,
+    node_names: Vec<Option<Node>>,
     /// Frames the external node (a tester in the process) received, when captured.
     external_rx: Option<Vec<Frame>>,
     /// Every moment the brake pedal went down, to the tick.
@@ -637,7 +645,7 @@ impl VirtualCar {
         // The gateway listens to everything (and acknowledges), like the middleware on
         // the bench; tools attached over socketcand send through this node too.
         let external = bus.attach(EXTERNAL_SENDER, AcceptanceFilter::All);
-        let node_names = bus.nodes().map(|n| node_name(bus.node_name(n))).collect();
+        let node_names = bus.nodes().map(|n| node_of(bus.node_name(n))).collect();
         let timeline = Timeline::new(scenario);
         let mut car = Self {
             scenario: scenario.clone(),
@@ -1270,9 +1278,6 @@ impl VirtualCar {
     }
 }
 
-fn node_name(name: &str) -> &'static str {
-    Node::ALL
-        .iter()
-        .find(|n| n.name() == name)
-        .map_or(EXTERNAL_SENDER, |n| n.name())
+fn node_of(name: &str) -> Option<Node> {
+    Node::ALL.iter().copied().find(|n| n.name() == name)
 }

@@ -96,7 +96,7 @@ impl CarBridge {
             self.on_the_way.push_back(sent);
         }
         for entry in frames {
-            let from_client = if entry.sender == crate::car::EXTERNAL_SENDER {
+            let from_client = if entry.sender.is_none() {
                 // The external node sends its queue by priority: find the frame, not just
                 // the oldest.
                 self.on_the_way

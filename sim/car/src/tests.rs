@@ -340,12 +340,12 @@ fn bus_log_lines_are_candump_and_read_back() {
         LoggedFrame {
             t_us: 12_345_678,
             frame,
-            sender: "Pedals",
+            sender: Some(Node::Pedals),
         },
         LoggedFrame {
             t_us: 5,
             frame: Frame::new(0x7FF, &[]).unwrap(),
-            sender: "External",
+            sender: None,
         },
     ];
     let mut out = Vec::new();

@@ -265,6 +265,36 @@ impl Cpu {
                     }
                 }
             }
+            Op::LoadStoreReg {
+                load,
+                width,
+                rt,
+                rn,
+                rm,
+                shift,
+            } => {
+                let address = self.r[rn as usize].wrapping_add(self.r[rm as usize] << shift);
+                self.cycles += 1;
+                if load {
+                    let value = self.load_width(bus, address, width)?;
+                    self.load_to(bus, rt, value)?;
+                } else {
+                    self.store_width(bus, address, width, self.r[rt as usize])?;
+                }
+            }
+            Op::BranchLink { target } => {
+                self.r[14] = self.next | 1;
+                self.next = target;
+                self.cycles += 2;
+            }
+            Op::BranchExchange { rm, link } => {
+                let target = self.r[rm as usize];
+                if link {
+                    self.r[14] = self.next | 1;
+                }
+                self.cycles += 2;
+                self.bx_write_pc(bus, target)?;
+            }
             other => return self.execute_other(bus, other, in_it),
         }
         Ok(())
@@ -279,7 +309,10 @@ impl Cpu {
             | Op::Branch { .. }
             | Op::CompareBranch { .. }
             | Op::It { .. }
-            | Op::LoadStoreImm { .. }) => return self.execute(bus, hot, in_it),
+            | Op::LoadStoreImm { .. }
+            | Op::LoadStoreReg { .. }
+            | Op::BranchLink { .. }
+            | Op::BranchExchange { .. }) => return self.execute(bus, hot, in_it),
             Op::ShiftReg {
                 s,
                 rd,
@@ -571,19 +604,6 @@ impl Cpu {
                 self.r[rdlo as usize] = result as u32;
                 self.r[rdhi as usize] = (result >> 32) as u32;
             }
-            Op::BranchLink { target } => {
-                self.r[14] = self.next | 1;
-                self.next = target;
-                self.cycles += 2;
-            }
-            Op::BranchExchange { rm, link } => {
-                let target = self.r[rm as usize];
-                if link {
-                    self.r[14] = self.next | 1;
-                }
-                self.cycles += 2;
-                self.bx_write_pc(bus, target)?;
-            }
             Op::TableBranch { half, rn, rm } => {
                 let base = self.r[rn as usize];
                 let index = self.r[rm as usize];
@@ -594,23 +614,6 @@ impl Cpu {
                 };
                 self.next = self.r[15].wrapping_add(offset << 1);
                 self.cycles += 3;
-            }
-            Op::LoadStoreReg {
-                load,
-                width,
-                rt,
-                rn,
-                rm,
-                shift,
-            } => {
-                let address = self.r[rn as usize].wrapping_add(self.r[rm as usize] << shift);
-                self.cycles += 1;
-                if load {
-                    let value = self.load_width(bus, address, width)?;
-                    self.load_to(bus, rt, value)?;
-                } else {
-                    self.store_width(bus, address, width, self.r[rt as usize])?;
-                }
             }
             Op::LoadLiteral { width, rt, address } => {
                 self.cycles += 1;
