@@ -16,6 +16,8 @@ use crate::wiring::{Bench, Wiring};
 use autoplug_can::{AbsMsg, CanMessage, CruiseAccelMsg, Frame, Gear as CanGear, Node, TracMsg};
 use autoplug_ecu::{Dtcs, EcuLogic, Instant};
 use autoplug_image::SoftwareVariant;
+use autoplug_mcu::mcu::Mcu;
+use autoplug_mcu::rtt::RttLog;
 use autoplug_scaling::units::{celsius_to_fahrenheit, fahrenheit_to_celsius};
 use autoplug_vehicle::{
     Actuators as VehicleActuators, Environment, Gear as VehicleGear, InitialState, Vehicle,
@@ -244,8 +246,12 @@ macro_rules! ecus {
                 bus: &mut VirtualBus,
             ) -> Result<Self, String> {
                 let mut phases = (0..).map(|i| i * PHASE_SPACING_US);
+                let mut loaded = match choice {
+                    Some(choice) => firmware::load_all(&choice.ecus, &choice.dir, scenario.seed)?,
+                    None => Vec::new(),
+                };
                 $(
-                    let emulated = emulate(fw, choice, Node::$node, bus, scenario.seed)?;
+                    let emulated = emulate(fw, &mut loaded, Node::$node, bus);
                     let phase_us = phases.next().unwrap_or_default();
                     let software = software_of(scenario, Node::$node);
                     let $name = Slot::new(software, scenario, bus, phase_us, emulated);
@@ -468,21 +474,16 @@ impl BusView {
     }
 }
 
-/// Attaches `node`'s board to the bus when it runs as firmware.
+/// Attaches `node`'s board to the bus when it runs as firmware (its MCU among `loaded`).
 fn emulate(
     firmware: &mut firmware::Firmware,
-    choice: Option<&FirmwareChoice>,
+    loaded: &mut Vec<(Node, Mcu, Vec<RttLog>)>,
     node: Node,
     bus: &mut VirtualBus,
-    seed: u64,
-) -> Result<Option<NodeId>, String> {
-    match choice {
-        Some(choice) if choice.runs(node) => {
-            let (mcu, logs) = firmware::load(node, &choice.dir, seed)?;
-            Ok(Some(firmware.attach(bus, node, mcu, logs)))
-        }
-        _ => Ok(None),
-    }
+) -> Option<NodeId> {
+    let i = loaded.iter().position(|(n, _, _)| *n == node)?;
+    let (_, mcu, logs) = loaded.remove(i);
+    Some(firmware.attach(bus, node, mcu, logs))
 }
 
 /// The car at the tick the driver pressed the brake pedal (from released): where a stop

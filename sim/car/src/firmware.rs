@@ -299,6 +299,28 @@ pub fn load(node: Node, dir: &Path, seed: u64) -> Result<(Mcu, Vec<RttLog>), Str
     Ok((mcu, logs))
 }
 
+/// [`load`] for each of `nodes`, on threads of their own (each is independent: its image's
+/// symbols and debug information, its first start), in `nodes`' order.
+pub fn load_all(
+    nodes: &[Node],
+    dir: &Path,
+    seed: u64,
+) -> Result<Vec<(Node, Mcu, Vec<RttLog>)>, String> {
+    std::thread::scope(|scope| {
+        let loads: Vec<_> = nodes
+            .iter()
+            .map(|&node| scope.spawn(move || load(node, dir, seed).map(|(m, l)| (node, m, l))))
+            .collect();
+        loads
+            .into_iter()
+            .map(|load| {
+                load.join()
+                    .unwrap_or_else(|_| Err("loading a firmware image panicked".into()))
+            })
+            .collect()
+    })
+}
+
 /// How long a board's first start runs before it is powered off: past the A/B record's
 /// sector erase and into the control loop.
 const FIRST_START_NS: u64 = 800_000_000;
