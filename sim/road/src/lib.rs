@@ -551,13 +551,7 @@ impl Road {
     /// one step of Simpson's rule (samples fall on every segment's ends, so the step lies
     /// within one segment).
     pub fn pose_at(&self, station_m: f64) -> Pose {
-        let s = self.wrap(station_m);
-        let point = self.centre_at(self.segment_index(s), s);
-        Pose {
-            x_m: point.x,
-            y_m: point.y,
-            heading_rad: point.heading,
-        }
+        self.pose_and_direction_at(station_m).0
     }
 
     /// The centreline's position at `station_m` (see [`Road::wrap`]) with its direction's

@@ -288,18 +288,45 @@ proptest! {
         hint_off in -3.0f64..3.0,
     ) {
         let road = Road::new(ORIGIN, stadium(400.0, 60.0, 40.0), 9.0).unwrap().closed().unwrap();
-        let centre = road.pose_at(station);
-        let (x, y) = (
-            centre.x_m - lateral * centre.heading_rad.sin(),
-            centre.y_m + lateral * centre.heading_rad.cos(),
-        );
-        let full = road.locate(x, y, None);
-        let warm = road.locate(x, y, Some(station + hint_off));
-        prop_assert!((full.lateral_m - lateral).abs() < 1e-6, "{full:?} against {lateral}");
-        prop_assert!((warm.lateral_m - full.lateral_m).abs() < 1e-9, "{warm:?} {full:?}");
-        let ds = (warm.station_m - full.station_m).abs();
-        prop_assert!(ds < 1e-6 || (road.length_m() - ds) < 1e-6, "{warm:?} {full:?}");
+        warm_against_full(&road, station, lateral, hint_off, 1e-9)?;
     }
+}
+
+/// The point `lateral_m` left of `station_m` located from a hint `hint_off_m` away and by
+/// a search of the whole road: the same place, the lateral offsets within
+/// `lateral_tolerance_m` of each other.
+fn warm_against_full(
+    road: &Road,
+    station_m: f64,
+    lateral_m: f64,
+    hint_off_m: f64,
+    lateral_tolerance_m: f64,
+) -> Result<(), TestCaseError> {
+    let centre = road.pose_at(station_m);
+    let (x, y) = (
+        centre.x_m - lateral_m * centre.heading_rad.sin(),
+        centre.y_m + lateral_m * centre.heading_rad.cos(),
+    );
+    let full = road.locate(x, y, None);
+    let warm = road.locate(x, y, Some(station_m + hint_off_m));
+    prop_assert!(
+        (full.lateral_m - lateral_m).abs() < 1e-6,
+        "{full:?} against {lateral_m}"
+    );
+    prop_assert!(
+        (warm.lateral_m - full.lateral_m).abs() < lateral_tolerance_m,
+        "{warm:?} {full:?}"
+    );
+    let ds = (warm.station_m - full.station_m).abs();
+    prop_assert!(
+        ds < 1e-6 || (road.length_m() - ds) < 1e-6,
+        "{warm:?} {full:?}"
+    );
+    prop_assert!(
+        (warm.heading_rad - full.heading_rad).abs() < 1e-9,
+        "{warm:?} {full:?}"
+    );
+    Ok(())
 }
 
 fn shipped(name: &str) -> std::path::PathBuf {
@@ -414,18 +441,7 @@ proptest! {
         hint_off in prop_oneof![-0.1f64..0.1, -5.0f64..5.0],
     ) {
         let road = file::load(&shipped("handling-circuit.toml")).unwrap().road;
-        let centre = road.pose_at(station);
-        let (x, y) = (
-            centre.x_m - lateral * centre.heading_rad.sin(),
-            centre.y_m + lateral * centre.heading_rad.cos(),
-        );
-        let full = road.locate(x, y, None);
-        let warm = road.locate(x, y, Some(station + hint_off));
-        prop_assert!((full.lateral_m - lateral).abs() < 1e-6, "{full:?} against {lateral}");
-        prop_assert!((warm.lateral_m - full.lateral_m).abs() < 1e-8, "{warm:?} {full:?}");
-        let ds = (warm.station_m - full.station_m).abs();
-        prop_assert!(ds < 1e-6 || (road.length_m() - ds) < 1e-6, "{warm:?} {full:?}");
-        prop_assert!((warm.heading_rad - full.heading_rad).abs() < 1e-9, "{warm:?} {full:?}");
+        warm_against_full(&road, station, lateral, hint_off, 1e-8)?;
     }
 }
 

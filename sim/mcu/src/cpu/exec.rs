@@ -31,6 +31,20 @@ impl Cpu {
         Ok(())
     }
 
+    /// An immediate-offset access's address (the base itself when post-indexed) and the
+    /// base plus the offset, which a write-back stores.
+    #[inline(always)]
+    fn indexed(&self, rn: u8, offset: i32, index: Index) -> (u32, u32) {
+        let base = self.r[rn as usize];
+        let offset_address = base.wrapping_add(offset as u32);
+        let address = if index == Index::Post {
+            base
+        } else {
+            offset_address
+        };
+        (address, offset_address)
+    }
+
     #[inline]
     fn nz(&mut self, result: u32) {
         self.n = result >> 31 != 0;
@@ -244,13 +258,7 @@ impl Cpu {
                 offset,
                 index,
             } => {
-                let base = self.r[rn as usize];
-                let offset_address = base.wrapping_add(offset as u32);
-                let address = if index == Index::Post {
-                    base
-                } else {
-                    offset_address
-                };
+                let (address, offset_address) = self.indexed(rn, offset, index);
                 self.cycles += 1;
                 if load {
                     let value = self.load_width(bus, address, width)?;
@@ -631,13 +639,7 @@ impl Cpu {
                 let (address, writeback) = if rn == 15 {
                     (offset as u32, None)
                 } else {
-                    let base = self.r[rn as usize];
-                    let offset_address = base.wrapping_add(offset as u32);
-                    let address = if index == Index::Post {
-                        base
-                    } else {
-                        offset_address
-                    };
+                    let (address, offset_address) = self.indexed(rn, offset, index);
                     (address, (index != Index::Offset).then_some(offset_address))
                 };
                 self.cycles += 2;
