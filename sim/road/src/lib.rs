@@ -802,7 +802,8 @@ impl Road {
     /// Whether the point lies past the start or the end of an open road (where the
     /// nearest centreline point is the end itself): off the road, whatever its offset.
     fn beyond_an_end(&self, x_m: f64, y_m: f64, at: &Location) -> bool {
-        if self.closed {
+        // Between the ends (nearly every query) there is nothing to work out.
+        if self.closed || (at.station_m > 0.0 && at.station_m < self.length_m) {
             return false;
         }
         let (sin, cos) = at.heading_rad.sin_cos();
