@@ -34,7 +34,7 @@ use autoplug_trips::{TripEnd, TripStats};
 use autoplug_vin::Vin;
 
 /// Reports published beyond those stored, at most.
-const WINDOW: usize = 100;
+const WINDOW: usize = 400;
 
 fn arg(n: usize, default: usize) -> usize {
     std::env::args()
@@ -187,6 +187,7 @@ fn main() {
             .map(|(chunk, link)| {
                 let (stored, sent) = (stored_in.clone(), sent_in.clone());
                 std::thread::spawn(move || {
+                    let count = chunk.len() as u64;
                     for (topic, body) in chunk {
                         while sent.load(Ordering::Relaxed)
                             >= stored.load(Ordering::Relaxed) + WINDOW
@@ -198,6 +199,13 @@ fn main() {
                         while link.publish(&topic, body.clone(), false).is_err() {
                             std::thread::sleep(Duration::from_micros(200));
                         }
+                    }
+                    // Every publish acknowledged before the goodbye: Mosquitto 2.0.11
+                    // dropped what was in flight when a client disconnected right after
+                    // its last publish ("disconnected due to out of memory").
+                    let deadline = Instant::now() + Duration::from_secs(60);
+                    while link.status().acknowledged < count && Instant::now() < deadline {
+                        std::thread::sleep(Duration::from_millis(5));
                     }
                     link.close(Duration::from_secs(60));
                 })
@@ -254,8 +262,8 @@ fn main() {
         service.ingest.store.name()
     );
     println!(
-        "stored {} inventories, {} trips, {} refused; {rows} rows in the tables",
-        s.inventories, s.trips, s.rejected
+        "stored {} inventories, {} trips, {} refused, in {} transactions; {rows} rows in the tables",
+        s.inventories, s.trips, s.rejected, s.commits
     );
     println!(
         "end to end (first publish to last commit): {elapsed:.2} s = {:.0} reports/s ({:.0} rows/s), at most {WINDOW} in flight",

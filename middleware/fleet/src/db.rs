@@ -142,11 +142,13 @@ pub trait Db: Send {
     fn query(&mut self, sql: &str, params: &[Value]) -> Result<Vec<Row>, DbError>;
     /// Runs several statements without parameters (a migration).
     fn batch(&mut self, sql: &str) -> Result<(), DbError>;
-    /// Starts a transaction (serialised against other writers as the engine does).
+    /// Starts a transaction (serialised against other writers as the engine does); inside
+    /// one, a savepoint: a batch of reports is one transaction, each report a savepoint in
+    /// it, so a refused report undoes only its own writes.
     fn begin(&mut self) -> Result<(), DbError>;
-    /// Commits it.
+    /// Commits it (releases the savepoint).
     fn commit(&mut self) -> Result<(), DbError>;
-    /// Abandons it.
+    /// Abandons it (back to the savepoint).
     fn rollback(&mut self) -> Result<(), DbError>;
 }
 
@@ -167,6 +169,33 @@ pub fn transaction<T, E: From<DbError>>(
             let _ = db.rollback();
             Err(error)
         }
+    }
+}
+
+/// The statement that starts a transaction at `depth` (0: the outer one, `outer`).
+pub(crate) fn begin_sql(depth: usize, outer: &str) -> String {
+    if depth == 0 {
+        outer.to_string()
+    } else {
+        format!("SAVEPOINT nested_{depth}")
+    }
+}
+
+/// The statement that commits the transaction at `depth` (counted after it ends).
+pub(crate) fn commit_sql(depth: usize) -> String {
+    if depth == 0 {
+        "COMMIT".to_string()
+    } else {
+        format!("RELEASE SAVEPOINT nested_{depth}")
+    }
+}
+
+/// The statement that abandons the transaction at `depth` (counted after it ends).
+pub(crate) fn rollback_sql(depth: usize) -> String {
+    if depth == 0 {
+        "ROLLBACK".to_string()
+    } else {
+        format!("ROLLBACK TO SAVEPOINT nested_{depth}; RELEASE SAVEPOINT nested_{depth}")
     }
 }
 

@@ -48,6 +48,8 @@ pub struct IngestStats {
     pub last_rejections: VecDeque<String>,
     /// Database errors retried.
     pub db_retries: u64,
+    /// Transactions committed (a batch of reports each).
+    pub commits: u64,
 }
 
 /// What a report came to.
@@ -85,8 +87,19 @@ fn from_store(e: StoreError) -> Refused {
     }
 }
 
-/// Stores one report (see the module docs for the checks).
-pub fn handle(store: &mut FleetStore, topic: &str, payload: &[u8]) -> Result<Handled, Refused> {
+/// A report read and checked, not yet stored.
+#[derive(Debug)]
+pub enum Parsed {
+    /// An inventory.
+    Inventory(InventoryReport),
+    /// A trip (its figures checked).
+    Trip(TripReport),
+    /// A report on a campaign.
+    Campaign(crate::campaign::CampaignReport),
+}
+
+/// Reads and checks one report without writing anything (see the module docs).
+pub fn parse(topic: &str, payload: &[u8]) -> Result<Parsed, Refused> {
     let (vin, kind) = topics::parse_report(topic).map_err(Refused::Invalid)?;
     if payload.len() > MAX_REPORT_BYTES {
         return Err(Refused::Invalid(format!(
@@ -116,29 +129,48 @@ pub fn handle(store: &mut FleetStore, topic: &str, payload: &[u8]) -> Result<Han
         ReportKind::Inventory => {
             let report: InventoryReport = serde_json::from_slice(payload).map_err(parse_error)?;
             same_vin(&report.vin)?;
-            store
-                .record_inventory(&report)
-                .map(Handled::Inventory)
-                .map_err(from_store)
+            Ok(Parsed::Inventory(report))
         }
         ReportKind::Trip => {
             let report: TripReport = serde_json::from_slice(payload).map_err(parse_error)?;
             same_vin(&report.vin)?;
-            store
-                .record_trip(&report)
-                .map(Handled::Trip)
-                .map_err(from_store)
+            report
+                .check()
+                .map_err(|e| from_store(StoreError::from(e)))?;
+            Ok(Parsed::Trip(report))
         }
         ReportKind::Campaign => {
             let report: crate::campaign::CampaignReport =
                 serde_json::from_slice(payload).map_err(parse_error)?;
             same_vin(&report.vin)?;
-            store
-                .record_campaign_report(&report)
-                .map(|()| Handled::Campaign)
-                .map_err(from_store)
+            Ok(Parsed::Campaign(report))
         }
     }
+}
+
+/// Stores one report read by [`parse`], in a transaction of its own (a savepoint inside a
+/// batch's).
+pub fn store(store: &mut FleetStore, parsed: &Parsed) -> Result<Handled, Refused> {
+    match parsed {
+        Parsed::Inventory(report) => store
+            .record_inventory(report)
+            .map(Handled::Inventory)
+            .map_err(from_store),
+        Parsed::Trip(report) => store
+            .record_trip(report)
+            .map(Handled::Trip)
+            .map_err(from_store),
+        Parsed::Campaign(report) => store
+            .record_campaign_report(report)
+            .map(|()| Handled::Campaign)
+            .map_err(from_store),
+    }
+}
+
+/// Stores one report (see the module docs for the checks).
+pub fn handle(store: &mut FleetStore, topic: &str, payload: &[u8]) -> Result<Handled, Refused> {
+    let parsed = parse(topic, payload)?;
+    self::store(store, &parsed)
 }
 
 /// The intake: reports from `link` (subscribed to [`topics::REPORTS_SHARED`] with manual
@@ -160,6 +192,11 @@ pub struct Ingest {
     /// Receipts the connection did not take (the vehicle sends the report again).
     pub receipts_not_sent: u64,
 }
+
+/// Most reports stored in one transaction. Mosquitto sends a client at most its
+/// `max_inflight_messages` unacknowledged (the shipped configuration: 200), which bounds a
+/// batch from that side.
+pub const MAX_BATCH: usize = 200;
 
 /// Notices kept until taken (older ones are dropped: the last say most).
 const MAX_NOTICES: usize = 64;
@@ -250,42 +287,13 @@ impl Ingest {
         loop {
             match handle(&mut self.store, &message.topic, &message.payload) {
                 Ok(handled) => {
-                    if self.db_failures > 0 {
-                        let tries = std::mem::take(&mut self.db_failures);
-                        self.notice(format!(
-                            "the database answers again, after {tries} failed tries: storing"
-                        ));
-                    }
-                    match &handled {
-                        Handled::Inventory(_) => self.stats.inventories += 1,
-                        Handled::Trip(Stored::New) => self.stats.trips += 1,
-                        Handled::Trip(Stored::Duplicate) => self.stats.duplicates += 1,
-                        Handled::Campaign => self.stats.campaign_reports += 1,
-                    }
-                    self.receipt(message, None);
-                    let _ = self.link.ack(message);
-                    return Some(handled);
+                    self.db_answers();
+                    self.stats.commits += 1;
+                    return self.settle(message, Ok(handled));
                 }
-                Err(Refused::Invalid(reason)) => {
-                    self.stats.rejected += 1;
-                    if self.stats.last_rejections.len() >= KEPT_REJECTIONS {
-                        self.stats.last_rejections.pop_front();
-                    }
-                    self.stats.last_rejections.push_back(reason.clone());
-                    self.refusal_notice(&message.topic, &reason);
-                    self.receipt(message, Some(reason));
-                    let _ = self.link.ack(message);
-                    return None;
-                }
+                Err(Refused::Invalid(reason)) => return self.settle(message, Err(reason)),
                 Err(Refused::Db(error)) => {
-                    if self.db_failures == 0 {
-                        self.notice(format!(
-                            "the database failed ({error}): reports stay unacknowledged and are tried again, at most every {} s",
-                            MAX_DB_BACKOFF.as_secs()
-                        ));
-                    }
-                    self.db_failures += 1;
-                    self.stats.db_retries += 1;
+                    self.db_failed(&error);
                     if stop.load(Ordering::Relaxed) {
                         return None;
                     }
@@ -296,11 +304,177 @@ impl Ingest {
         }
     }
 
+    /// The reports waiting now, at most [`MAX_BATCH`], waiting at most `wait` for the
+    /// first: under load a batch fills from what the broker already sent, and a lone
+    /// report is never held back for company.
+    pub fn recv_batch(&mut self, wait: Duration) -> Vec<Message> {
+        let Some(first) = self.link.recv_timeout(wait) else {
+            return Vec::new();
+        };
+        let mut batch = vec![first];
+        while batch.len() < MAX_BATCH {
+            match self.link.try_recv() {
+                Some(message) => batch.push(message),
+                None => break,
+            }
+        }
+        batch
+    }
+
+    /// Handles a batch of messages in one transaction, each report in a savepoint of its
+    /// own (a refused one undoes only its own writes); once it commits, each gets its
+    /// receipt and is acknowledged, in the order received (MQTT's order for
+    /// acknowledgements). A database error rolls the whole batch back and tries it again
+    /// (with a backoff) until it stores or `stop` is set; it then stays unacknowledged for
+    /// the broker to deliver again. Reports are written in their vehicles' order, so two
+    /// services' batches take the vehicles' rows in one order and never wait on each
+    /// other in a circle.
+    pub fn take_batch(&mut self, messages: &[Message], stop: &AtomicBool) -> Vec<Option<Handled>> {
+        if messages.len() == 1 {
+            return vec![self.take(&messages[0], stop)];
+        }
+        let mut order: Vec<usize> = (0..messages.len()).collect();
+        order.sort_by(|&a, &b| messages[a].topic.cmp(&messages[b].topic));
+        let mut backoff = Duration::from_millis(50);
+        let outcomes = loop {
+            match self.store_batch(messages, &order) {
+                Ok(outcomes) => break outcomes,
+                Err(error) => {
+                    self.db_failed(&error);
+                    if stop.load(Ordering::Relaxed) {
+                        return vec![None; messages.len()];
+                    }
+                    std::thread::sleep(backoff);
+                    backoff = (backoff * 2).min(MAX_DB_BACKOFF);
+                }
+            }
+        };
+        self.db_answers();
+        messages
+            .iter()
+            .zip(outcomes)
+            .map(|(message, outcome)| self.settle(message, outcome))
+            .collect()
+    }
+
+    /// Writes `messages` (in `order`) in one transaction: each one's outcome, or the
+    /// database's error (the transaction then rolled back).
+    fn store_batch(
+        &mut self,
+        messages: &[Message],
+        order: &[usize],
+    ) -> Result<Vec<Result<Handled, String>>, String> {
+        let db_error = |e: crate::db::DbError| e.to_string();
+        let parsed: Vec<Result<Parsed, Refused>> = messages
+            .iter()
+            .map(|m| parse(&m.topic, &m.payload))
+            .collect();
+        let mut outcomes: Vec<Result<Handled, String>> = parsed
+            .iter()
+            .map(|p| match p {
+                Err(refused) => Err(refused.to_string()),
+                Ok(_) => Ok(Handled::Campaign),
+            })
+            .collect();
+        self.store.db().begin().map_err(db_error)?;
+        // The trips together (most of what arrives), in (VIN, trip) order.
+        let mut trips: Vec<(usize, &TripReport)> = parsed
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| match p {
+                Ok(Parsed::Trip(t)) => Some((i, t)),
+                _ => None,
+            })
+            .collect();
+        trips.sort_by(|a, b| (a.1.vin.as_str(), a.1.trip).cmp(&(b.1.vin.as_str(), b.1.trip)));
+        let reports: Vec<&TripReport> = trips.iter().map(|(_, t)| *t).collect();
+        match self.store.record_trips_in_batch(&reports) {
+            Ok(stored) => {
+                for ((i, _), stored) in trips.iter().zip(stored) {
+                    outcomes[*i] = Ok(Handled::Trip(stored));
+                }
+            }
+            Err(e) => {
+                let _ = self.store.db().rollback();
+                return Err(from_store(e).to_string());
+            }
+        }
+        // The rest one by one, each in a savepoint, in their vehicles' order.
+        for &i in order {
+            let Ok(report) = &parsed[i] else { continue };
+            if matches!(report, Parsed::Trip(_)) {
+                continue;
+            }
+            match store(&mut self.store, report) {
+                Ok(handled) => outcomes[i] = Ok(handled),
+                Err(Refused::Invalid(reason)) => outcomes[i] = Err(reason),
+                Err(Refused::Db(error)) => {
+                    let _ = self.store.db().rollback();
+                    return Err(error);
+                }
+            }
+        }
+        self.store.db().commit().map_err(db_error)?;
+        self.stats.commits += 1;
+        Ok(outcomes)
+    }
+
+    /// A database error: said once until it answers again, counted each time.
+    fn db_failed(&mut self, error: &str) {
+        if self.db_failures == 0 {
+            self.notice(format!(
+                "the database failed ({error}): reports stay unacknowledged and are tried again, at most every {} s",
+                MAX_DB_BACKOFF.as_secs()
+            ));
+        }
+        self.db_failures += 1;
+        self.stats.db_retries += 1;
+    }
+
+    /// The database stored again after failing.
+    fn db_answers(&mut self) {
+        if self.db_failures > 0 {
+            let tries = std::mem::take(&mut self.db_failures);
+            self.notice(format!(
+                "the database answers again, after {tries} failed tries: storing"
+            ));
+        }
+    }
+
+    /// A stored or refused report counted, its receipt sent and the message acknowledged.
+    fn settle(&mut self, message: &Message, outcome: Result<Handled, String>) -> Option<Handled> {
+        match outcome {
+            Ok(handled) => {
+                match &handled {
+                    Handled::Inventory(_) => self.stats.inventories += 1,
+                    Handled::Trip(Stored::New) => self.stats.trips += 1,
+                    Handled::Trip(Stored::Duplicate) => self.stats.duplicates += 1,
+                    Handled::Campaign => self.stats.campaign_reports += 1,
+                }
+                self.receipt(message, None);
+                let _ = self.link.ack(message);
+                Some(handled)
+            }
+            Err(reason) => {
+                self.stats.rejected += 1;
+                if self.stats.last_rejections.len() >= KEPT_REJECTIONS {
+                    self.stats.last_rejections.pop_front();
+                }
+                self.stats.last_rejections.push_back(reason.clone());
+                self.refusal_notice(&message.topic, &reason);
+                self.receipt(message, Some(reason));
+                let _ = self.link.ack(message);
+                None
+            }
+        }
+    }
+
     /// Takes reports until `stop` is set; `wait` is the longest wait for one.
     pub fn run(&mut self, stop: &AtomicBool, wait: Duration, mut each: impl FnMut(&Self)) {
         while !stop.load(Ordering::Relaxed) {
-            if let Some(message) = self.link.recv_timeout(wait) {
-                self.take(&message, stop);
+            let batch = self.recv_batch(wait);
+            if !batch.is_empty() {
+                self.take_batch(&batch, stop);
             }
             each(self);
         }

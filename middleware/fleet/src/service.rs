@@ -44,11 +44,12 @@ impl FleetService {
         self.key.is_some()
     }
 
-    /// One turn: a report taken (waiting at most `wait` for one), the campaigns moved on if
+    /// One turn: the reports waiting taken in one batch (waiting at most `wait` for one), the campaigns moved on if
     /// their tick is due.
     pub fn step(&mut self, stop: &AtomicBool, wait: Duration) {
-        if let Some(message) = self.ingest.link.recv_timeout(wait) {
-            self.ingest.take(&message, stop);
+        let batch = self.ingest.recv_batch(wait);
+        if !batch.is_empty() {
+            self.ingest.take_batch(&batch, stop);
         }
         let Some(key) = &self.key else {
             return;

@@ -466,6 +466,148 @@ impl FleetStore {
         })
     }
 
+    /// Stores trips (each already [`TripReport::check`]ed) in the transaction open, a
+    /// batch's: the vehicles touched in one statement, the trips in one (each once: those
+    /// there already, or twice in the batch, are [`Stored::Duplicate`]), the new trips'
+    /// verdicts and trouble codes in one each. A report's own statements (a dozen for a
+    /// trip with nine verdicts) would cost a round trip to the server each, which is what
+    /// bounds a service's intake, not the database's work.
+    pub fn record_trips_in_batch(
+        &mut self,
+        reports: &[&TripReport],
+    ) -> Result<Vec<Stored>, StoreError> {
+        if reports.is_empty() {
+            return Ok(Vec::new());
+        }
+        let received = now_ms();
+        let db = self.db.as_mut();
+        // The vehicles first, in VIN order (see `Ingest::take_batch`).
+        let vins: std::collections::BTreeSet<&str> =
+            reports.iter().map(|r| r.vin.as_str()).collect();
+        let rows: Vec<Vec<Value>> = vins.iter().map(|v| vec![Value::from(*v)]).collect();
+        insert_rows(
+            db,
+            "INSERT INTO vehicles (vin, first_seen_ms, last_seen_ms) VALUES ",
+            "($P, $0, $0)",
+            " ON CONFLICT (vin) DO UPDATE SET last_seen_ms =
+                 CASE WHEN excluded.last_seen_ms > vehicles.last_seen_ms
+                      THEN excluded.last_seen_ms ELSE vehicles.last_seen_ms END",
+            &[Value::Int(received)],
+            &rows,
+            false,
+        )?;
+        // Each trip once: a second copy in the batch is a duplicate without asking.
+        let mut first_of: BTreeMap<(&str, i64), usize> = BTreeMap::new();
+        let mut rows = Vec::new();
+        for (i, r) in reports.iter().enumerate() {
+            if first_of.contains_key(&(r.vin.as_str(), r.trip)) {
+                continue;
+            }
+            first_of.insert((r.vin.as_str(), r.trip), i);
+            let s = &r.stats;
+            let stats = serde_json::to_string(s)
+                .map_err(|e| StoreError::Invalid(format!("trip statistics: {e}")))?;
+            rows.push(vec![
+                Value::from(r.vin.as_str()),
+                Value::Int(r.trip),
+                Value::Int(r.started_at_ms),
+                Value::Int(r.ended_at_ms),
+                Value::from(r.end.name()),
+                Value::Float(s.distance_m),
+                Value::Float(s.duration_s),
+                Value::Float(s.fuel_used_l),
+                Value::Float(s.max_speed_kmh),
+                Value::Int(s.abs_interventions.into()),
+                Value::Int(s.shifts.into()),
+                Value::Float(s.cruise_time_s),
+                Value::Text(stats),
+            ]);
+        }
+        let inserted = insert_rows(
+            db,
+            "INSERT INTO trips (vin, trip, started_at_ms, ended_at_ms, end_reason,
+                 distance_m, duration_s, fuel_used_l, max_speed_kmh, abs_interventions,
+                 shifts, cruise_time_s, stats, received_at_ms) VALUES ",
+            "($P, $0)",
+            " ON CONFLICT (vin, trip) DO NOTHING RETURNING vin, trip",
+            &[Value::Int(received)],
+            &rows,
+            true,
+        )?;
+        let mut outcome = vec![Stored::Duplicate; reports.len()];
+        for row in inserted {
+            let key = (
+                text(&row, 0).unwrap_or_default(),
+                row.get(1).and_then(Value::int),
+            );
+            if let (vin, Some(trip)) = key {
+                if let Some(&i) = first_of.get(&(vin.as_str(), trip)) {
+                    outcome[i] = Stored::New;
+                }
+            }
+        }
+        let new = || {
+            reports
+                .iter()
+                .zip(&outcome)
+                .filter(|(_, o)| **o == Stored::New)
+                .map(|(r, _)| *r)
+        };
+        let verdicts: Vec<Vec<Value>> = new()
+            .flat_map(|r| {
+                r.verdicts.iter().map(move |v| {
+                    vec![
+                        Value::from(r.vin.as_str()),
+                        Value::Int(r.trip),
+                        Value::from(v.ecu.as_str()),
+                        Value::from(v.routine.as_str()),
+                        Value::from(v.verdict.as_str()),
+                        Value::from(v.number.filter(|n| n.is_finite())),
+                        Value::from(v.unit.as_str()),
+                        Value::from(v.evidence.as_str()),
+                        Value::Int(r.ended_at_ms),
+                    ]
+                })
+            })
+            .collect();
+        insert_rows(
+            db,
+            "INSERT INTO verdicts (vin, trip, ecu, routine, verdict, number, unit,
+                 evidence, judged_at_ms) VALUES ",
+            "($P)",
+            " ON CONFLICT (vin, trip, ecu, routine) DO NOTHING",
+            &[],
+            &verdicts,
+            false,
+        )?;
+        let dtcs: Vec<Vec<Value>> = new()
+            .flat_map(|r| {
+                r.dtcs.iter().map(move |d| {
+                    vec![
+                        Value::from(r.vin.as_str()),
+                        Value::Int(r.trip),
+                        Value::from(d.ecu.as_str()),
+                        Value::from(d.code.as_str()),
+                        Value::Int(d.status.into()),
+                        Value::from(d.description.as_str()),
+                        Value::Int(r.ended_at_ms),
+                    ]
+                })
+            })
+            .collect();
+        insert_rows(
+            db,
+            "INSERT INTO dtcs (vin, trip, ecu, code, status, description, reported_at_ms)
+             VALUES ",
+            "($P)",
+            " ON CONFLICT (vin, trip, ecu, code) DO NOTHING",
+            &[],
+            &dtcs,
+            false,
+        )?;
+        Ok(outcome)
+    }
+
     /// The SQL and parameters of an inventory recall (the benchmark shows its plan).
     pub fn inventory_sql(query: &InventoryQuery) -> (String, Vec<Value>) {
         let mut sql = Sql::new(
@@ -667,4 +809,59 @@ impl FleetStore {
             faulty_verdicts: count(db, "SELECT count(*) FROM verdicts WHERE verdict = 'faulty'")?,
         })
     }
+}
+
+/// Rows inserted by one statement per chunk: `head`, then each row as `row` with `$P`
+/// standing for the row's own parameters and `$0` for the first of `shared` (bound once
+/// per statement; at most ten), then `tail`. Chunks are powers of two up to [`MAX_ROWS_PER_STATEMENT`],
+/// so a batch of any size uses one of a few statement shapes, each prepared once per
+/// connection. Returns the rows the statements return when `returning`.
+fn insert_rows(
+    db: &mut dyn Db,
+    head: &str,
+    row: &str,
+    tail: &str,
+    shared: &[Value],
+    rows: &[Vec<Value>],
+    returning: bool,
+) -> Result<Vec<Row>, DbError> {
+    let mut template = row.to_string();
+    for k in 0..shared.len() {
+        template = template.replace(&format!("${k}"), &format!("${}", k + 1));
+    }
+    let mut returned = Vec::new();
+    let mut rest = rows;
+    while !rest.is_empty() {
+        let take = chunk_len(rest.len());
+        let (chunk, tail_rows) = rest.split_at(take);
+        rest = tail_rows;
+        let width = chunk[0].len();
+        let mut sql = String::from(head);
+        let mut params: Vec<Value> = shared.to_vec();
+        for (i, values) in chunk.iter().enumerate() {
+            if i > 0 {
+                sql.push_str(", ");
+            }
+            let first = shared.len() + i * width + 1;
+            let own: Vec<String> = (first..first + width).map(|n| format!("${n}")).collect();
+            sql.push_str(&template.replace("$P", &own.join(", ")));
+            params.extend(values.iter().cloned());
+        }
+        sql.push_str(tail);
+        if returning {
+            returned.extend(db.query(&sql, &params)?);
+        } else {
+            db.execute(&sql, &params)?;
+        }
+    }
+    Ok(returned)
+}
+
+/// Most rows one insert statement carries (64 verdicts of 9 values: 576 parameters).
+const MAX_ROWS_PER_STATEMENT: usize = 64;
+
+/// The rows the next statement takes of `left`: the largest power of two up to both.
+fn chunk_len(left: usize) -> usize {
+    let cap = left.min(MAX_ROWS_PER_STATEMENT);
+    1 << (usize::BITS - 1 - cap.leading_zeros())
 }

@@ -150,6 +150,152 @@ fn reports_through_the_broker_are_stored_once_and_bad_ones_refused() {
     }
 }
 
+/// A batch of reports in one transaction, on both engines: each comes to what it would
+/// alone (a new trip, the same trip twice in the batch, a trip stored before, an inventory,
+/// reports refused before and inside the transaction), and a report refused inside the
+/// transaction undoes only its own writes.
+#[test]
+fn a_batch_in_one_transaction_settles_each_report_as_alone() {
+    use autoplug_fleet::campaign::{CampaignReport, VehicleState};
+    use autoplug_store::{DtcRecord, VerdictRecord};
+    let rt = runtime();
+    let broker: Broker = broker_url().parse().unwrap();
+    for (k, engine) in engines().into_iter().enumerate() {
+        let serial = std::process::id() % 100_000 * 10 + 3 + k as u32;
+        let vin = Vin::with_check_digit(&format!("JA3AP47H0YK{serial:06}")).unwrap();
+        let second = Vin::with_check_digit(&format!("JA3AP47H0YL{serial:06}")).unwrap();
+        let mut options = LinkOptions::new(format!("batch-test-{serial}"));
+        options.manual_acks = true;
+        options.subscriptions = vec![
+            format!("autoplug/v1/vehicles/{vin}/report/#"),
+            format!("autoplug/v1/vehicles/{second}/report/#"),
+        ];
+        let link = MqttLink::connect(rt.handle(), &broker, options);
+        link.wait_connected(Duration::from_secs(5))
+            .unwrap_or_else(|e| panic!("{e} (scripts/setup-tests installs and starts Mosquitto)"));
+        while link.status().granted.len() < 2 {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let car = MqttLink::connect(
+            rt.handle(),
+            &broker,
+            LinkOptions::new(format!("batch-car-{serial}")),
+        );
+        car.wait_connected(Duration::from_secs(5)).unwrap();
+        let mut ingest = Ingest::new(engine.open(), link);
+        // Trip 1 of `vin` stored before the batch.
+        ingest.store.record_trip(&trip(&vin)).unwrap();
+        let evidence = |v: &Vin, n: i64| TripReport {
+            trip: n,
+            verdicts: vec![VerdictRecord {
+                ecu: "cruise".into(),
+                routine: "presence".into(),
+                verdict: "faulty".into(),
+                number: Some(30.0),
+                unit: "%".into(),
+                suspect_above: 5.0,
+                faulty_above: 20.0,
+                window_s: None,
+                evidence: "frames missing".into(),
+            }],
+            dtcs: vec![DtcRecord {
+                ecu: "cruise".into(),
+                code: "U0140-87".into(),
+                status: 9,
+                description: "lost communication".into(),
+            }],
+            ..trip(v)
+        };
+        let stray = CampaignReport {
+            vin: second.to_string(),
+            campaign: 999_999,
+            attempt: 1,
+            state: VehicleState::Installed,
+            reason: None,
+            ecu: "cruise".into(),
+            version_running: Some("1.2.0".into()),
+            at_ms: 30,
+        };
+        let json = |v: &dyn erased::Json| v.json();
+        let sends: Vec<(String, Vec<u8>)> = vec![
+            (topics::report(&vin, ReportKind::Trip), json(&trip(&vin))),
+            (
+                topics::report(&second, ReportKind::Trip),
+                json(&evidence(&second, 7)),
+            ),
+            (
+                topics::report(&vin, ReportKind::Trip),
+                json(&evidence(&vin, 2)),
+            ),
+            (topics::report(&second, ReportKind::Campaign), json(&stray)),
+            (
+                topics::report(&second, ReportKind::Trip),
+                json(&evidence(&second, 7)),
+            ),
+            (
+                topics::report(&second, ReportKind::Inventory),
+                json(&inventory(&second)),
+            ),
+            (topics::report(&vin, ReportKind::Trip), b"{oops".to_vec()),
+        ];
+        for (topic, payload) in &sends {
+            car.publish(topic, payload.clone(), false).unwrap();
+        }
+        let mut batch = Vec::new();
+        while batch.len() < sends.len() {
+            let message = ingest
+                .link
+                .recv_timeout(Duration::from_secs(5))
+                .expect("every report arrives");
+            batch.push(message);
+        }
+        let commits = ingest.stats.commits;
+        let handled = ingest.take_batch(&batch, &AtomicBool::new(false));
+        assert_eq!(
+            handled,
+            vec![
+                Some(Handled::Trip(Stored::Duplicate)),
+                Some(Handled::Trip(Stored::New)),
+                Some(Handled::Trip(Stored::New)),
+                None,
+                Some(Handled::Trip(Stored::Duplicate)),
+                Some(Handled::Inventory(vec!["cruise".into()])),
+                None,
+            ],
+            "{}",
+            engine.label()
+        );
+        assert_eq!(ingest.stats.commits, commits + 1, "one transaction");
+        let reasons: Vec<&String> = ingest.stats.last_rejections.iter().collect();
+        assert!(
+            reasons[0].contains("is not a vehicle of campaign 999999"),
+            "{reasons:?}"
+        );
+        assert!(reasons[1].contains("not valid"), "{reasons:?}");
+        let count = |store: &mut FleetStore, table: &str| {
+            store
+                .db()
+                .query(&format!("SELECT count(*) FROM {table}"), &[])
+                .unwrap()[0][0]
+                .int()
+                .unwrap()
+        };
+        let store = &mut ingest.store;
+        assert_eq!(
+            [
+                count(store, "vehicles"),
+                count(store, "trips"),
+                count(store, "verdicts"),
+                count(store, "dtcs"),
+                count(store, "ecus"),
+            ],
+            [2, 3, 2, 2, 1],
+            "{}",
+            engine.label()
+        );
+    }
+}
+
 /// The service's database connection ended by the server (a restart, a failover, an
 /// administrator) in the middle of an intake: the next try makes it again, says so, and
 /// every report is stored; none is acknowledged before it is.
@@ -215,8 +361,9 @@ fn a_database_connection_ended_mid_intake_is_made_again_and_nothing_is_lost() {
                 ingest.stats.trips,
                 ingest.stats
             );
-            if let Some(message) = ingest.link.recv_timeout(Duration::from_millis(200)) {
-                ingest.take(&message, &stop);
+            let batch = ingest.recv_batch(Duration::from_millis(200));
+            if !batch.is_empty() {
+                ingest.take_batch(&batch, &stop);
             }
         }
     };

@@ -29,9 +29,10 @@ pub struct PostgresDb {
     config: Config,
     name: String,
     statements: HashMap<String, Statement>,
-    /// A transaction is open on this connection (no reconnecting under it: its work would
-    /// be lost, and a COMMIT on a new connection succeeds with nothing to commit).
-    in_transaction: bool,
+    /// Transactions open on this connection, the outer one and the savepoints inside it
+    /// (no reconnecting under one: its work would be lost, and a COMMIT on a new
+    /// connection succeeds with nothing to commit).
+    depth: usize,
 }
 
 impl PostgresDb {
@@ -60,13 +61,13 @@ impl PostgresDb {
             config,
             name,
             statements: HashMap::new(),
-            in_transaction: false,
+            depth: 0,
         })
     }
 
     /// Makes the connection again if it was lost and no transaction is open on it.
     fn live(&mut self) -> Result<(), DbError> {
-        if !self.client.is_closed() || self.in_transaction {
+        if !self.client.is_closed() || self.depth > 0 {
             return Ok(());
         }
         self.client = self.config.connect(NoTls).map_err(|e| DbError {
@@ -249,22 +250,21 @@ impl Db for PostgresDb {
     }
 
     fn begin(&mut self) -> Result<(), DbError> {
-        self.batch("BEGIN")?;
-        self.in_transaction = true;
+        let sql = super::begin_sql(self.depth, "BEGIN");
+        self.batch(&sql)?;
+        self.depth += 1;
         Ok(())
     }
 
     fn commit(&mut self) -> Result<(), DbError> {
         // Over whatever the outcome: a failed COMMIT ends the transaction too.
-        let result = self.batch("COMMIT");
-        self.in_transaction = false;
-        result
+        self.depth = self.depth.saturating_sub(1);
+        self.batch(&super::commit_sql(self.depth))
     }
 
     fn rollback(&mut self) -> Result<(), DbError> {
-        let result = self.batch("ROLLBACK");
-        self.in_transaction = false;
-        result
+        self.depth = self.depth.saturating_sub(1);
+        self.batch(&super::rollback_sql(self.depth))
     }
 }
 

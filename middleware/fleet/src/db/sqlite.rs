@@ -18,6 +18,8 @@ const STATEMENT_CACHE: usize = 64;
 pub struct SqliteDb {
     conn: Connection,
     name: String,
+    /// Transactions open: the outer one and the savepoints inside it.
+    depth: usize,
 }
 
 impl SqliteDb {
@@ -59,7 +61,11 @@ impl SqliteDb {
                 message: format!("not a usable SQLite database: {e}"),
             })?;
         conn.set_prepared_statement_cache_capacity(STATEMENT_CACHE);
-        Ok(Self { conn, name })
+        Ok(Self {
+            conn,
+            name,
+            depth: 0,
+        })
     }
 
     fn fail(&self, sql: &str, e: rusqlite::Error) -> DbError {
@@ -144,14 +150,19 @@ impl Db for SqliteDb {
     fn begin(&mut self) -> Result<(), DbError> {
         // IMMEDIATE: take the write lock now, so two writers never both read then both
         // try to write (which SQLite can only resolve by failing one).
-        self.batch("BEGIN IMMEDIATE")
+        let sql = super::begin_sql(self.depth, "BEGIN IMMEDIATE");
+        self.batch(&sql)?;
+        self.depth += 1;
+        Ok(())
     }
 
     fn commit(&mut self) -> Result<(), DbError> {
-        self.batch("COMMIT")
+        self.depth = self.depth.saturating_sub(1);
+        self.batch(&super::commit_sql(self.depth))
     }
 
     fn rollback(&mut self) -> Result<(), DbError> {
-        self.batch("ROLLBACK")
+        self.depth = self.depth.saturating_sub(1);
+        self.batch(&super::rollback_sql(self.depth))
     }
 }
