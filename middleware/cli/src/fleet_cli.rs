@@ -274,9 +274,16 @@ pub struct ServeArgs {
     /// The services that split the reports between them (a shared subscription).
     #[arg(long, value_name = "NAME", default_value = "autoplug-fleet")]
     pub group: String,
-    /// Keep no session at the broker (a one-off run or a test): reports published
-    /// while the service is down are then not kept for it.
+    /// Keep the service's session at the broker while it is down (its subscription and
+    /// the reports for it). Only for a service that runs alone: in a group, the broker
+    /// goes on handing a stopped member's session its turn of every report, stranded
+    /// there until it comes back. Without it (the default) the session ends with the
+    /// connection, and the cars publish again what a stopped service held.
     #[arg(long)]
+    pub persistent_session: bool,
+    /// The default now (the session ends with the connection); kept so that scripts
+    /// written for earlier versions still run.
+    #[arg(long, hide = true, conflicts_with = "persistent_session")]
     pub clean_session: bool,
     /// Serve the fleet page (the dashboard's Fleet view: campaigns in total and per
     /// vehicle, read only) on this address, e.g. 127.0.0.1:8090.

@@ -165,7 +165,6 @@ fn a_campaign_from_the_command_line_reaches_its_vehicle_and_the_report_comes_bac
         &group,
         "--group",
         &group,
-        "--clean-session",
     ]);
     let service = std::thread::spawn(move || run_args(&serve_args));
 
@@ -481,7 +480,6 @@ fn fleet_serve_with_its_page_answers_only_its_own_names_and_ends_cleanly_on_post
             &broker_url(),
             "--client-id",
             &client_id,
-            "--clean-session",
             "--web",
             &addr,
             "--allowed-host",

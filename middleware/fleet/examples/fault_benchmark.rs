@@ -152,10 +152,10 @@ fn main() {
     stop.store(true, Ordering::Relaxed);
     let (a, link_a) = service_a.join().expect("service a");
     let (b, link_b) = service_b.join().expect("service b");
-    let acknowledged: u64 = outcomes.iter().map(|(_, s)| s.acknowledged).sum();
-    let resent: u64 = outcomes.iter().map(|(o, _)| o.resent).sum();
-    let confirmed: u64 = outcomes.iter().map(|(o, _)| o.stored).sum();
-    let unconfirmed: usize = outcomes.iter().map(|(o, _)| o.len()).sum();
+    let acknowledged: u64 = outcomes.iter().map(|(_, s, _)| s.acknowledged).sum();
+    let resent: u64 = outcomes.iter().map(|(o, _, _)| o.resent).sum();
+    let confirmed: u64 = outcomes.iter().map(|(o, _, _)| o.stored).sum();
+    let unconfirmed: usize = outcomes.iter().map(|(o, _, _)| o.len()).sum();
     let stored = stored();
     let twice = count(
         &schema,

@@ -198,6 +198,13 @@ pub struct Ingest {
 /// batch from that side.
 pub const MAX_BATCH: usize = 200;
 
+/// How long a service leaving its group waits for reports the broker sent before the
+/// UNSUBSCRIBE (in order on one connection: a pause this long means none are left).
+pub const DRAIN_QUIET: Duration = Duration::from_millis(500);
+
+/// The longest a service leaving its group takes for those.
+pub const DRAIN_LIMIT: Duration = Duration::from_secs(10);
+
 /// Notices kept until taken (older ones are dropped: the last say most).
 const MAX_NOTICES: usize = 64;
 
@@ -467,6 +474,30 @@ impl Ingest {
                 None
             }
         }
+    }
+
+    /// Leaves the shared group `subscription` and stores what the broker had sent before
+    /// it took the UNSUBSCRIBE, until none has come for `quiet` (at most
+    /// [`DRAIN_LIMIT`]): a service stopped cleanly leaves nothing for the cars to send
+    /// again. Returns how many it stored or refused.
+    pub fn leave(&mut self, subscription: &str, quiet: Duration) -> usize {
+        if subscription.is_empty() || self.link.unsubscribe(subscription).is_err() {
+            return 0;
+        }
+        let started = Instant::now();
+        // Stopping: a database that fails now is not waited for (those reports come
+        // again from the cars).
+        let stopping = AtomicBool::new(true);
+        let mut taken = 0;
+        while started.elapsed() < DRAIN_LIMIT {
+            let batch = self.recv_batch(quiet);
+            if batch.is_empty() {
+                break;
+            }
+            taken += batch.len();
+            self.take_batch(&batch, &stopping);
+        }
+        taken
     }
 
     /// Takes reports until `stop` is set; `wait` is the longest wait for one.

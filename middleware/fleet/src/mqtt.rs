@@ -183,6 +183,26 @@ impl LinkOptions {
     }
 }
 
+/// The keep-alive of a fleet service's connection: a service whose machine stops
+/// answering is out of the shared group 1.5 times this after its last packet (the broker's
+/// rule), and the reports it held go to the others with the cars' resends.
+pub const SERVICE_KEEP_ALIVE: Duration = Duration::from_secs(5);
+
+/// How a fleet service connects: a session that ends with the connection, manual
+/// acknowledgements, [`SERVICE_KEEP_ALIVE`]. A service's session must not outlive it: in a
+/// shared subscription Mosquitto hands a kept session of a stopped service its turn of
+/// every report, and those wait there until a process with its client id comes back (its
+/// issue 1747). Ended with the connection, the session takes the reports it held
+/// unacknowledged with it, and the cars publish those again (their outbox): a report is
+/// never stranded.
+pub fn service_options(client_id: impl Into<String>) -> LinkOptions {
+    let mut options = LinkOptions::new(client_id);
+    options.persistent_session = false;
+    options.manual_acks = true;
+    options.keep_alive = SERVICE_KEEP_ALIVE;
+    options
+}
+
 /// A message that arrived.
 #[derive(Clone, Debug)]
 pub struct Message {

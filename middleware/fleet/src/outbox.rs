@@ -33,6 +33,8 @@ struct Pending {
     wait_ms: i64,
     /// Times published.
     sent: u32,
+    /// When it was first published, ms.
+    first_sent_ms: Option<i64>,
 }
 
 /// What a receipt said.
@@ -112,6 +114,7 @@ impl Outbox {
             next_ms: None,
             wait_ms: self.resend_after_ms,
             sent: 0,
+            first_sent_ms: None,
         });
     }
 
@@ -129,6 +132,7 @@ impl Outbox {
             if p.sent > 0 {
                 self.resent += 1;
             }
+            p.first_sent_ms.get_or_insert(now_ms);
             p.sent += 1;
             p.next_ms = Some(now_ms.saturating_add(p.wait_ms));
             p.wait_ms = (p.wait_ms.saturating_mul(2)).min(MAX_RESEND_AFTER_MS);
@@ -138,6 +142,18 @@ impl Outbox {
     /// A receipt from the fleet: the report it names is done with. `Ok(None)` for a
     /// receipt of a report no longer here (it was sent twice, and both were confirmed).
     pub fn on_receipt(&mut self, payload: &[u8]) -> Result<Option<Confirmed>, String> {
+        Ok(self
+            .on_receipt_at(payload, 0)?
+            .map(|(confirmed, _)| confirmed))
+    }
+
+    /// [`Self::on_receipt`] at `now_ms`, with how long the report waited for its receipt
+    /// since it was first published, ms (what a fleet's latency is to its cars).
+    pub fn on_receipt_at(
+        &mut self,
+        payload: &[u8],
+        now_ms: i64,
+    ) -> Result<Option<(Confirmed, i64)>, String> {
         let receipt = Receipt::parse(payload)?;
         let Some(i) = self.pending.iter().position(|p| p.id == receipt.report) else {
             return Ok(None);
@@ -145,7 +161,8 @@ impl Outbox {
         let Some(done) = self.pending.remove(i) else {
             return Ok(None);
         };
-        Ok(Some(match receipt.refused {
+        let waited_ms = done.first_sent_ms.map_or(0, |t| now_ms.saturating_sub(t));
+        let confirmed = match receipt.refused {
             None => {
                 self.stored += 1;
                 Confirmed::Stored { topic: done.topic }
@@ -157,7 +174,8 @@ impl Outbox {
                     reason,
                 }
             }
-        }))
+        };
+        Ok(Some((confirmed, waited_ms)))
     }
 }
 
@@ -172,6 +190,20 @@ mod tests {
             true
         });
         out
+    }
+
+    #[test]
+    fn a_receipt_says_how_long_the_report_waited_since_its_first_publish() {
+        let mut outbox = Outbox::new(8, 1_000);
+        outbox.push("a".into(), b"report a".to_vec());
+        sent_at(&mut outbox, 5_000);
+        // Sent again after a second: the wait still counts from the first publish.
+        sent_at(&mut outbox, 6_000);
+        let stored = Receipt::of(b"report a", None).to_json();
+        assert_eq!(
+            outbox.on_receipt_at(&stored, 6_250),
+            Ok(Some((Confirmed::Stored { topic: "a".into() }, 1_250)))
+        );
     }
 
     #[test]

@@ -210,8 +210,8 @@ pub fn trip_report(vin: &autoplug_vin::Vin, n: i64) -> crate::TripReport {
     }
 }
 
-/// A fleet service's intake as `autoplug fleet serve` runs it (persistent session, the
-/// shared subscription, manual acks, receipts) as `client_id` on `broker`, storing into
+/// A fleet service's intake as `autoplug fleet serve` runs it (a session that ends with
+/// the connection, the shared subscription, manual acks, batches, receipts) as `client_id` on `broker`, storing into
 /// `store`, on a thread of its own until `stop`; it returns what it did and its link's
 /// state. Waits for the subscription before it returns; panics naming what failed (a
 /// test and benchmark helper).
@@ -223,9 +223,7 @@ pub fn intake_thread(
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
 ) -> std::thread::JoinHandle<(crate::ingest::IngestStats, crate::mqtt::LinkStatus)> {
     use std::time::{Duration, Instant};
-    let mut options = crate::mqtt::LinkOptions::new(client_id);
-    options.persistent_session = true;
-    options.manual_acks = true;
+    let mut options = crate::mqtt::service_options(client_id);
     options.subscriptions = vec![crate::topics::REPORTS_SHARED.to_string()];
     options.max_backoff = Duration::from_secs(1);
     let link = crate::mqtt::MqttLink::connect(runtime, broker, options);
@@ -245,7 +243,8 @@ pub fn intake_thread(
 /// A car as the gateway reports: its reports in an outbox until the fleet's receipt, sent
 /// again while none comes (after `resend_after_ms`, doubling), over a persistent session
 /// with its VIN as client id. It publishes `trips` trips one every `pace` and returns once
-/// every one is confirmed (or after `deadline`), with its outbox and its link's state.
+/// every one is confirmed (or after `deadline`), with its outbox, its link's state and
+/// how long each confirmed report waited for its receipt since its first publish, ms.
 pub fn reporting_car(
     runtime: &tokio::runtime::Handle,
     broker: &crate::mqtt::Broker,
@@ -254,7 +253,7 @@ pub fn reporting_car(
     pace: std::time::Duration,
     resend_after_ms: i64,
     deadline: std::time::Duration,
-) -> std::thread::JoinHandle<(crate::outbox::Outbox, crate::mqtt::LinkStatus)> {
+) -> std::thread::JoinHandle<(crate::outbox::Outbox, crate::mqtt::LinkStatus, Vec<i64>)> {
     use std::time::{Duration, Instant};
     let mut options = crate::mqtt::LinkOptions::new(vin.to_string());
     options.persistent_session = true;
@@ -263,6 +262,7 @@ pub fn reporting_car(
     let mut link = crate::mqtt::MqttLink::connect(runtime, broker, options);
     std::thread::spawn(move || {
         let mut outbox = crate::outbox::Outbox::new(4096, resend_after_ms);
+        let mut waits = Vec::with_capacity(trips);
         let started = Instant::now();
         let mut pushed = 0;
         let mut next = Instant::now();
@@ -281,11 +281,15 @@ pub fn reporting_car(
                 link.publish(topic, payload.to_vec(), false).is_ok()
             });
             if let Some(message) = link.recv_timeout(Duration::from_millis(5)) {
-                let _ = outbox.on_receipt(&message.payload);
+                if let Ok(Some((_, waited))) =
+                    outbox.on_receipt_at(&message.payload, crate::unix_ms())
+                {
+                    waits.push(waited);
+                }
             }
         }
         let status = link.status();
-        (outbox, status)
+        (outbox, status, waits)
     })
 }
 

@@ -384,14 +384,15 @@ fn a_broker_restarted_mid_ingest_loses_no_report() {
         },
     );
     broker.restart();
-    let outcomes: Vec<(Outbox, LinkStatus)> = cars.into_iter().map(|c| c.join().unwrap()).collect();
+    let outcomes: Vec<(Outbox, LinkStatus, Vec<i64>)> =
+        cars.into_iter().map(|c| c.join().unwrap()).collect();
     stop.store(true, Ordering::Relaxed);
     let (stats, service_link) = service.join().unwrap();
     let (per_vin, most) = stored_per_vin(&schema);
     let stored = stored_trips(&mut check);
-    let acknowledged: u64 = outcomes.iter().map(|(_, s)| s.acknowledged).sum();
-    let resent: u64 = outcomes.iter().map(|(o, _)| o.resent).sum();
-    let confirmed: u64 = outcomes.iter().map(|(o, _)| o.stored).sum();
+    let acknowledged: u64 = outcomes.iter().map(|(_, s, _)| s.acknowledged).sum();
+    let resent: u64 = outcomes.iter().map(|(o, _, _)| o.resent).sum();
+    let confirmed: u64 = outcomes.iter().map(|(o, _, _)| o.stored).sum();
     eprintln!(
         "broker restart: {} published, {acknowledged} PUBACKs (resends included), {resent} sent again for want of a receipt, {confirmed} confirmed, {stored} stored ({} redelivered); the service connected {} times",
         vins.len() * PER_CAR,
@@ -399,10 +400,10 @@ fn a_broker_restarted_mid_ingest_loses_no_report() {
         service_link.connects
     );
     assert!(
-        outcomes.iter().all(|(_, s)| s.connects >= 2) && service_link.connects >= 2,
+        outcomes.iter().all(|(_, s, _)| s.connects >= 2) && service_link.connects >= 2,
         "the broker did restart under every client"
     );
-    for (outbox, _) in &outcomes {
+    for (outbox, _, _) in &outcomes {
         assert!(
             outbox.is_empty(),
             "a car still waits for {} receipts",

@@ -8,6 +8,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use autoplug_fleet::ingest::Ingest;
+use autoplug_fleet::ingest::DRAIN_QUIET;
 use autoplug_fleet::mqtt::{LinkOptions, MqttLink};
 use autoplug_fleet::service::FleetService;
 use autoplug_fleet::topics;
@@ -26,13 +27,13 @@ pub(crate) fn run(args: ServeArgs, out: &mut dyn Write) -> Result<(), String> {
         duration,
         client_id,
         group,
-        clean_session,
+        persistent_session,
+        clean_session: _,
         web,
         allowed_hosts,
     } = args;
-    let mut options = LinkOptions::new(client_id);
-    options.persistent_session = !clean_session;
-    options.manual_acks = true;
+    let mut options = autoplug_fleet::mqtt::service_options(client_id);
+    options.persistent_session = persistent_session;
     if group.is_empty() || group.contains(['/', '+', '#']) {
         return Err(format!("'{group}' cannot name a group (no '/', '+', '#')"));
     }
@@ -101,6 +102,7 @@ fn serve(
     };
     let runtime = mqtt_runtime()?;
     let broker = broker.broker()?;
+    let subscription = options.subscriptions.first().cloned().unwrap_or_default();
     let link = MqttLink::connect(runtime.handle(), &broker, options);
     link.wait_connected(Duration::from_secs(10))
         .map_err(|e| e.to_string())?;
@@ -118,7 +120,8 @@ fn serve(
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
-        // A second service or a test may have set a handler: then Ctrl-C just ends.
+        // Ctrl-C and SIGTERM (a service manager's stop). A second service or a test may
+        // have set a handler: then they just end the process.
         let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
     let started = Instant::now();
@@ -132,6 +135,13 @@ fn serve(
         for notice in service.ingest.take_notices() {
             eprintln!("fleet: {notice}");
         }
+    }
+    // Leaving the group before going: no new reports come, and what the broker had sent
+    // already is stored and acknowledged (with a session ended at disconnect, anything
+    // unacknowledged would wait for the cars' resend).
+    let drained = service.ingest.leave(&subscription, DRAIN_QUIET);
+    if drained > 0 {
+        eprintln!("fleet: stored {drained} reports that had arrived before leaving the group");
     }
     let sends = service.sends_campaigns();
     let (sent, failure) = (service.sent, service.failure.take());
