@@ -26,11 +26,10 @@ use std::time::{Duration, Instant};
 use autoplug_fleet::ingest::Ingest;
 use autoplug_fleet::mqtt::{Broker, LinkOptions, MqttLink};
 use autoplug_fleet::service::FleetService;
-use autoplug_fleet::testing::{broker_url, ecus, PgSchema};
+use autoplug_fleet::testing::{broker_url, ecus, trip_with_evidence, PgSchema};
 use autoplug_fleet::topics::{self, ReportKind};
-use autoplug_fleet::{FleetStore, InventoryReport, TripReport};
-use autoplug_store::{DtcRecord, EcuIdentity, VerdictRecord};
-use autoplug_trips::{TripEnd, TripStats};
+use autoplug_fleet::{FleetStore, InventoryReport};
+use autoplug_store::EcuIdentity;
 use autoplug_vin::Vin;
 
 /// Reports published beyond those stored, at most.
@@ -57,53 +56,6 @@ fn inventory(vin: &Vin, i: usize) -> InventoryReport {
                 serial_number: Some(format!("{ecu}-{i:08}")),
             })
             .collect(),
-    }
-}
-
-fn trip(vin: &Vin, i: usize, n: usize) -> TripReport {
-    let ended = 1_790_000_000_000 + (n as i64) * 3_600_000;
-    let stats = TripStats {
-        duration_s: 600.0,
-        distance_m: 14_000.0 + (i % 100) as f64,
-        max_speed_kmh: 110.0,
-        ..TripStats::default()
-    };
-    let faulty = i.is_multiple_of(50);
-    TripReport {
-        vin: vin.to_string(),
-        trip: n as i64 + 1,
-        started_at_ms: ended - 600_000,
-        ended_at_ms: ended,
-        stats,
-        end: TripEnd::BusSilent,
-        verdicts: ecus()
-            .map(|(ecu, _)| VerdictRecord {
-                ecu: ecu.to_string(),
-                routine: "presence".into(),
-                verdict: if faulty && ecu == "cruise" {
-                    "faulty"
-                } else {
-                    "ok"
-                }
-                .into(),
-                number: Some(0.2),
-                unit: "%".into(),
-                suspect_above: 5.0,
-                faulty_above: 20.0,
-                window_s: Some((0.0, 600.0)),
-                evidence: "frames on time".into(),
-            })
-            .collect(),
-        dtcs: if faulty {
-            vec![DtcRecord {
-                ecu: "cruise".into(),
-                code: "U0140-87".into(),
-                status: 0x09,
-                description: "lost communication with the body control module".into(),
-            }]
-        } else {
-            Vec::new()
-        },
     }
 }
 
@@ -144,8 +96,8 @@ fn main() {
         messages.push((topics::report(vin, ReportKind::Inventory), body));
     }
     for n in 0..trips {
-        for (i, vin) in vins.iter().enumerate() {
-            let body = serde_json::to_vec(&trip(vin, i, n)).expect("JSON");
+        for vin in &vins {
+            let body = serde_json::to_vec(&trip_with_evidence(vin, n as i64 + 1)).expect("JSON");
             messages.push((topics::report(vin, ReportKind::Trip), body));
         }
     }

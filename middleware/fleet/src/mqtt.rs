@@ -276,7 +276,12 @@ impl MqttLink {
         if let Some(user) = &broker.username {
             mqtt.set_credentials(user.clone(), broker.password.clone().unwrap_or_default());
         }
-        let (client, eventloop) = AsyncClient::new(mqtt, REQUEST_CAPACITY);
+        let (client, mut eventloop) = AsyncClient::new(mqtt, REQUEST_CAPACITY);
+        // Small messages sent at once: with Nagle's algorithm a receipt or an
+        // acknowledgement waited for the peer's delayed ACK (tens of ms on loopback).
+        let mut network = eventloop.network_options();
+        network.set_tcp_nodelay(true);
+        eventloop.set_network_options(network);
         let (tx, incoming) = mpsc::channel(INCOMING_CAPACITY);
         let status = Arc::new(Mutex::new(LinkStatus::default()));
         let subscribing = Subscribing::default();

@@ -240,6 +240,56 @@ pub fn intake_thread(
     })
 }
 
+/// A trip numbered `n` of `vin` as a drive reports it (statistics, the presence verdict of
+/// each of the nine ECUs, the cruise control faulty with a trouble code on one trip in
+/// 50): what the fleet's benchmarks store.
+pub fn trip_with_evidence(vin: &autoplug_vin::Vin, n: i64) -> crate::TripReport {
+    use autoplug_store::{DtcRecord, VerdictRecord};
+    let ended = 1_790_000_000_000 + n * 3_600_000;
+    let faulty = n % 50 == 0;
+    crate::TripReport {
+        vin: vin.to_string(),
+        trip: n,
+        started_at_ms: ended - 600_000,
+        ended_at_ms: ended,
+        stats: autoplug_trips::TripStats {
+            duration_s: 600.0,
+            distance_m: 14_000.0 + (n % 100) as f64,
+            max_speed_kmh: 110.0,
+            ..autoplug_trips::TripStats::default()
+        },
+        end: autoplug_trips::TripEnd::BusSilent,
+        verdicts: ecus()
+            .map(|(ecu, _)| VerdictRecord {
+                ecu: ecu.to_string(),
+                routine: "presence".into(),
+                verdict: if faulty && ecu == "cruise" {
+                    "faulty"
+                } else {
+                    "ok"
+                }
+                .into(),
+                number: Some(0.2),
+                unit: "%".into(),
+                suspect_above: 5.0,
+                faulty_above: 20.0,
+                window_s: Some((0.0, 600.0)),
+                evidence: "frames on time".into(),
+            })
+            .collect(),
+        dtcs: if faulty {
+            vec![DtcRecord {
+                ecu: "cruise".into(),
+                code: "U0140-87".into(),
+                status: 0x09,
+                description: "lost communication with the body control module".into(),
+            }]
+        } else {
+            Vec::new()
+        },
+    }
+}
+
 /// A car as the gateway reports: its reports in an outbox until the fleet's receipt, sent
 /// again while none comes (after `resend_after_ms`, doubling), over a persistent session
 /// with its VIN as client id. It publishes `trips` trips one every `pace` and returns once
@@ -253,6 +303,30 @@ pub fn reporting_car(
     pace: std::time::Duration,
     resend_after_ms: i64,
     deadline: std::time::Duration,
+) -> std::thread::JoinHandle<(crate::outbox::Outbox, crate::mqtt::LinkStatus, Vec<i64>)> {
+    reporting_car_with(
+        runtime,
+        broker,
+        vin,
+        trips,
+        pace,
+        resend_after_ms,
+        deadline,
+        trip_report,
+    )
+}
+
+/// [`reporting_car`] with its trips made by `make` (the VIN and the trip's number, from 1).
+#[allow(clippy::too_many_arguments)]
+pub fn reporting_car_with(
+    runtime: &tokio::runtime::Handle,
+    broker: &crate::mqtt::Broker,
+    vin: autoplug_vin::Vin,
+    trips: usize,
+    pace: std::time::Duration,
+    resend_after_ms: i64,
+    deadline: std::time::Duration,
+    make: impl Fn(&autoplug_vin::Vin, i64) -> crate::TripReport + Send + 'static,
 ) -> std::thread::JoinHandle<(crate::outbox::Outbox, crate::mqtt::LinkStatus, Vec<i64>)> {
     use std::time::{Duration, Instant};
     let mut options = crate::mqtt::LinkOptions::new(vin.to_string());
@@ -269,8 +343,7 @@ pub fn reporting_car(
         while started.elapsed() < deadline && (pushed < trips || !outbox.is_empty()) {
             if pushed < trips && Instant::now() >= next {
                 pushed += 1;
-                let report =
-                    serde_json::to_vec(&trip_report(&vin, pushed as i64)).unwrap_or_default();
+                let report = serde_json::to_vec(&make(&vin, pushed as i64)).unwrap_or_default();
                 outbox.push(
                     crate::topics::report(&vin, crate::topics::ReportKind::Trip),
                     report,
@@ -280,7 +353,14 @@ pub fn reporting_car(
             outbox.send_due(crate::unix_ms(), |topic, payload| {
                 link.publish(topic, payload.to_vec(), false).is_ok()
             });
-            if let Some(message) = link.recv_timeout(Duration::from_millis(5)) {
+            // Woken by a receipt at once; otherwise at the next report due (or to send
+            // again), so that a hundred idle cars do not spin.
+            let wait = if pushed < trips {
+                next.saturating_duration_since(Instant::now())
+            } else {
+                Duration::from_millis(50)
+            };
+            if let Some(message) = link.recv_timeout(wait.min(Duration::from_millis(50))) {
                 if let Ok(Some((_, waited))) =
                     outbox.on_receipt_at(&message.payload, crate::unix_ms())
                 {

@@ -1,0 +1,174 @@
+//! How the fleet's intake scales with services: cars report as the gateway does (each
+//! logged in as its VIN, an outbox, receipts) through a broker run from the shipped
+//! configuration to 1, 2 and 3 fleet services in one group (as `autoplug fleet serve` runs
+//! them: batches, acknowledgement after the commit), into PostgreSQL
+//! (`AUTOPLUG_TEST_POSTGRES`). For each count of services, on a fresh schema and broker:
+//!
+//! - **throughput**: every car publishes all its trips at once (a fleet coming back online),
+//!   timed from the first publish until every receipt is in: reports/s;
+//! - **latency**: the same cars at a steady `RATE` reports/s in all, the time from a
+//!   report's publish to its receipt at the car: p50, p99, the longest.
+//!
+//! The trips carry the nine ECUs' verdicts (and a trouble code on one in 50), as drives
+//! report them. Cars, broker, services and database share this machine's cores.
+//!
+//! ```text
+//! cargo run --release -p autoplug-fleet --example scaling_benchmark [CARS] [TRIPS] [RATE] [SERVICES...]
+//! ```
+//! Defaults: 100 cars, 50 trips each, 200 reports/s, services 1 2 3.
+
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use autoplug_fleet::broker::FLEET_USER;
+use autoplug_fleet::testing::{
+    intake_thread, reporting_car_with, trip_with_evidence, PgSchema, PrivateBroker,
+};
+use autoplug_fleet::FleetStore;
+use autoplug_vin::Vin;
+
+fn arg(n: usize, default: usize) -> usize {
+    std::env::args()
+        .nth(n)
+        .map(|a| a.parse().expect("a number"))
+        .unwrap_or(default)
+}
+
+/// One phase's figures: reports, wall time, the cars' waits for their receipts (ms) and
+/// the transactions the services committed.
+struct Phase {
+    reports: usize,
+    wall_s: f64,
+    waits: Vec<i64>,
+    commits: u64,
+    resent: u64,
+}
+
+/// `services` services and `cars` cars of `trips` trips each, one every `pace` per car.
+fn phase(
+    runtime: &tokio::runtime::Runtime,
+    services: usize,
+    cars: usize,
+    trips: usize,
+    pace: Duration,
+) -> Phase {
+    let broker = PrivateBroker::start();
+    let vins: Vec<Vin> = (0..cars)
+        .map(|i| Vin::with_check_digit(&format!("JA3AP47H0YB{:06}", 700_000 + i)).expect("VIN"))
+        .collect();
+    let mut logins = vec![(FLEET_USER.to_string(), "pw-fleet".to_string())];
+    logins.extend(vins.iter().map(|v| (v.to_string(), format!("pw-{v}"))));
+    broker.add_logins(&logins);
+    let schema = PgSchema::new();
+    // The schema made once, before the services start.
+    drop(FleetStore::open(&schema.url).expect("PostgreSQL"));
+    let stop = Arc::new(AtomicBool::new(false));
+    let fleet = broker.url(FLEET_USER, "pw-fleet");
+    let intakes: Vec<_> = (0..services)
+        .map(|i| {
+            let store = FleetStore::open(&schema.url).expect("PostgreSQL");
+            intake_thread(
+                runtime.handle(),
+                &fleet,
+                &format!("fleet-{i}"),
+                store,
+                stop.clone(),
+            )
+        })
+        .collect();
+    let started = Instant::now();
+    // Paced cars start one after the other, spread over one pace: a fleet's cars do not
+    // report in step.
+    let stagger = pace / cars as u32;
+    let car_threads: Vec<_> = vins
+        .iter()
+        .map(|v| {
+            std::thread::sleep(stagger);
+            reporting_car_with(
+                runtime.handle(),
+                &broker.url(v.as_str(), &format!("pw-{v}")),
+                *v,
+                trips,
+                pace,
+                30_000,
+                Duration::from_secs(600),
+                trip_with_evidence,
+            )
+        })
+        .collect();
+    let mut waits = Vec::with_capacity(cars * trips);
+    let mut resent = 0;
+    for car in car_threads {
+        let (outbox, _, car_waits) = car.join().expect("a car");
+        assert!(outbox.is_empty(), "a car's reports were not all confirmed");
+        resent += outbox.resent;
+        waits.extend(car_waits);
+    }
+    let wall_s = started.elapsed().as_secs_f64();
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let commits = intakes
+        .into_iter()
+        .map(|t| t.join().expect("a service").0.commits)
+        .sum();
+    waits.sort_unstable();
+    Phase {
+        reports: cars * trips,
+        wall_s,
+        waits,
+        commits,
+        resent,
+    }
+}
+
+fn percentile(sorted: &[i64], p: f64) -> i64 {
+    if sorted.is_empty() {
+        return 0;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+fn main() {
+    let cars = arg(1, 100).max(1);
+    let trips = arg(2, 50).max(1);
+    let rate = arg(3, 200).max(1);
+    let counts: Vec<usize> = {
+        let given: Vec<usize> = std::env::args()
+            .skip(4)
+            .map(|a| a.parse().expect("a count of services"))
+            .collect();
+        if given.is_empty() {
+            vec![1, 2, 3]
+        } else {
+            given
+        }
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("a runtime");
+    println!(
+        "fleet scaling: {cars} cars x {trips} trips (9 verdicts each), Mosquitto from the shipped configuration, PostgreSQL; {} cores",
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
+    for services in counts {
+        let burst = phase(&runtime, services, cars, trips, Duration::ZERO);
+        // The steady phase: each car one report every cars/rate seconds.
+        let pace = Duration::from_secs_f64(cars as f64 / rate as f64);
+        let steady_trips = (rate * 10 / cars).max(5);
+        let steady = phase(&runtime, services, cars, steady_trips, pace);
+        println!(
+            "{services} service(s): {:.0} reports/s ({} reports in {:.2} s, {} transactions, {} sent again); at {rate} reports/s publish to receipt p50 {} ms, p99 {} ms, longest {} ms ({} reports)",
+            burst.reports as f64 / burst.wall_s,
+            burst.reports,
+            burst.wall_s,
+            burst.commits,
+            burst.resent,
+            percentile(&steady.waits, 0.5),
+            percentile(&steady.waits, 0.99),
+            steady.waits.last().copied().unwrap_or(0),
+            steady.reports,
+        );
+    }
+}
