@@ -327,65 +327,83 @@ impl FleetStore {
                 "UPDATE vehicles SET inventory_at_ms = $2 WHERE vin = $1",
                 &[Value::from(vin), Value::Int(report.read_at_ms)],
             )?;
+            // What the vehicle's ECUs reported last, in one query (the inventory's ECUs are
+            // distinct: `check` refuses one listed twice).
+            let stored: BTreeMap<String, Row> = db
+                .query(
+                    "SELECT ecu, part_number, software_version, hardware_version, serial
+                     FROM ecus WHERE vin = $1",
+                    &[Value::from(vin)],
+                )?
+                .into_iter()
+                .filter_map(|row| Some((text(&row, 0)?, row[1..].to_vec())))
+                .collect();
             let mut changed = Vec::new();
+            let mut rows = Vec::with_capacity(report.ecus.len());
+            let mut history = Vec::new();
             for ecu in &report.ecus {
-                let current = db.query(
-                    "SELECT part_number, software_version, hardware_version, serial
-                     FROM ecus WHERE vin = $1 AND ecu = $2",
-                    &[Value::from(vin), Value::from(ecu.ecu.as_str())],
-                )?;
                 let identity = [
                     Value::from(ecu.part_number.clone()),
                     Value::from(ecu.software_version.clone()),
                     Value::from(ecu.hardware_version.clone()),
                     Value::from(ecu.serial_number.clone()),
                 ];
-                let same = current.first().is_some_and(|row| row[..] == identity[..]);
+                let same = stored
+                    .get(&ecu.ecu)
+                    .is_some_and(|row| row[..] == identity[..]);
                 let [major, minor, patch] = version_parts(ecu.software_version.as_deref());
-                db.execute(
-                    "INSERT INTO ecus (vin, ecu, node, part_number, software_version,
-                         sw_major, sw_minor, sw_patch, hardware_version, serial, reported_at_ms)
-                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)
-                     ON CONFLICT (vin, ecu) DO UPDATE SET node = excluded.node,
-                         part_number = excluded.part_number,
-                         software_version = excluded.software_version,
-                         sw_major = excluded.sw_major, sw_minor = excluded.sw_minor,
-                         sw_patch = excluded.sw_patch,
-                         hardware_version = excluded.hardware_version,
-                         serial = excluded.serial, reported_at_ms = excluded.reported_at_ms",
-                    &[
-                        Value::from(vin),
-                        Value::from(ecu.ecu.as_str()),
-                        Value::Int(ecu.node.into()),
-                        identity[0].clone(),
-                        identity[1].clone(),
-                        major,
-                        minor,
-                        patch,
-                        identity[2].clone(),
-                        identity[3].clone(),
-                        Value::Int(report.read_at_ms),
-                    ],
-                )?;
+                rows.push(vec![
+                    Value::from(vin),
+                    Value::from(ecu.ecu.as_str()),
+                    Value::Int(ecu.node.into()),
+                    identity[0].clone(),
+                    identity[1].clone(),
+                    major,
+                    minor,
+                    patch,
+                    identity[2].clone(),
+                    identity[3].clone(),
+                ]);
                 if !same {
                     let [p, s, h, n] = identity;
-                    db.execute(
-                        "INSERT INTO ecu_history (vin, ecu, part_number, software_version,
-                             hardware_version, serial, reported_at_ms)
-                         VALUES ($1, $2, $3, $4, $5, $6, $7)",
-                        &[
-                            Value::from(vin),
-                            Value::from(ecu.ecu.as_str()),
-                            p,
-                            s,
-                            h,
-                            n,
-                            Value::Int(report.read_at_ms),
-                        ],
-                    )?;
+                    history.push(vec![
+                        Value::from(vin),
+                        Value::from(ecu.ecu.as_str()),
+                        p,
+                        s,
+                        h,
+                        n,
+                    ]);
                     changed.push(ecu.ecu.clone());
                 }
             }
+            insert_rows(
+                db,
+                "INSERT INTO ecus (vin, ecu, node, part_number, software_version,
+                     sw_major, sw_minor, sw_patch, hardware_version, serial, reported_at_ms)
+                 VALUES ",
+                "($P, $0)",
+                " ON CONFLICT (vin, ecu) DO UPDATE SET node = excluded.node,
+                     part_number = excluded.part_number,
+                     software_version = excluded.software_version,
+                     sw_major = excluded.sw_major, sw_minor = excluded.sw_minor,
+                     sw_patch = excluded.sw_patch,
+                     hardware_version = excluded.hardware_version,
+                     serial = excluded.serial, reported_at_ms = excluded.reported_at_ms",
+                &[Value::Int(report.read_at_ms)],
+                &rows,
+                false,
+            )?;
+            insert_rows(
+                db,
+                "INSERT INTO ecu_history (vin, ecu, part_number, software_version,
+                     hardware_version, serial, reported_at_ms) VALUES ",
+                "($P, $0)",
+                "",
+                &[Value::Int(report.read_at_ms)],
+                &history,
+                false,
+            )?;
             Ok(changed)
         })
     }
