@@ -411,77 +411,19 @@ impl FleetStore {
     /// Stores a trip with its verdicts and trouble codes, once: the same trip again (a
     /// redelivered message) changes nothing.
     pub fn record_trip(&mut self, report: &TripReport) -> Result<Stored, StoreError> {
-        let vin = report.check()?;
-        let vin = vin.as_str();
-        let received = now_ms();
-        let stats = serde_json::to_string(&report.stats)
-            .map_err(|e| StoreError::Invalid(format!("trip statistics: {e}")))?;
-        transaction(self.db.as_mut(), |db| -> Result<_, StoreError> {
-            Self::touch_vehicle(db, vin, received)?;
-            let s = &report.stats;
-            let inserted = db.execute(
-                "INSERT INTO trips (vin, trip, started_at_ms, ended_at_ms, end_reason,
-                     distance_m, duration_s, fuel_used_l, max_speed_kmh, abs_interventions,
-                     shifts, cruise_time_s, stats, received_at_ms)
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14)
-                 ON CONFLICT (vin, trip) DO NOTHING",
-                &[
-                    Value::from(vin),
-                    Value::Int(report.trip),
-                    Value::Int(report.started_at_ms),
-                    Value::Int(report.ended_at_ms),
-                    Value::from(report.end.name()),
-                    Value::Float(s.distance_m),
-                    Value::Float(s.duration_s),
-                    Value::Float(s.fuel_used_l),
-                    Value::Float(s.max_speed_kmh),
-                    Value::Int(s.abs_interventions.into()),
-                    Value::Int(s.shifts.into()),
-                    Value::Float(s.cruise_time_s),
-                    Value::Text(stats),
-                    Value::Int(received),
-                ],
-            )?;
-            if inserted == 0 {
-                return Ok(Stored::Duplicate);
+        report.check()?;
+        // A batch of one, in a transaction of its own (a savepoint inside a batch's).
+        self.db.begin()?;
+        match self.record_trips_in_batch(&[report]) {
+            Ok(stored) => {
+                self.db.commit()?;
+                Ok(stored.into_iter().next().unwrap_or(Stored::Duplicate))
             }
-            for v in &report.verdicts {
-                db.execute(
-                    "INSERT INTO verdicts (vin, trip, ecu, routine, verdict, number, unit,
-                         evidence, judged_at_ms)
-                     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)
-                     ON CONFLICT (vin, trip, ecu, routine) DO NOTHING",
-                    &[
-                        Value::from(vin),
-                        Value::Int(report.trip),
-                        Value::from(v.ecu.as_str()),
-                        Value::from(v.routine.as_str()),
-                        Value::from(v.verdict.as_str()),
-                        Value::from(v.number.filter(|n| n.is_finite())),
-                        Value::from(v.unit.as_str()),
-                        Value::from(v.evidence.as_str()),
-                        Value::Int(report.ended_at_ms),
-                    ],
-                )?;
+            Err(error) => {
+                let _ = self.db.rollback();
+                Err(error)
             }
-            for d in &report.dtcs {
-                db.execute(
-                    "INSERT INTO dtcs (vin, trip, ecu, code, status, description, reported_at_ms)
-                     VALUES ($1, $2, $3, $4, $5, $6, $7)
-                     ON CONFLICT (vin, trip, ecu, code) DO NOTHING",
-                    &[
-                        Value::from(vin),
-                        Value::Int(report.trip),
-                        Value::from(d.ecu.as_str()),
-                        Value::from(d.code.as_str()),
-                        Value::Int(d.status.into()),
-                        Value::from(d.description.as_str()),
-                        Value::Int(report.ended_at_ms),
-                    ],
-                )?;
-            }
-            Ok(Stored::New)
-        })
+        }
     }
 
     /// Stores trips (each already [`TripReport::check`]ed) in the transaction open, a

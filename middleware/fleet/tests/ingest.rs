@@ -44,6 +44,31 @@ fn trip(vin: &Vin) -> TripReport {
     }
 }
 
+/// An intake's link (manual acks) subscribed to the reports of `vins`, and a car's link
+/// to publish them, both connected; `name` names the pair.
+fn intake_and_car(
+    rt: &tokio::runtime::Runtime,
+    broker: &Broker,
+    name: &str,
+    vins: [&Vin; 2],
+) -> (MqttLink, MqttLink) {
+    let mut options = LinkOptions::new(name);
+    options.manual_acks = true;
+    options.subscriptions = vins
+        .iter()
+        .map(|v| format!("autoplug/v1/vehicles/{v}/report/#"))
+        .collect();
+    let link = MqttLink::connect(rt.handle(), broker, options);
+    link.wait_connected(Duration::from_secs(5))
+        .unwrap_or_else(|e| panic!("{e} (scripts/setup-tests installs and starts Mosquitto)"));
+    while link.status().granted.len() < vins.len() {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let car = MqttLink::connect(rt.handle(), broker, LinkOptions::new(format!("{name}-car")));
+    car.wait_connected(Duration::from_secs(5)).unwrap();
+    (link, car)
+}
+
 #[test]
 fn reports_through_the_broker_are_stored_once_and_bad_ones_refused() {
     let rt = runtime();
@@ -53,24 +78,12 @@ fn reports_through_the_broker_are_stored_once_and_bad_ones_refused() {
         let serial = std::process::id() % 100_000 * 10 + k as u32;
         let vin = Vin::with_check_digit(&format!("JA3AP47H0YF{serial:06}")).unwrap();
         let other = Vin::with_check_digit(&format!("JA3AP47H0YG{serial:06}")).unwrap();
-        let mut options = LinkOptions::new(format!("ingest-test-{serial}"));
-        options.manual_acks = true;
-        options.subscriptions = vec![
-            format!("autoplug/v1/vehicles/{vin}/report/#"),
-            format!("autoplug/v1/vehicles/{other}/report/#"),
-        ];
-        let link = MqttLink::connect(rt.handle(), &broker, options);
-        link.wait_connected(Duration::from_secs(5))
-            .unwrap_or_else(|e| panic!("{e} (scripts/setup-tests installs and starts Mosquitto)"));
-        while link.status().granted.len() < 2 {
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        let car = MqttLink::connect(
-            rt.handle(),
+        let (link, car) = intake_and_car(
+            &rt,
             &broker,
-            LinkOptions::new(format!("car-{serial}")),
+            &format!("ingest-test-{serial}"),
+            [&vin, &other],
         );
-        car.wait_connected(Duration::from_secs(5)).unwrap();
 
         let json = |v: &dyn erased::Json| v.json();
         let sends: Vec<(String, Vec<u8>)> = vec![
@@ -164,24 +177,12 @@ fn a_batch_in_one_transaction_settles_each_report_as_alone() {
         let serial = std::process::id() % 100_000 * 10 + 3 + k as u32;
         let vin = Vin::with_check_digit(&format!("JA3AP47H0YK{serial:06}")).unwrap();
         let second = Vin::with_check_digit(&format!("JA3AP47H0YL{serial:06}")).unwrap();
-        let mut options = LinkOptions::new(format!("batch-test-{serial}"));
-        options.manual_acks = true;
-        options.subscriptions = vec![
-            format!("autoplug/v1/vehicles/{vin}/report/#"),
-            format!("autoplug/v1/vehicles/{second}/report/#"),
-        ];
-        let link = MqttLink::connect(rt.handle(), &broker, options);
-        link.wait_connected(Duration::from_secs(5))
-            .unwrap_or_else(|e| panic!("{e} (scripts/setup-tests installs and starts Mosquitto)"));
-        while link.status().granted.len() < 2 {
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        let car = MqttLink::connect(
-            rt.handle(),
+        let (link, car) = intake_and_car(
+            &rt,
             &broker,
-            LinkOptions::new(format!("batch-car-{serial}")),
+            &format!("batch-test-{serial}"),
+            [&vin, &second],
         );
-        car.wait_connected(Duration::from_secs(5)).unwrap();
         let mut ingest = Ingest::new(engine.open(), link);
         // Trip 1 of `vin` stored before the batch.
         ingest.store.record_trip(&trip(&vin)).unwrap();
