@@ -333,9 +333,12 @@ impl Ingest {
     /// receipt and is acknowledged, in the order received (MQTT's order for
     /// acknowledgements). A database error rolls the whole batch back and tries it again
     /// (with a backoff) until it stores or `stop` is set; it then stays unacknowledged for
-    /// the broker to deliver again. Reports are written in their vehicles' order, so two
-    /// services' batches take the vehicles' rows in one order and never wait on each
-    /// other in a circle.
+    /// the broker to deliver again. The batch's trips are written first, in (VIN, trip)
+    /// order, then its other reports in their vehicles' order, so two services' batches
+    /// mostly take rows in one order; where they still wait on each other in a circle
+    /// (an inventory and a trip of two vehicles crossing), PostgreSQL ends one
+    /// transaction with a deadlock error, and that batch is tried again like any other
+    /// database error.
     pub fn take_batch(&mut self, messages: &[Message], stop: &AtomicBool) -> Vec<Option<Handled>> {
         if messages.len() == 1 {
             return vec![self.take(&messages[0], stop)];
@@ -479,7 +482,8 @@ impl Ingest {
     /// Leaves the shared group `subscription` and stores what the broker had sent before
     /// it took the UNSUBSCRIBE, until none has come for `quiet` (at most
     /// [`DRAIN_LIMIT`]): a service stopped cleanly leaves nothing for the cars to send
-    /// again. Returns how many it stored or refused.
+    /// again. Returns how many it took (a database that fails now leaves those to the
+    /// cars' resends).
     pub fn leave(&mut self, subscription: &str, quiet: Duration) -> usize {
         if subscription.is_empty() || self.link.unsubscribe(subscription).is_err() {
             return 0;

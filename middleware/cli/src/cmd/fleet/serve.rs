@@ -141,7 +141,7 @@ fn serve(
     // unacknowledged would wait for the cars' resend).
     let drained = service.ingest.leave(&subscription, DRAIN_QUIET);
     if drained > 0 {
-        eprintln!("fleet: stored {drained} reports that had arrived before leaving the group");
+        eprintln!("fleet: took {drained} reports that had arrived before leaving the group");
     }
     let sends = service.sends_campaigns();
     let (sent, failure) = (service.sent, service.failure.take());
