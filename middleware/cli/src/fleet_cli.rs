@@ -98,6 +98,10 @@ impl VehicleFleetArgs {
     }
 }
 
+fn parse_queue(text: &str) -> Result<autoplug_fleet::nats::NatsServers, String> {
+    text.parse()
+}
+
 fn parse_broker(text: &str) -> Result<Broker, String> {
     text.parse()
 }
@@ -248,6 +252,15 @@ pub enum FleetCommand {
     Broker(BrokerCommand),
 }
 
+/// The fleet's messaging.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Engine {
+    /// One Mosquitto broker: the default, for one machine.
+    Mosquitto,
+    /// A NATS cluster with JetStream: for fleets that outgrow one broker.
+    Nats,
+}
+
 /// `autoplug fleet serve`: the database, the broker, the signing key and the service's
 /// settings.
 #[derive(Debug, Args)]
@@ -274,6 +287,15 @@ pub struct ServeArgs {
     /// The services that split the reports between them (a shared subscription).
     #[arg(long, value_name = "NAME", default_value = "autoplug-fleet")]
     pub group: String,
+    /// Take the reports from the clustered engine's work queue (NATS JetStream),
+    /// nats://[USER[:PASSWORD]@]HOST[:PORT][,HOST[:PORT]…], instead of a shared
+    /// subscription; receipts and instructions still go out through --broker (the
+    /// cluster's MQTT).
+    #[arg(long, value_name = "URL", env = "AUTOPLUG_QUEUE", value_parser = parse_queue)]
+    pub queue: Option<autoplug_fleet::nats::NatsServers>,
+    /// Read the work queue's password from this file (instead of the URL).
+    #[arg(long, value_name = "FILE", requires = "queue")]
+    pub queue_password_file: Option<PathBuf>,
     /// Keep the service's session at the broker while it is down (its subscription and
     /// the reports for it). Only for a service that runs alone: in a group, the broker
     /// goes on handing a stopped member's session its turn of every report, stranded
@@ -441,21 +463,39 @@ pub struct CreateArgs {
 pub enum BrokerCommand {
     /// Write a Mosquitto configuration for a fleet (logins, per-vehicle ACL, persistent
     /// sessions) into a directory: run `mosquitto -c DIR/mosquitto.conf`.
+    ///
+    /// With --engine nats: a NATS cluster's nodes instead (JetStream replicated by RAFT,
+    /// MQTT for the vehicles, a work queue for the services): run
+    /// `nats-server -c DIR/node-N.conf` for each.
     Init {
         /// The directory (created).
         #[arg(long, value_name = "DIR")]
         dir: PathBuf,
-        /// Where the broker listens for vehicles.
+        /// Where the broker listens for vehicles (MQTT); with several nodes, node N on
+        /// this port plus N-1.
         #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:1883")]
         listen: std::net::SocketAddr,
-        /// Where it listens for the fleet services (their own logins; each process keeps
-        /// its own client id there).
+        /// Mosquitto: where it listens for the fleet services (their own logins; each
+        /// process keeps its own client id there).
         #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:1884")]
         fleet_listen: std::net::SocketAddr,
+        /// The engine: one Mosquitto (one machine), or a NATS cluster.
+        #[arg(long, value_enum, default_value_t = Engine::Mosquitto)]
+        engine: Engine,
+        /// NATS: the cluster's nodes (3 survive the loss of one).
+        #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u16).range(1..=9))]
+        nodes: u16,
+        /// NATS: where node 1 listens for the fleet services (node N: the port plus N-1).
+        #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:4222")]
+        client_listen: std::net::SocketAddr,
+        /// NATS: where node 1 listens for the other nodes (node N: the port plus N-1).
+        #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:6222")]
+        cluster_listen: std::net::SocketAddr,
     },
     /// Add a login to the running broker: a vehicle (its VIN) or the fleet services
     /// (autoplug-fleet); a login there already gets the new password. Prints the
-    /// password once unless --password-file names one to use.
+    /// password once unless --password-file names one to use. A NATS cluster's
+    /// directory: the logins' file rewritten and its running nodes told to reload.
     Add {
         /// The directory of `broker init`.
         #[arg(long, value_name = "DIR")]
@@ -491,7 +531,25 @@ pub fn run(command: FleetCommand, out: &mut dyn Write) -> Result<(), String> {
             dir,
             listen,
             fleet_listen,
+            engine: Engine::Mosquitto,
+            ..
         }) => fleet::broker::init(&dir, listen, fleet_listen, out),
+        FleetCommand::Broker(BrokerCommand::Init {
+            dir,
+            listen,
+            engine: Engine::Nats,
+            nodes,
+            client_listen,
+            cluster_listen,
+            ..
+        }) => fleet::broker::init_nats(
+            &dir,
+            nodes.into(),
+            listen,
+            client_listen,
+            cluster_listen,
+            out,
+        ),
         FleetCommand::Broker(BrokerCommand::Add {
             dir,
             user,

@@ -392,12 +392,7 @@ pub fn add_logins(dir: &BrokerDir, logins: &[(String, String)]) -> Result<(), St
     let admin = std::fs::read_to_string(&dir.admin_password)
         .map_err(|e| format!("cannot read {}: {e}", dir.admin_password.display()))?;
     let (host, port) = dir.fleet_listener()?;
-    let broker = Broker {
-        host,
-        port,
-        username: Some(ADMIN_USER.into()),
-        password: Some(admin.trim().to_string()),
-    };
+    let broker = Broker::at(host, port).with_login(ADMIN_USER, admin.trim());
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .enable_all()

@@ -19,6 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::mqtt::{Message, MqttLink};
+use crate::nats::WorkQueue;
 use crate::report::{InventoryReport, Receipt, TripReport, MAX_REPORT_BYTES};
 use crate::store::{FleetStore, StoreError, Stored};
 use crate::topics::{self, ReportKind};
@@ -174,12 +175,14 @@ pub fn handle(store: &mut FleetStore, topic: &str, payload: &[u8]) -> Result<Han
 }
 
 /// The intake: reports from `link` (subscribed to [`topics::REPORTS_SHARED`] with manual
-/// acks) into `store`.
+/// acks), or from the clustered engine's work queue, into `store`.
 pub struct Ingest {
     /// The store.
     pub store: FleetStore,
-    /// The broker.
+    /// The broker: the reports (without a work queue), the receipts.
     pub link: MqttLink,
+    /// The clustered engine's work queue, where the reports come from when there is one.
+    pub queue: Option<WorkQueue>,
     /// What it did.
     pub stats: IngestStats,
     /// What an operator should see now (the database failing and back), oldest first;
@@ -217,11 +220,41 @@ impl Ingest {
         Self {
             store,
             link,
+            queue: None,
             stats: IngestStats::default(),
             notices: VecDeque::new(),
             db_failures: 0,
             refusal_window: (Instant::now(), 0, 0),
             receipts_not_sent: 0,
+        }
+    }
+
+    /// Reports from the clustered engine's `queue` into `store`; receipts over `link`.
+    pub fn with_queue(store: FleetStore, link: MqttLink, queue: WorkQueue) -> Self {
+        let mut ingest = Self::new(store, link);
+        ingest.queue = Some(queue);
+        ingest
+    }
+
+    /// Acknowledges a message where it came from.
+    fn ack(&self, message: &Message) {
+        match &self.queue {
+            Some(queue) if matches!(message.ack, crate::mqtt::Ack::JetStream(_)) => {
+                let _ = queue.ack(message);
+            }
+            _ => {
+                let _ = self.link.ack(message);
+            }
+        }
+    }
+
+    /// Tells the work queue that `messages` are still being stored (a database that
+    /// fails), so it does not hand them to another service meanwhile.
+    fn still_at(&self, messages: &[Message]) {
+        if let Some(queue) = &self.queue {
+            for message in messages {
+                let _ = queue.in_progress(message);
+            }
         }
     }
 
@@ -304,6 +337,7 @@ impl Ingest {
                     if stop.load(Ordering::Relaxed) {
                         return None;
                     }
+                    self.still_at(std::slice::from_ref(message));
                     std::thread::sleep(backoff);
                     backoff = (backoff * 2).min(MAX_DB_BACKOFF);
                 }
@@ -315,6 +349,13 @@ impl Ingest {
     /// first: under load a batch fills from what the broker already sent, and a lone
     /// report is never held back for company.
     pub fn recv_batch(&mut self, wait: Duration) -> Vec<Message> {
+        if let Some(queue) = &mut self.queue {
+            let batch = queue.recv_batch(wait, MAX_BATCH);
+            if let Some(said) = queue.take_notice() {
+                self.notice(said);
+            }
+            return batch;
+        }
         let Some(first) = self.link.recv_timeout(wait) else {
             return Vec::new();
         };
@@ -354,6 +395,7 @@ impl Ingest {
                     if stop.load(Ordering::Relaxed) {
                         return vec![None; messages.len()];
                     }
+                    self.still_at(messages);
                     std::thread::sleep(backoff);
                     backoff = (backoff * 2).min(MAX_DB_BACKOFF);
                 }
@@ -462,7 +504,7 @@ impl Ingest {
                     Handled::Campaign => self.stats.campaign_reports += 1,
                 }
                 self.receipt(message, None);
-                let _ = self.link.ack(message);
+                self.ack(message);
                 Some(handled)
             }
             Err(reason) => {
@@ -473,7 +515,7 @@ impl Ingest {
                 self.stats.last_rejections.push_back(reason.clone());
                 self.refusal_notice(&message.topic, &reason);
                 self.receipt(message, Some(reason));
-                let _ = self.link.ack(message);
+                self.ack(message);
                 None
             }
         }
@@ -485,6 +527,10 @@ impl Ingest {
     /// again. Returns how many it took (a database that fails now leaves those to the
     /// cars' resends).
     pub fn leave(&mut self, subscription: &str, quiet: Duration) -> usize {
+        // A service of the work queue holds nothing between batches.
+        if self.queue.is_some() {
+            return 0;
+        }
         if subscription.is_empty() || self.link.unsubscribe(subscription).is_err() {
             return 0;
         }
@@ -521,12 +567,7 @@ mod tests {
     use super::*;
 
     fn message(topic: &str, payload: &[u8]) -> Message {
-        Message {
-            topic: topic.to_string(),
-            payload: payload.to_vec(),
-            retained: false,
-            publish: rumqttc::Publish::new(topic, rumqttc::QoS::AtLeastOnce, payload.to_vec()),
-        }
+        Message::unacknowledged(topic, payload)
     }
 
     #[test]

@@ -19,6 +19,8 @@ pub mod db;
 pub mod ingest;
 pub mod migrations;
 pub mod mqtt;
+pub mod nats;
+pub mod nats_cluster;
 pub mod outbox;
 pub mod report;
 pub mod service;

@@ -30,6 +30,10 @@ pub fn runtime() -> Result<tokio::runtime::Runtime, String> {
         .map_err(|e| format!("cannot start the MQTT runtime: {e}"))
 }
 
+/// The first wait before a refused subscription is asked for again (then doubling up to
+/// the link's longest backoff).
+pub const RESUBSCRIBE_WAIT: Duration = Duration::from_secs(2);
+
 /// The broker's standard port for MQTT without TLS.
 pub const DEFAULT_PORT: u16 = 1883;
 
@@ -51,17 +55,36 @@ pub const REQUEST_CAPACITY: usize = 256;
 /// request queue.
 pub const REQUEST_WAIT: Duration = Duration::from_secs(5);
 
-/// A broker's address and the login to use: `mqtt://[USER[:PASSWORD]@]HOST[:PORT]`.
+/// A broker's addresses and the login to use:
+/// `mqtt://[USER[:PASSWORD]@]HOST[:PORT][,HOST[:PORT]…]`. Several addresses are the nodes
+/// of one clustered broker: the connection takes the first and moves to the next each
+/// time a connection fails, so a car whose node went away comes back through another.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Broker {
-    /// Host name or address.
-    pub host: String,
-    /// TCP port.
-    pub port: u16,
+    /// Host names or addresses with their TCP ports, in the order tried (at least one).
+    pub addresses: Vec<(String, u16)>,
     /// The login, if the broker wants one.
     pub username: Option<String>,
     /// Its password.
     pub password: Option<String>,
+}
+
+impl Broker {
+    /// One broker at `host:port`.
+    pub fn at(host: impl Into<String>, port: u16) -> Self {
+        Self {
+            addresses: vec![(host.into(), port)],
+            username: None,
+            password: None,
+        }
+    }
+
+    /// The same with a login.
+    pub fn with_login(mut self, user: impl Into<String>, password: impl Into<String>) -> Self {
+        self.username = Some(user.into());
+        self.password = Some(password.into());
+        self
+    }
 }
 
 impl std::fmt::Debug for Broker {
@@ -70,62 +93,96 @@ impl std::fmt::Debug for Broker {
     }
 }
 
-impl std::fmt::Display for Broker {
-    /// The address without the password.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match &self.username {
-            Some(user) => write!(f, "mqtt://{user}@{}:{}", self.host, self.port),
-            None => write!(f, "mqtt://{}:{}", self.host, self.port),
+/// `SCHEME://[USER@]HOST:PORT[,HOST:PORT…]`, without the password.
+pub(crate) fn display_address(
+    f: &mut std::fmt::Formatter<'_>,
+    scheme: &str,
+    addresses: &[(String, u16)],
+    username: Option<&str>,
+) -> std::fmt::Result {
+    write!(f, "{scheme}://")?;
+    if let Some(user) = username {
+        write!(f, "{user}@")?;
+    }
+    for (i, (host, port)) in addresses.iter().enumerate() {
+        if i > 0 {
+            f.write_str(",")?;
         }
+        write!(f, "{host}:{port}")?;
+    }
+    Ok(())
+}
+
+impl std::fmt::Display for Broker {
+    /// The addresses without the password.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        display_address(f, "mqtt", &self.addresses, self.username.as_deref())
     }
 }
 
-impl std::str::FromStr for Broker {
-    type Err = String;
+/// The parts of `SCHEME://[USER[:PASSWORD]@]HOST[:PORT][,HOST[:PORT]…]`: the addresses
+/// (`default_port` where none is given), the user and the password; an error naming what
+/// is wrong, with the password hidden.
+pub(crate) type AddressList = (Vec<(String, u16)>, Option<String>, Option<String>);
 
-    fn from_str(url: &str) -> Result<Self, String> {
-        let rest = url.strip_prefix("mqtt://").ok_or_else(|| {
+pub(crate) fn parse_address_list(
+    url: &str,
+    scheme: &str,
+    default_port: u16,
+    example: &str,
+) -> Result<AddressList, String> {
+    let rest = url
+        .strip_prefix(scheme)
+        .and_then(|r| r.strip_prefix("://"))
+        .ok_or_else(|| {
             format!(
-                "broker address '{}' must start with mqtt:// (e.g. {DEFAULT_BROKER})",
+                "address '{}' must start with {scheme}:// (e.g. {example})",
                 redact(url)
             )
         })?;
-        let (login, hostport) = match rest.rsplit_once('@') {
-            Some((login, hostport)) => (Some(login), hostport),
-            None => (None, rest),
-        };
-        let (username, password) = match login {
-            None => (None, None),
-            Some(login) => match login.split_once(':') {
-                Some((user, password)) => (Some(user.to_string()), Some(password.to_string())),
-                None => (Some(login.to_string()), None),
-            },
-        };
-        if username.as_deref() == Some("") {
-            return Err(format!(
-                "broker address '{}' has an empty user name",
-                redact(url)
-            ));
-        }
-        let hostport = hostport.trim_end_matches('/');
+    let (login, hosts) = match rest.rsplit_once('@') {
+        Some((login, hosts)) => (Some(login), hosts),
+        None => (None, rest),
+    };
+    let (username, password) = match login {
+        None => (None, None),
+        Some(login) => match login.split_once(':') {
+            Some((user, password)) => (Some(user.to_string()), Some(password.to_string())),
+            None => (Some(login.to_string()), None),
+        },
+    };
+    if username.as_deref() == Some("") {
+        return Err(format!("address '{}' has an empty user name", redact(url)));
+    }
+    let mut addresses = Vec::new();
+    for hostport in hosts.trim_end_matches('/').split(',') {
         let (host, port) = match hostport.rsplit_once(':') {
             Some((host, port)) => (
                 host,
                 port.parse::<u16>()
                     .ok()
                     .filter(|p| *p != 0)
-                    .ok_or_else(|| {
-                        format!("broker address '{}': '{port}' is not a port", redact(url))
-                    })?,
+                    .ok_or_else(|| format!("address '{}': '{port}' is not a port", redact(url)))?,
             ),
-            None => (hostport, DEFAULT_PORT),
+            None => (hostport, default_port),
         };
-        if host.is_empty() || host.contains(['/', ' ']) {
-            return Err(format!("broker address '{}' names no host", redact(url)));
+        if host.is_empty() || host.contains(['/', ' ', '@']) {
+            return Err(format!("address '{}' names no host", redact(url)));
         }
+        addresses.push((host.to_string(), port));
+    }
+    Ok((addresses, username, password))
+}
+
+impl std::str::FromStr for Broker {
+    type Err = String;
+
+    fn from_str(url: &str) -> Result<Self, String> {
+        let (addresses, username, password) =
+            parse_address_list(url, "mqtt", DEFAULT_PORT, DEFAULT_BROKER)
+                .map_err(|e| format!("broker {e}"))?;
         Ok(Broker {
-            host: host.to_string(),
-            port,
+            addresses,
             username,
             password,
         })
@@ -212,7 +269,28 @@ pub struct Message {
     pub payload: Vec<u8>,
     /// Whether the broker delivered it as a retained message.
     pub retained: bool,
-    pub(crate) publish: Publish,
+    /// How it is acknowledged, and to whom.
+    pub(crate) ack: Ack,
+}
+
+/// What acknowledges a message: its MQTT PUBLISH (to the link that took it), or a
+/// JetStream delivery of the clustered engine's work queue ([`crate::nats::WorkQueue`]).
+#[derive(Clone, Debug)]
+pub(crate) enum Ack {
+    Mqtt(Publish),
+    JetStream(Box<async_nats::jetstream::Message>),
+}
+
+impl Message {
+    /// A message that needs no acknowledgement (tests, a message made up).
+    pub fn unacknowledged(topic: &str, payload: &[u8]) -> Self {
+        Message {
+            topic: topic.to_string(),
+            payload: payload.to_vec(),
+            retained: false,
+            ack: Ack::Mqtt(Publish::new(topic, QoS::AtMostOnce, payload.to_vec())),
+        }
+    }
 }
 
 /// What the connection is doing, for the caller to show.
@@ -227,12 +305,15 @@ pub struct LinkStatus {
     pub refused: Option<String>,
     /// The last error of the connection, if any.
     pub last_error: Option<String>,
-    /// Subscriptions the broker refused (its ACL), by topic.
+    /// Subscriptions the broker refuses (its ACL; a clustered broker that could not set
+    /// one up in time), by topic: asked for again after [`RESUBSCRIBE_WAIT`], doubling.
     pub denied: Vec<String>,
     /// Subscriptions the broker granted since the last connect.
     pub granted: Vec<String>,
     /// Publishes the broker acknowledged (PUBACK): it took them, which is not yet stored.
     pub acknowledged: u64,
+    /// Which of the broker's addresses it uses (or tries) now, from 0.
+    pub address: usize,
 }
 
 /// Why a request could not be made.
@@ -266,16 +347,7 @@ impl MqttLink {
     /// Starts connecting to `broker` on `runtime` (returns at once: see [`Self::status`]
     /// and [`Self::wait_connected`]).
     pub fn connect(runtime: &Handle, broker: &Broker, options: LinkOptions) -> Self {
-        let mut mqtt =
-            MqttOptions::new(options.client_id.clone(), broker.host.clone(), broker.port);
-        mqtt.set_keep_alive(options.keep_alive)
-            .set_clean_session(!options.persistent_session)
-            .set_max_packet_size(MAX_PACKET_BYTES, MAX_PACKET_BYTES)
-            .set_request_channel_capacity(REQUEST_CAPACITY)
-            .set_manual_acks(options.manual_acks);
-        if let Some(user) = &broker.username {
-            mqtt.set_credentials(user.clone(), broker.password.clone().unwrap_or_default());
-        }
+        let mqtt = mqtt_options(broker, 0, &options);
         let (client, mut eventloop) = AsyncClient::new(mqtt, REQUEST_CAPACITY);
         // Small messages sent at once: with Nagle's algorithm a receipt or an
         // acknowledgement waited for the peer's delayed ACK (tens of ms on loopback).
@@ -287,10 +359,12 @@ impl MqttLink {
         let subscribing = Subscribing::default();
         let task = runtime.spawn(run(
             eventloop,
+            broker.clone(),
             tx,
             status.clone(),
             subscribing.clone(),
             options,
+            client.clone(),
         ));
         Self {
             subscribing,
@@ -391,7 +465,12 @@ impl MqttLink {
     /// nothing to acknowledge: the broker delivers the message again on the next
     /// connection (the session is kept).
     pub fn ack(&self, message: &Message) -> Result<(), LinkError> {
-        self.send_waiting("acknowledge", self.client.ack(&message.publish))
+        match &message.ack {
+            Ack::Mqtt(publish) => self.send_waiting("acknowledge", self.client.ack(publish)),
+            Ack::JetStream(_) => Err(LinkError(
+                "a message of the work queue is acknowledged there".into(),
+            )),
+        }
     }
 
     /// Publishes at QoS 1 like [`Self::publish`], but waits (at most [`REQUEST_WAIT`]) for
@@ -455,6 +534,26 @@ impl Drop for MqttLink {
     }
 }
 
+/// The connection's settings for `broker`'s address number `address`.
+fn mqtt_options(broker: &Broker, address: usize, options: &LinkOptions) -> MqttOptions {
+    let (host, port) = broker
+        .addresses
+        .get(address)
+        .or(broker.addresses.first())
+        .cloned()
+        .unwrap_or_else(|| ("127.0.0.1".to_string(), DEFAULT_PORT));
+    let mut mqtt = MqttOptions::new(options.client_id.clone(), host, port);
+    mqtt.set_keep_alive(options.keep_alive)
+        .set_clean_session(!options.persistent_session)
+        .set_max_packet_size(MAX_PACKET_BYTES, MAX_PACKET_BYTES)
+        .set_request_channel_capacity(REQUEST_CAPACITY)
+        .set_manual_acks(options.manual_acks);
+    if let Some(user) = &broker.username {
+        mqtt.set_credentials(user.clone(), broker.password.clone().unwrap_or_default());
+    }
+    mqtt
+}
+
 fn set(status: &Mutex<LinkStatus>, change: impl FnOnce(&mut LinkStatus)) {
     if let Ok(mut s) = status.lock() {
         change(&mut s);
@@ -465,12 +564,20 @@ fn set(status: &Mutex<LinkStatus>, change: impl FnOnce(&mut LinkStatus)) {
 /// hands publishes to the caller.
 async fn run(
     mut eventloop: rumqttc::EventLoop,
+    broker: Broker,
     tx: mpsc::Sender<Message>,
     status: Arc<Mutex<LinkStatus>>,
     subscribing: Subscribing,
     options: LinkOptions,
+    client: AsyncClient,
 ) {
     let mut backoff = options.backoff;
+    // Subscriptions refused, each with the wait before it is asked for again: a clustered
+    // broker refuses one it could not set up in time (NATS: its JetStream consumer), and
+    // rights fixed at the broker take effect without a reconnect.
+    let mut refused_waits: std::collections::HashMap<String, Duration> =
+        std::collections::HashMap::new();
+    let mut address = 0;
     // With manual acks, messages the caller's queue had no room for wait here rather than
     // stop the event loop: a caller acknowledging (or publishing a receipt) waits for the
     // event loop to take its request, and an event loop waiting for the caller to take a
@@ -532,22 +639,46 @@ async fn run(
                     .ok()
                     .and_then(|mut p| p.pop_front())
                     .unwrap_or_default();
+                let mut again = Vec::new();
                 set(&status, |s| {
                     for (i, code) in ack.return_codes.iter().enumerate() {
                         let topic = topics.get(i).cloned().unwrap_or_else(|| format!("#{i}"));
                         match code {
-                            SubscribeReasonCode::Success(_) => s.granted.push(topic),
-                            SubscribeReasonCode::Failure => s.denied.push(topic),
+                            SubscribeReasonCode::Success(_) => {
+                                s.denied.retain(|t| *t != topic);
+                                refused_waits.remove(&topic);
+                                s.granted.push(topic);
+                            }
+                            SubscribeReasonCode::Failure => {
+                                if !s.denied.contains(&topic) {
+                                    s.denied.push(topic.clone());
+                                }
+                                again.push(topic);
+                            }
                         }
                     }
                 });
+                for topic in again {
+                    let wait = refused_waits.get(&topic).map_or(RESUBSCRIBE_WAIT, |w| {
+                        (*w * 2).min(options.max_backoff.max(RESUBSCRIBE_WAIT))
+                    });
+                    refused_waits.insert(topic.clone(), wait);
+                    let (client, subscribing) = (client.clone(), subscribing.clone());
+                    tokio::spawn(async move {
+                        tokio::time::sleep(wait).await;
+                        if let Ok(mut pending) = subscribing.lock() {
+                            pending.push_back(vec![topic.clone()]);
+                        }
+                        let _ = client.subscribe(topic, QoS::AtLeastOnce).await;
+                    });
+                }
             }
             Ok(Event::Incoming(Packet::Publish(publish))) => {
                 let message = Message {
                     topic: publish.topic.clone(),
                     payload: publish.payload.to_vec(),
                     retained: publish.retain,
-                    publish,
+                    ack: Ack::Mqtt(publish),
                 };
                 if options.manual_acks {
                     if held.is_empty() {
@@ -599,6 +730,12 @@ async fn run(
                 }
                 tokio::time::sleep(wait).await;
                 backoff = (backoff * 2).min(options.max_backoff);
+                // The next node of a clustered broker (each address tried in turn).
+                if broker.addresses.len() > 1 {
+                    address = (address + 1) % broker.addresses.len();
+                    eventloop.mqtt_options = mqtt_options(&broker, address, &options);
+                    set(&status, |s| s.address = address);
+                }
             }
         }
     }
@@ -612,8 +749,8 @@ mod tests {
     fn broker_addresses_parse_and_hide_the_password() {
         let b: Broker = "mqtt://127.0.0.1:1883".parse().unwrap();
         assert_eq!(
-            (b.host.as_str(), b.port, b.username.clone()),
-            ("127.0.0.1", 1883, None)
+            (b.addresses.clone(), b.username.clone()),
+            (vec![("127.0.0.1".to_string(), 1883)], None)
         );
         let b: Broker = "mqtt://JA3AP47H0YF000042:s3cret@broker.example:8883"
             .parse()
@@ -624,7 +761,30 @@ mod tests {
             b.to_string(),
             "mqtt://JA3AP47H0YF000042@broker.example:8883"
         );
-        assert_eq!("mqtt://host".parse::<Broker>().unwrap().port, 1883);
+        assert_eq!(
+            "mqtt://host".parse::<Broker>().unwrap().addresses,
+            [("host".to_string(), 1883)]
+        );
+        // A clustered broker's nodes, tried in turn.
+        let b: Broker = "mqtt://car:pw@10.0.0.1,10.0.0.2:1884,node3:1885"
+            .parse()
+            .unwrap();
+        assert_eq!(
+            b.addresses,
+            [
+                ("10.0.0.1".to_string(), 1883),
+                ("10.0.0.2".to_string(), 1884),
+                ("node3".to_string(), 1885)
+            ]
+        );
+        assert_eq!(
+            b.to_string(),
+            "mqtt://car@10.0.0.1:1883,10.0.0.2:1884,node3:1885"
+        );
+        assert!("mqtt://h1,,h2"
+            .parse::<Broker>()
+            .unwrap_err()
+            .contains("names no host"));
         let e = "tcp://u:pw@host".parse::<Broker>().unwrap_err();
         assert!(
             e.contains("mqtt://") && e.contains("u:***@host") && !e.contains("pw"),

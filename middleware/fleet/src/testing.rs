@@ -196,6 +196,217 @@ impl Drop for PrivateBroker {
     }
 }
 
+/// A NATS cluster of the test's own (the clustered engine), run from the configuration
+/// `autoplug fleet broker init --engine nats` writes, on free loopback ports, each node a
+/// process that can be killed and started again; killed when dropped. The binary:
+/// `$NATS_SERVER`, else `/usr/sbin/nats-server`, else `nats-server` on the PATH.
+pub struct PrivateCluster {
+    /// Its directory (removed when dropped).
+    pub dir: std::path::PathBuf,
+    /// Its configuration's files.
+    pub files: crate::nats_cluster::ClusterDir,
+    /// The nodes' addresses.
+    pub nodes: Vec<crate::nats_cluster::NodeAddress>,
+    children: Vec<Option<std::process::Child>>,
+}
+
+impl PrivateCluster {
+    /// Starts `nodes` nodes and waits until every one listens and JetStream answers
+    /// (a cluster: has a leader); panics naming what is missing (a test helper).
+    pub fn start(nodes: usize) -> Self {
+        static NEXT: AtomicU32 = AtomicU32::new(0);
+        let dir = std::env::temp_dir().join(format!(
+            "autoplug-nats-{}-{}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+        // Three ports a node from three free ranges (bound once to find them).
+        let free = || {
+            std::net::TcpListener::bind("127.0.0.1:0")
+                .unwrap()
+                .local_addr()
+                .unwrap()
+                .port()
+        };
+        let addresses: Vec<crate::nats_cluster::NodeAddress> = (0..nodes)
+            .map(|_| crate::nats_cluster::NodeAddress {
+                host: "127.0.0.1".into(),
+                mqtt_port: free(),
+                client_port: free(),
+                cluster_port: free(),
+            })
+            .collect();
+        let files = crate::nats_cluster::init(&dir, &addresses).unwrap();
+        let mut cluster = Self {
+            dir,
+            files,
+            nodes: addresses,
+            children: (0..nodes).map(|_| None).collect(),
+        };
+        // A login of its own to warm the cluster up with (a test's own logins come after).
+        let warm = format!("warm-{}", std::process::id());
+        crate::nats_cluster::add_logins(
+            &cluster.files,
+            &[(crate::broker::FLEET_USER.into(), warm.clone(), false)],
+        )
+        .unwrap();
+        for n in 0..nodes {
+            cluster.start_node(n);
+        }
+        cluster.warm_up(&warm);
+        cluster
+    }
+
+    /// Waits until JetStream answers (the cluster elected its leader) and the MQTT side's
+    /// own streams are made (the first QoS 1 subscription makes them): otherwise a test's
+    /// first cars race the cluster's start, and a subscription made then times out.
+    fn warm_up(&self, password: &str) {
+        use std::time::{Duration, Instant};
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let servers = self.nats_url(&[0], crate::broker::FLEET_USER, password);
+        let deadline = Instant::now() + Duration::from_secs(30);
+        runtime.block_on(async {
+            let client = async_nats::ConnectOptions::with_user_and_password(
+                crate::broker::FLEET_USER.into(),
+                password.into(),
+            )
+            .connect(format!("127.0.0.1:{}", self.nodes[0].client_port))
+            .await
+            .unwrap_or_else(|e| panic!("{servers}: {e}"));
+            let js = async_nats::jetstream::new(client);
+            // A stream that is not there: "not found" is JetStream answering.
+            loop {
+                match js.get_stream("AUTOPLUG_WARM_UP").await {
+                    Err(e) if e.to_string().contains("not found") => break,
+                    Ok(_) => break,
+                    Err(e) => assert!(
+                        Instant::now() < deadline,
+                        "JetStream did not answer ({e}): {}",
+                        self.log(0)
+                    ),
+                }
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        });
+        let mut options = crate::mqtt::LinkOptions::new(format!("warm-{}", std::process::id()));
+        options.subscriptions = vec!["autoplug/v1/warm-up".into()];
+        let link = crate::mqtt::MqttLink::connect(
+            runtime.handle(),
+            &self.mqtt_url(&[0], crate::broker::FLEET_USER, password),
+            options,
+        );
+        while link.status().granted.is_empty() {
+            assert!(
+                Instant::now() < deadline,
+                "no MQTT subscription: {:?}",
+                link.status()
+            );
+            runtime.block_on(async { tokio::time::sleep(Duration::from_millis(50)).await });
+        }
+    }
+
+    /// Starts node `n` (from 0) and waits until it listens.
+    pub fn start_node(&mut self, n: usize) {
+        let binary = std::env::var("NATS_SERVER").unwrap_or_else(|_| {
+            if std::path::Path::new("/usr/sbin/nats-server").exists() {
+                "/usr/sbin/nats-server".into()
+            } else {
+                "nats-server".into()
+            }
+        });
+        let log = std::fs::File::create(self.dir.join(format!("node-{}.log", n + 1))).unwrap();
+        let child = std::process::Command::new(&binary)
+            .arg("-c")
+            .arg(self.files.node_config(n + 1))
+            .stdout(std::process::Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot run {binary} (scripts/setup-tests installs nats-server): {e}")
+            });
+        self.children[n] = Some(child);
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        let node = &self.nodes[n];
+        for port in [node.client_port, node.mqtt_port] {
+            while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+                assert!(
+                    std::time::Instant::now() < deadline,
+                    "nats-server node {} did not listen on {port}: {}",
+                    n + 1,
+                    self.log(n)
+                );
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+        }
+    }
+
+    /// Kills node `n` (SIGKILL: a machine lost), waiting for it to end.
+    pub fn kill_node(&mut self, n: usize) {
+        if let Some(mut child) = self.children[n].take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
+    /// Node `n`'s log so far.
+    pub fn log(&self, n: usize) -> String {
+        std::fs::read_to_string(self.dir.join(format!("node-{}.log", n + 1))).unwrap_or_default()
+    }
+
+    /// Adds logins and has the running nodes reload them.
+    pub fn add_logins(&self, logins: &[(String, String)]) {
+        let logins: Vec<(String, String, bool)> = logins
+            .iter()
+            .map(|(u, p)| (u.clone(), p.clone(), false))
+            .collect();
+        crate::nats_cluster::add_logins(&self.files, &logins).unwrap();
+        // A reload is asynchronous: give the nodes a moment to read the file.
+        std::thread::sleep(std::time::Duration::from_millis(300));
+    }
+
+    /// The cars' MQTT address over `nodes` (from 0, in that order) as `user`.
+    pub fn mqtt_url(&self, nodes: &[usize], user: &str, password: &str) -> crate::mqtt::Broker {
+        let hosts: Vec<String> = nodes
+            .iter()
+            .map(|&n| format!("127.0.0.1:{}", self.nodes[n].mqtt_port))
+            .collect();
+        format!("mqtt://{user}:{password}@{}", hosts.join(","))
+            .parse()
+            .unwrap()
+    }
+
+    /// The services' NATS address over `nodes` as `user`.
+    pub fn nats_url(
+        &self,
+        nodes: &[usize],
+        user: &str,
+        password: &str,
+    ) -> crate::nats::NatsServers {
+        let hosts: Vec<String> = nodes
+            .iter()
+            .map(|&n| format!("127.0.0.1:{}", self.nodes[n].client_port))
+            .collect();
+        format!("nats://{user}:{password}@{}", hosts.join(","))
+            .parse()
+            .unwrap()
+    }
+}
+
+impl Drop for PrivateCluster {
+    fn drop(&mut self) {
+        for n in 0..self.children.len() {
+            self.kill_node(n);
+        }
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
 /// A trip report numbered `n` of `vin` (a short standing trip: every figure plausible).
 pub fn trip_report(vin: &autoplug_vin::Vin, n: i64) -> crate::TripReport {
     crate::TripReport {
@@ -235,6 +446,30 @@ pub fn intake_thread(
     }
     std::thread::spawn(move || {
         let mut ingest = crate::ingest::Ingest::new(store, link);
+        ingest.run(&stop, Duration::from_millis(50), |_| {});
+        (ingest.stats, ingest.link.status())
+    })
+}
+
+/// A fleet service's intake on the clustered engine, as `autoplug fleet serve --queue`
+/// runs it: reports pulled from the work queue at `servers`, receipts over an MQTT
+/// connection to `broker`, on a thread of its own until `stop`; returns what it did.
+pub fn queue_intake_thread(
+    runtime: &tokio::runtime::Handle,
+    broker: &crate::mqtt::Broker,
+    servers: &crate::nats::NatsServers,
+    client_id: &str,
+    store: crate::FleetStore,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<(crate::ingest::IngestStats, crate::mqtt::LinkStatus)> {
+    use std::time::Duration;
+    let mut options = crate::mqtt::service_options(client_id);
+    options.max_backoff = Duration::from_secs(1);
+    let link = crate::mqtt::MqttLink::connect(runtime, broker, options);
+    link.wait_connected(Duration::from_secs(10)).unwrap();
+    let queue = crate::nats::WorkQueue::connect(runtime, servers, client_id).unwrap();
+    std::thread::spawn(move || {
+        let mut ingest = crate::ingest::Ingest::with_queue(store, link, queue);
         ingest.run(&stop, Duration::from_millis(50), |_| {});
         (ingest.stats, ingest.link.status())
     })

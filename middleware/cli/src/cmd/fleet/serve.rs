@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use autoplug_fleet::ingest::Ingest;
 use autoplug_fleet::ingest::DRAIN_QUIET;
 use autoplug_fleet::mqtt::{LinkOptions, MqttLink};
+use autoplug_fleet::nats::{NatsServers, WorkQueue};
 use autoplug_fleet::service::FleetService;
 use autoplug_fleet::topics;
 use autoplug_image::SigningKey;
@@ -29,6 +30,8 @@ pub(crate) fn run(args: ServeArgs, out: &mut dyn Write) -> Result<(), String> {
         group,
         persistent_session,
         clean_session: _,
+        queue,
+        queue_password_file,
         web,
         allowed_hosts,
     } = args;
@@ -37,13 +40,28 @@ pub(crate) fn run(args: ServeArgs, out: &mut dyn Write) -> Result<(), String> {
     if group.is_empty() || group.contains(['/', '+', '#']) {
         return Err(format!("'{group}' cannot name a group (no '/', '+', '#')"));
     }
-    options.subscriptions = vec![topics::reports_shared(&group)];
+    let queue = match queue {
+        Some(mut servers) => {
+            if let Some(path) = &queue_password_file {
+                let password = std::fs::read_to_string(path)
+                    .map_err(|e| format!("cannot read '{}': {e}", path.display()))?;
+                servers.password = Some(password.trim_end_matches(['\r', '\n']).to_string());
+            }
+            Some(servers)
+        }
+        // The reports through the broker, split by a shared subscription.
+        None => {
+            options.subscriptions = vec![topics::reports_shared(&group)];
+            None
+        }
+    };
     let settings = ServeSettings {
         key,
         tick,
         duration,
         web,
         allowed_hosts,
+        queue,
     };
     serve(&db, &broker, settings, options, out)
 }
@@ -55,6 +73,7 @@ struct ServeSettings {
     duration: Option<f64>,
     web: Option<std::net::SocketAddr>,
     allowed_hosts: Vec<String>,
+    queue: Option<NatsServers>,
 }
 
 /// Runs the service (and the fleet page) until Ctrl-C or `--duration`, then prints what
@@ -72,6 +91,7 @@ fn serve(
         duration,
         web,
         allowed_hosts,
+        queue,
     } = settings;
     if !(tick.is_finite() && (0.01..=3600.0).contains(&tick)) {
         return Err("--tick is 0.01 to 3600 seconds".into());
@@ -103,12 +123,23 @@ fn serve(
     let runtime = mqtt_runtime()?;
     let broker = broker.broker()?;
     let subscription = options.subscriptions.first().cloned().unwrap_or_default();
+    let name = options.client_id.clone();
     let link = MqttLink::connect(runtime.handle(), &broker, options);
     link.wait_connected(Duration::from_secs(10))
         .map_err(|e| e.to_string())?;
+    let queue = queue
+        .map(|servers| WorkQueue::connect(runtime.handle(), &servers, &name))
+        .transpose()?;
+    let source = match &queue {
+        Some(queue) => format!(
+            "the work queue at {} (receipts through {broker})",
+            queue.servers()
+        ),
+        None => broker.to_string(),
+    };
     writeln!(
         out,
-        "fleet service: reports from {broker} into {}; campaigns {}",
+        "fleet service: reports from {source} into {}; campaigns {}",
         store.name(),
         if key.is_some() {
             "sent"
@@ -125,8 +156,11 @@ fn serve(
         let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
     let started = Instant::now();
-    let mut service =
-        FleetService::new(Ingest::new(store, link), key, Duration::from_secs_f64(tick));
+    let ingest = match queue {
+        Some(queue) => Ingest::with_queue(store, link, queue),
+        None => Ingest::new(store, link),
+    };
+    let mut service = FleetService::new(ingest, key, Duration::from_secs_f64(tick));
     while !stop.load(Ordering::Relaxed)
         && duration.is_none_or(|d| started.elapsed().as_secs_f64() < d)
     {
