@@ -261,38 +261,66 @@ impl WorkQueue {
         Ok((consumer, replicas))
     }
 
+    /// Makes or finds the stream and the consumer, once.
+    fn try_set_up(&mut self) -> Result<(), String> {
+        if self.consumer.is_some() {
+            return Ok(());
+        }
+        let client = self.client.clone();
+        let outcome = self.runtime.block_on(async move {
+            tokio::time::timeout(REQUEST_TIMEOUT * 2, Self::set_up(client)).await
+        });
+        match outcome {
+            Ok(Ok((consumer, replicas))) => {
+                self.consumer = Some(consumer);
+                if let Ok(mut s) = self.status.lock() {
+                    s.ready = true;
+                    s.replicas = replicas;
+                    s.last_error = None;
+                }
+                self.unseen = Some(format!(
+                    "the work queue is ready: stream {STREAM} on {replicas} node(s), consumer {CONSUMER}"
+                ));
+                Ok(())
+            }
+            Ok(Err(e)) => {
+                self.set_error(e.clone());
+                Err(e)
+            }
+            Err(_) => {
+                let e = format!("{}: no answer while setting up the stream", self.servers);
+                self.set_error(e.clone());
+                Err(e)
+            }
+        }
+    }
+
+    /// Waits until the stream and the consumer are there, at most `timeout`: reports the
+    /// cars publish before the stream exists are kept by no one (the cars send them again
+    /// when no receipt comes).
+    pub fn wait_ready(&mut self, timeout: Duration) -> Result<(), String> {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            match self.try_set_up() {
+                Ok(()) => return Ok(()),
+                Err(e) if std::time::Instant::now() >= deadline => {
+                    return Err(format!(
+                        "{}: the work queue is not ready: {e}",
+                        self.servers
+                    ))
+                }
+                Err(_) => std::thread::sleep(Duration::from_millis(100)),
+            }
+        }
+    }
+
     /// The reports waiting now, at most `max`, waiting at most `wait` for the first: a
     /// pull of one that waits, then one of the rest that does not. Nothing is asked for
     /// that this call does not take, so the service holds only what it returns.
     pub fn recv_batch(&mut self, wait: Duration, max: usize) -> Vec<Message> {
-        if self.consumer.is_none() {
-            let client = self.client.clone();
-            match self.runtime.block_on(async move {
-                tokio::time::timeout(REQUEST_TIMEOUT * 2, Self::set_up(client)).await
-            }) {
-                Ok(Ok((consumer, replicas))) => {
-                    self.consumer = Some(consumer);
-                    if let Ok(mut s) = self.status.lock() {
-                        s.ready = true;
-                        s.replicas = replicas;
-                        s.last_error = None;
-                    }
-                    self.unseen = Some(format!(
-                        "the work queue is ready: stream {STREAM} on {replicas} node(s), consumer {CONSUMER}"
-                    ));
-                }
-                Ok(Err(e)) => {
-                    self.set_error(e);
-                    std::thread::sleep(wait);
-                    return Vec::new();
-                }
-                Err(_) => {
-                    let servers = self.servers.clone();
-                    self.set_error(format!("{servers}: no answer while setting up the stream"));
-                    std::thread::sleep(wait);
-                    return Vec::new();
-                }
-            }
+        if self.consumer.is_none() && self.try_set_up().is_err() {
+            std::thread::sleep(wait);
+            return Vec::new();
         }
         let Some(consumer) = &self.consumer else {
             return Vec::new();

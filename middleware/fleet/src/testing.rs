@@ -467,7 +467,8 @@ pub fn queue_intake_thread(
     options.max_backoff = Duration::from_secs(1);
     let link = crate::mqtt::MqttLink::connect(runtime, broker, options);
     link.wait_connected(Duration::from_secs(10)).unwrap();
-    let queue = crate::nats::WorkQueue::connect(runtime, servers, client_id).unwrap();
+    let mut queue = crate::nats::WorkQueue::connect(runtime, servers, client_id).unwrap();
+    queue.wait_ready(Duration::from_secs(20)).unwrap();
     std::thread::spawn(move || {
         let mut ingest = crate::ingest::Ingest::with_queue(store, link, queue);
         ingest.run(&stop, Duration::from_millis(50), |_| {});

@@ -7,7 +7,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use autoplug_fleet::broker::FLEET_USER;
+use autoplug_fleet::mqtt::{LinkOptions, MqttLink};
+use autoplug_fleet::nats::WorkQueue;
 use autoplug_fleet::testing::{self, PgSchema, PrivateCluster};
+use autoplug_fleet::topics::{self, ReportKind};
 use autoplug_fleet::FleetStore;
 use autoplug_vin::Vin;
 
@@ -163,4 +166,317 @@ fn a_node_killed_mid_stream_loses_nothing_and_its_cars_move_to_another() {
         all_waits[all_waits.len() * 99 / 100],
         all_waits[all_waits.len() - 1],
     );
+}
+
+const A: &str = "JA3AP47H0YF000042";
+const B: &str = "JA3AP47H2YF000043";
+
+fn vin(text: &str) -> Vin {
+    Vin::parse(text).unwrap()
+}
+
+fn cluster_with_logins() -> PrivateCluster {
+    let cluster = PrivateCluster::start(3);
+    let mut logins = vec![(FLEET_USER.to_string(), "pw-fleet".to_string())];
+    logins.extend([A, B].map(|v| (v.to_string(), format!("pw-{v}"))));
+    cluster.add_logins(&logins);
+    cluster
+}
+
+/// A car's connection as `user` with `client_id` through node `node` (then the others).
+fn vehicle(
+    rt: &tokio::runtime::Runtime,
+    cluster: &PrivateCluster,
+    node: usize,
+    user: &str,
+    client_id: &str,
+    subscriptions: Vec<String>,
+) -> MqttLink {
+    let mut options = LinkOptions::new(client_id);
+    options.persistent_session = true;
+    options.subscriptions = subscriptions;
+    options.max_backoff = Duration::from_millis(500);
+    let nodes = [node % 3, (node + 1) % 3, (node + 2) % 3];
+    MqttLink::connect(
+        rt.handle(),
+        &cluster.mqtt_url(&nodes, user, &format!("pw-{user}")),
+        options,
+    )
+}
+
+fn wait_answered(link: &MqttLink, n: usize) {
+    for _ in 0..1000 {
+        let s = link.status();
+        if s.granted.len() + s.denied.len() >= n {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!("no SUBACK: {:?}", link.status());
+}
+
+fn next(link: &mut MqttLink, wait: Duration) -> Option<(String, Vec<u8>)> {
+    link.recv_timeout(wait).map(|m| (m.topic, m.payload))
+}
+
+/// The reports in the work queue within `wait`, by topic and payload.
+fn queued(queue: &mut WorkQueue, wait: Duration) -> Vec<(String, Vec<u8>)> {
+    let deadline = std::time::Instant::now() + wait;
+    let mut got = Vec::new();
+    while std::time::Instant::now() < deadline {
+        for m in queue.recv_batch(Duration::from_millis(100), 100) {
+            queue.ack(&m).unwrap();
+            got.push((m.topic, m.payload));
+        }
+    }
+    got
+}
+
+#[test]
+fn on_the_cluster_a_vehicle_publishes_only_as_itself_and_reads_only_its_own_topics() {
+    let cluster = cluster_with_logins();
+    let rt = testing_runtime();
+    let mut queue = WorkQueue::connect(
+        rt.handle(),
+        &cluster.nats_url(&[1], FLEET_USER, "pw-fleet"),
+        "probe",
+    )
+    .unwrap();
+    assert!(queued(&mut queue, Duration::from_millis(500)).is_empty());
+    let fleet = {
+        let link = MqttLink::connect(
+            rt.handle(),
+            &cluster.mqtt_url(&[2], FLEET_USER, "pw-fleet"),
+            LinkOptions::new("fleet-probe"),
+        );
+        link.wait_connected(Duration::from_secs(10)).unwrap();
+        link
+    };
+
+    // A wrong password is refused at login, with the reason.
+    let mut options = LinkOptions::new(A);
+    options.max_backoff = Duration::from_millis(200);
+    let intruder = MqttLink::connect(rt.handle(), &cluster.mqtt_url(&[0], A, "guess"), options);
+    let refused = intruder.wait_connected(Duration::from_secs(5)).unwrap_err();
+    assert!(refused.0.contains("refused the login"), "{refused}");
+    drop(intruder);
+
+    // Beyond its own topics every subscription is refused at SUBACK: another car's
+    // commands, every car's reports, everything, the server's own delivery subjects.
+    let beyond = [
+        topics::command(&vin(B)),
+        topics::REPORTS.to_string(),
+        "#".to_string(),
+        "$MQTT/sub/#".to_string(),
+    ];
+    let mut subscriptions = vec![topics::command(&vin(A)), topics::receipt(&vin(A))];
+    subscriptions.extend(beyond.iter().cloned());
+    let mut a = vehicle(&rt, &cluster, 0, A, A, subscriptions);
+    a.wait_connected(Duration::from_secs(10)).unwrap();
+    wait_answered(&a, 6);
+    let status = a.status();
+    assert!(
+        status.granted.contains(&topics::command(&vin(A))),
+        "{status:?}"
+    );
+    for topic in &beyond {
+        assert!(status.denied.contains(topic), "{topic}: {status:?}");
+    }
+
+    // A publishes a report as B, then one as itself: only its own reaches the queue.
+    a.publish(
+        &topics::report(&vin(B), ReportKind::Trip),
+        b"forged".to_vec(),
+        false,
+    )
+    .unwrap();
+    a.publish(
+        &topics::report(&vin(A), ReportKind::Trip),
+        b"own".to_vec(),
+        false,
+    )
+    .unwrap();
+    // Nor may a car write commands (a forged instruction), to itself or another.
+    a.publish(&topics::command(&vin(A)), b"self-command".to_vec(), false)
+        .unwrap();
+    a.publish(&topics::command(&vin(B)), b"forged-command".to_vec(), false)
+        .unwrap();
+    assert_eq!(
+        queued(&mut queue, Duration::from_secs(2)),
+        [(topics::report(&vin(A), ReportKind::Trip), b"own".to_vec())]
+    );
+    // B, offline with its session kept, and A taking B's client id: it gets B's
+    // connection but not B's commands (its own rights judge the session's subscriptions).
+    let b = vehicle(&rt, &cluster, 1, B, B, vec![topics::command(&vin(B))]);
+    b.wait_connected(Duration::from_secs(10)).unwrap();
+    wait_answered(&b, 1);
+    b.close(Duration::from_secs(2));
+    let mut a_as_b = vehicle(&rt, &cluster, 2, A, B, vec![]);
+    a_as_b.wait_connected(Duration::from_secs(10)).unwrap();
+    fleet
+        .publish(&topics::command(&vin(B)), b"for B".to_vec(), false)
+        .unwrap();
+    fleet
+        .publish(&topics::command(&vin(A)), b"for A".to_vec(), false)
+        .unwrap();
+    assert_eq!(
+        next(&mut a, Duration::from_secs(5)),
+        Some((topics::command(&vin(A)), b"for A".to_vec()))
+    );
+    assert_eq!(
+        next(&mut a, Duration::from_millis(300)),
+        None,
+        "no forged command arrived"
+    );
+    assert_eq!(next(&mut a_as_b, Duration::from_millis(500)), None);
+    drop(a_as_b);
+    // B comes back and finds its command in its session.
+    let mut b = vehicle(&rt, &cluster, 1, B, B, vec![topics::command(&vin(B))]);
+    b.wait_connected(Duration::from_secs(10)).unwrap();
+    assert_eq!(
+        next(&mut b, Duration::from_secs(10)),
+        Some((topics::command(&vin(B)), b"for B".to_vec()))
+    );
+}
+
+fn testing_runtime() -> tokio::runtime::Runtime {
+    autoplug_fleet::mqtt::runtime().unwrap()
+}
+
+/// The receipts on `link` within `wait`: (report's SHA-256, refusal).
+fn receipts(link: &mut MqttLink, wait: Duration) -> Vec<(String, Option<String>)> {
+    let deadline = std::time::Instant::now() + wait;
+    let mut got = Vec::new();
+    while std::time::Instant::now() < deadline {
+        if let Some(m) = link.recv_timeout(Duration::from_millis(100)) {
+            let r: autoplug_fleet::Receipt = serde_json::from_slice(&m.payload).unwrap();
+            got.push((r.report, r.refused));
+        }
+    }
+    got
+}
+
+/// Bad reports refused with a receipt, a duplicate stored once; then, while cars report,
+/// the whole cluster restarted (every node killed and started again from its store) and
+/// the service's database connection ended by an administrator: every trip stored once.
+#[test]
+fn on_the_cluster_bad_reports_are_refused_and_restarts_lose_nothing() {
+    const CARS: usize = 6;
+    const TRIPS: usize = 50;
+    let mut cluster = cluster_with_logins();
+    let cars = vins(CARS);
+    let logins: Vec<(String, String)> = cars
+        .iter()
+        .map(|v| (v.to_string(), format!("pw-{v}")))
+        .collect();
+    cluster.add_logins(&logins);
+    let rt = testing_runtime();
+    let schema = PgSchema::new();
+    let mut store = FleetStore::open(&schema.url).unwrap();
+    let backend = store.db().query("SELECT pg_backend_pid()", &[]).unwrap()[0][0]
+        .int()
+        .unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let service = testing::queue_intake_thread(
+        rt.handle(),
+        &cluster.mqtt_url(&[0, 1, 2], FLEET_USER, "pw-fleet"),
+        &cluster.nats_url(&[0, 1, 2], FLEET_USER, "pw-fleet"),
+        "svc",
+        store,
+        stop.clone(),
+    );
+
+    // The hostile car: malformed, too large, naming another VIN, and one trip twice.
+    let mut a = vehicle(&rt, &cluster, 0, A, A, vec![topics::receipt(&vin(A))]);
+    a.wait_connected(Duration::from_secs(10)).unwrap();
+    wait_answered(&a, 1);
+    let topic = topics::report(&vin(A), ReportKind::Trip);
+    let huge = format!(
+        "\"{}\"",
+        "x".repeat(autoplug_fleet::report::MAX_REPORT_BYTES)
+    );
+    let as_b = serde_json::to_vec(&testing::trip_report(&vin(B), 1)).unwrap();
+    let good = serde_json::to_vec(&testing::trip_report(&vin(A), 1)).unwrap();
+    let bad: Vec<Vec<u8>> = vec![b"{not json".to_vec(), huge.into_bytes(), as_b];
+    for payload in bad.iter().chain([&good, &good]) {
+        a.publish(&topic, payload.clone(), false).unwrap();
+    }
+    let got = receipts(&mut a, Duration::from_secs(5));
+    let sha = |p: &[u8]| autoplug_fleet::campaign::sha256_hex(p);
+    for (payload, why) in bad
+        .iter()
+        .zip(["not valid", "bytes (at most", "naming VIN"])
+    {
+        let refused = got.iter().find(|(r, _)| *r == sha(payload));
+        assert!(
+            refused.is_some_and(|(_, reason)| reason.as_deref().is_some_and(|r| r.contains(why))),
+            "{why}: {got:?}"
+        );
+    }
+    assert_eq!(
+        got.iter()
+            .filter(|(r, f)| *r == sha(&good) && f.is_none())
+            .count(),
+        2
+    );
+
+    let drivers: Vec<_> = cars
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            testing::reporting_car(
+                rt.handle(),
+                &cluster.mqtt_url(
+                    &[i % 3, (i + 1) % 3, (i + 2) % 3],
+                    v.as_str(),
+                    &format!("pw-{v}"),
+                ),
+                *v,
+                TRIPS,
+                Duration::from_millis(40),
+                2_000,
+                Duration::from_secs(120),
+            )
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(600));
+    for n in 0..3 {
+        cluster.kill_node(n);
+    }
+    for n in 0..3 {
+        cluster.start_node(n);
+    }
+    std::thread::sleep(Duration::from_millis(800));
+    let mut admin = FleetStore::open(&schema.url).unwrap();
+    admin
+        .db()
+        .query(&format!("SELECT pg_terminate_backend({backend})"), &[])
+        .unwrap();
+    for d in drivers {
+        let (outbox, status, _) = d.join().unwrap();
+        assert!(
+            outbox.is_empty(),
+            "{} unconfirmed: {status:?}",
+            outbox.len()
+        );
+    }
+    stop.store(true, Ordering::Relaxed);
+    let (stats, _) = service.join().unwrap();
+    assert_eq!(stats.rejected, 3, "{stats:?}");
+    assert!(
+        stats.db_retries >= 1,
+        "the connection's end was met: {stats:?}"
+    );
+    let mut store = FleetStore::open(&schema.url).unwrap();
+    assert_eq!(store.summary().unwrap().trips as usize, CARS * TRIPS + 1);
+    let twice = store
+        .db()
+        .query(
+            "SELECT count(*) FROM (SELECT 1 FROM trips GROUP BY vin, trip HAVING count(*) > 1) t",
+            &[],
+        )
+        .unwrap()[0][0]
+        .int()
+        .unwrap();
+    assert_eq!(twice, 0);
 }

@@ -127,9 +127,14 @@ fn serve(
     let link = MqttLink::connect(runtime.handle(), &broker, options);
     link.wait_connected(Duration::from_secs(10))
         .map_err(|e| e.to_string())?;
-    let queue = queue
-        .map(|servers| WorkQueue::connect(runtime.handle(), &servers, &name))
-        .transpose()?;
+    let queue = match queue {
+        Some(servers) => {
+            let mut queue = WorkQueue::connect(runtime.handle(), &servers, &name)?;
+            queue.wait_ready(Duration::from_secs(10))?;
+            Some(queue)
+        }
+        None => None,
+    };
     let source = match &queue {
         Some(queue) => format!(
             "the work queue at {} (receipts through {broker})",
