@@ -12,8 +12,12 @@
 //! The trips carry the nine ECUs' verdicts (and a trouble code on one in 50), as drives
 //! report them. Cars, broker, services and database share this machine's cores.
 //!
+//! With `--nats`, the clustered engine instead: three NATS nodes on this machine (the
+//! configuration `autoplug fleet broker init --engine nats` writes), the cars spread over
+//! them, the services pulling from the work queue (each on a node of its own).
+//!
 //! ```text
-//! cargo run --release -p autoplug-fleet --example scaling_benchmark [CARS] [TRIPS] [RATE] [SERVICES...]
+//! cargo run --release -p autoplug-fleet --example scaling_benchmark [--nats] [CARS] [TRIPS] [RATE] [SERVICES...]
 //! ```
 //! Defaults: 100 cars, 50 trips each, 200 reports/s, services 1 2 3.
 
@@ -23,13 +27,24 @@ use std::time::{Duration, Instant};
 
 use autoplug_fleet::broker::FLEET_USER;
 use autoplug_fleet::testing::{
-    intake_thread, reporting_car_with, trip_with_evidence, PgSchema, PrivateBroker,
+    intake_thread, queue_intake_thread, reporting_car_with, trip_with_evidence, PgSchema,
+    PrivateBroker, PrivateCluster,
 };
 use autoplug_fleet::FleetStore;
 use autoplug_vin::Vin;
 
+/// The arguments besides `--nats`.
+fn args() -> Vec<String> {
+    std::env::args().filter(|a| a != "--nats").collect()
+}
+
+fn nats() -> bool {
+    std::env::args().any(|a| a == "--nats")
+}
+
 fn arg(n: usize, default: usize) -> usize {
-    std::env::args()
+    args()
+        .into_iter()
         .nth(n)
         .map(|a| a.parse().expect("a number"))
         .unwrap_or(default)
@@ -53,28 +68,51 @@ fn phase(
     trips: usize,
     pace: Duration,
 ) -> Phase {
-    let broker = PrivateBroker::start();
+    enum Messaging {
+        Mosquitto(PrivateBroker),
+        Nats(PrivateCluster),
+    }
+    let messaging = if nats() {
+        Messaging::Nats(PrivateCluster::start(3))
+    } else {
+        Messaging::Mosquitto(PrivateBroker::start())
+    };
     let vins: Vec<Vin> = (0..cars)
         .map(|i| Vin::with_check_digit(&format!("JA3AP47H0YB{:06}", 700_000 + i)).expect("VIN"))
         .collect();
     let mut logins = vec![(FLEET_USER.to_string(), "pw-fleet".to_string())];
     logins.extend(vins.iter().map(|v| (v.to_string(), format!("pw-{v}"))));
-    broker.add_logins(&logins);
+    match &messaging {
+        Messaging::Mosquitto(broker) => broker.add_logins(&logins),
+        Messaging::Nats(cluster) => cluster.add_logins(&logins),
+    }
     let schema = PgSchema::new();
     // The schema made once, before the services start.
     drop(FleetStore::open(&schema.url).expect("PostgreSQL"));
     let stop = Arc::new(AtomicBool::new(false));
-    let fleet = broker.url(FLEET_USER, "pw-fleet");
     let intakes: Vec<_> = (0..services)
         .map(|i| {
             let store = FleetStore::open(&schema.url).expect("PostgreSQL");
-            intake_thread(
-                runtime.handle(),
-                &fleet,
-                &format!("fleet-{i}"),
-                store,
-                stop.clone(),
-            )
+            match &messaging {
+                Messaging::Mosquitto(broker) => intake_thread(
+                    runtime.handle(),
+                    &broker.url(FLEET_USER, "pw-fleet"),
+                    &format!("fleet-{i}"),
+                    store,
+                    stop.clone(),
+                ),
+                Messaging::Nats(cluster) => {
+                    let nodes = [i % 3, (i + 1) % 3, (i + 2) % 3];
+                    queue_intake_thread(
+                        runtime.handle(),
+                        &cluster.mqtt_url(&nodes, FLEET_USER, "pw-fleet"),
+                        &cluster.nats_url(&nodes, FLEET_USER, "pw-fleet"),
+                        &format!("fleet-{i}"),
+                        store,
+                        stop.clone(),
+                    )
+                }
+            }
         })
         .collect();
     let started = Instant::now();
@@ -83,11 +121,19 @@ fn phase(
     let stagger = pace / cars as u32;
     let car_threads: Vec<_> = vins
         .iter()
-        .map(|v| {
+        .enumerate()
+        .map(|(i, v)| {
             std::thread::sleep(stagger);
+            let password = format!("pw-{v}");
+            let url = match &messaging {
+                Messaging::Mosquitto(broker) => broker.url(v.as_str(), &password),
+                Messaging::Nats(cluster) => {
+                    cluster.mqtt_url(&[i % 3, (i + 1) % 3, (i + 2) % 3], v.as_str(), &password)
+                }
+            };
             reporting_car_with(
                 runtime.handle(),
-                &broker.url(v.as_str(), &format!("pw-{v}")),
+                &url,
                 *v,
                 trips,
                 pace,
@@ -133,7 +179,8 @@ fn main() {
     let trips = arg(2, 50).max(1);
     let rate = arg(3, 200).max(1);
     let counts: Vec<usize> = {
-        let given: Vec<usize> = std::env::args()
+        let given: Vec<usize> = args()
+            .into_iter()
             .skip(4)
             .map(|a| a.parse().expect("a count of services"))
             .collect();
@@ -149,7 +196,12 @@ fn main() {
         .build()
         .expect("a runtime");
     println!(
-        "fleet scaling: {cars} cars x {trips} trips (9 verdicts each), Mosquitto from the shipped configuration, PostgreSQL; {} cores",
+        "fleet scaling: {cars} cars x {trips} trips (9 verdicts each), {}, PostgreSQL; {} cores",
+        if nats() {
+            "three NATS nodes (JetStream work queue)"
+        } else {
+            "Mosquitto from the shipped configuration"
+        },
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
     for services in counts {

@@ -303,11 +303,17 @@ impl Ingest {
             return;
         };
         let receipt = Receipt::of(&message.payload, refused);
-        if self
-            .link
-            .publish_waiting(&topics::receipt(&vin), receipt.to_json(), false)
-            .is_err()
-        {
+        let sent = match &self.queue {
+            // On the clustered engine through NATS itself (see `WorkQueue::publish_now`).
+            Some(queue) => queue
+                .publish_now(&topics::receipt(&vin), receipt.to_json())
+                .is_ok(),
+            None => self
+                .link
+                .publish_waiting(&topics::receipt(&vin), receipt.to_json(), false)
+                .is_ok(),
+        };
+        if !sent {
             self.receipts_not_sent += 1;
         }
     }

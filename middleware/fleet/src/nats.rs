@@ -360,6 +360,17 @@ impl WorkQueue {
         messages
     }
 
+    /// Publishes `payload` to an MQTT `topic` through NATS itself: the cars connected now
+    /// get it (at QoS 0), no stream keeps it. For receipts: a car that misses one sends its
+    /// report again and gets the receipt of the duplicate. Never waits for the server.
+    pub fn publish_now(&self, topic: &str, payload: Vec<u8>) -> Result<(), String> {
+        let client = self.client.clone();
+        let subject = subject_of(topic);
+        self.runtime
+            .block_on(async move { client.publish(subject, payload.into()).await })
+            .map_err(|e| format!("cannot publish to {topic}: {e}"))
+    }
+
     /// Acknowledges a message (its report stored or refused for good): the stream forgets it.
     pub fn ack(&self, message: &Message) -> Result<(), String> {
         self.reply(message, AckKind::Ack)

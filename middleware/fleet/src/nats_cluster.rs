@@ -187,7 +187,7 @@ pub fn init(dir: &Path, nodes: &[NodeAddress]) -> Result<ClusterDir, String> {
              \n\
              jetstream {{\n  store_dir: {store}\n}}\n\
              \n\
-             mqtt {{\n  listen: {mqtt}\n}}\n\
+             mqtt {{\n  listen: {mqtt}\n  # The cars' sessions and QoS 1 messages on as many nodes as the reports: a node lost\n  # keeps a majority (the server would pick fewer if it started before its peers).\n  stream_replicas: {replicas}\n}}\n\
              \n\
              authorization {{\n  include \"users.conf\"\n}}\n",
             count = nodes.len(),
@@ -196,6 +196,7 @@ pub fn init(dir: &Path, nodes: &[NodeAddress]) -> Result<ClusterDir, String> {
             pid = quoted(&format!("{text}/node-{n}.pid")),
             store = quoted(&format!("{text}/node-{n}")),
             mqtt = quoted(&format!("{}:{}", node.host, node.mqtt_port)),
+            replicas = nodes.len().min(3),
         );
         if nodes.len() > 1 {
             let routes: Vec<String> = nodes
