@@ -362,9 +362,9 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
     pub decline_share: f64,
     /// Give every car a login of its own (its VIN, a fresh password) on the running
-    /// broker of this directory (`fleet broker init`), and connect each with it to the
-    /// vehicles' listener of --broker: the per-vehicle rights are then exercised as on
-    /// the road.
+    /// broker of this directory (`fleet broker init`, Mosquitto's or a NATS cluster's),
+    /// and connect each with it to the vehicles' listener of --broker: the per-vehicle
+    /// rights are then exercised as on the road.
     #[arg(long, value_name = "DIR")]
     pub broker_dir: Option<PathBuf>,
 }

@@ -491,6 +491,13 @@ impl FleetLink {
         let Some(link) = &self.link else {
             return;
         };
+        // Not before the receipts can come (see `MqttLink::subscribed`).
+        let Some(vin) = self.agent.as_ref().map(|a| a.vin()) else {
+            return;
+        };
+        if !link.subscribed(&autoplug_fleet::topics::receipt(vin)) {
+            return;
+        }
         self.outbox.send_due(now_ms(), |topic, payload| {
             link.publish(topic, payload.to_vec(), false).is_ok()
         });

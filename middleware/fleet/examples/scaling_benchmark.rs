@@ -50,6 +50,77 @@ fn arg(n: usize, default: usize) -> usize {
         .unwrap_or(default)
 }
 
+/// CPU time so far (clock ticks), by what spends it: this process's service threads
+/// ("intake"), the rest of this process (the cars and the connections), PostgreSQL, the
+/// broker (Mosquitto or the NATS nodes), and the whole machine's busy and total time.
+#[derive(Clone, Copy, Default)]
+struct Cpu {
+    services: u64,
+    this_process: u64,
+    postgres: u64,
+    broker: u64,
+    busy: u64,
+    total: u64,
+}
+
+/// utime + stime of a /proc stat line, and its command name.
+fn ticks(stat: &str) -> Option<(String, u64)> {
+    let open = stat.find('(')?;
+    let close = stat.rfind(')')?;
+    let name = stat[open + 1..close].to_string();
+    let fields: Vec<&str> = stat[close + 2..].split_whitespace().collect();
+    let utime: u64 = fields.get(11)?.parse().ok()?;
+    let stime: u64 = fields.get(12)?.parse().ok()?;
+    Some((name, utime + stime))
+}
+
+fn cpu() -> Cpu {
+    let mut cpu = Cpu::default();
+    if let Ok(tasks) = std::fs::read_dir("/proc/self/task") {
+        for task in tasks.flatten() {
+            if let Some((name, t)) = std::fs::read_to_string(task.path().join("stat"))
+                .ok()
+                .as_deref()
+                .and_then(ticks)
+            {
+                if name == "intake" {
+                    cpu.services += t;
+                }
+                cpu.this_process += t;
+            }
+        }
+    }
+    if let Ok(procs) = std::fs::read_dir("/proc") {
+        for p in procs.flatten() {
+            if let Some((name, t)) = std::fs::read_to_string(p.path().join("stat"))
+                .ok()
+                .as_deref()
+                .and_then(ticks)
+            {
+                match name.as_str() {
+                    "postgres" => cpu.postgres += t,
+                    "mosquitto" | "nats-server" => cpu.broker += t,
+                    _ => {}
+                }
+            }
+        }
+    }
+    if let Some(line) = std::fs::read_to_string("/proc/stat")
+        .ok()
+        .and_then(|s| s.lines().next().map(str::to_string))
+    {
+        let v: Vec<u64> = line
+            .split_whitespace()
+            .skip(1)
+            .filter_map(|x| x.parse().ok())
+            .collect();
+        cpu.total = v.iter().take(8).sum();
+        // idle and iowait are the 4th and 5th.
+        cpu.busy = cpu.total - v.get(3).copied().unwrap_or(0) - v.get(4).copied().unwrap_or(0);
+    }
+    cpu
+}
+
 /// One phase's figures: reports, wall time, the cars' waits for their receipts (ms) and
 /// the transactions the services committed.
 struct Phase {
@@ -58,6 +129,8 @@ struct Phase {
     waits: Vec<i64>,
     commits: u64,
     resent: u64,
+    /// CPU time spent during the phase (its start to its last receipt).
+    cpu: Cpu,
 }
 
 /// `services` services and `cars` cars of `trips` trips each, one every `pace` per car.
@@ -116,6 +189,7 @@ fn phase(
         })
         .collect();
     let started = Instant::now();
+    let cpu_before = cpu();
     // Paced cars start one after the other, spread over one pace: a fleet's cars do not
     // report in step.
     let stagger = pace / cars as u32;
@@ -152,6 +226,7 @@ fn phase(
         waits.extend(car_waits);
     }
     let wall_s = started.elapsed().as_secs_f64();
+    let cpu_after = cpu();
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let commits = intakes
         .into_iter()
@@ -164,6 +239,16 @@ fn phase(
         waits,
         commits,
         resent,
+        cpu: Cpu {
+            services: cpu_after.services.saturating_sub(cpu_before.services),
+            this_process: cpu_after
+                .this_process
+                .saturating_sub(cpu_before.this_process),
+            postgres: cpu_after.postgres.saturating_sub(cpu_before.postgres),
+            broker: cpu_after.broker.saturating_sub(cpu_before.broker),
+            busy: cpu_after.busy.saturating_sub(cpu_before.busy),
+            total: cpu_after.total.saturating_sub(cpu_before.total),
+        },
     }
 }
 
@@ -221,6 +306,17 @@ fn main() {
             percentile(&steady.waits, 0.99),
             steady.waits.last().copied().unwrap_or(0),
             steady.reports,
+        );
+        // Where the burst's CPU went, in per cent of one core (the machine has `cores`).
+        let c = burst.cpu;
+        let pct = |t: u64| 100.0 * t as f64 / (burst.wall_s * 100.0);
+        println!(
+            "    burst CPU: machine {:.0} % busy; services {:.0} % of a core, PostgreSQL {:.0} %, broker {:.0} %, cars and their links {:.0} %",
+            100.0 * c.busy as f64 / c.total.max(1) as f64,
+            pct(c.services),
+            pct(c.postgres),
+            pct(c.broker),
+            pct(c.this_process.saturating_sub(c.services)),
         );
     }
 }

@@ -377,6 +377,16 @@ impl MqttLink {
         }
     }
 
+    /// Whether the broker granted `topic` on this connection (a car sends its reports
+    /// only once its receipts can reach it: a clustered broker may take a while, or
+    /// refuse for a while, to set a subscription up, and a receipt sent meanwhile is lost,
+    /// which costs the report a resend much later).
+    pub fn subscribed(&self, topic: &str) -> bool {
+        self.status
+            .lock()
+            .is_ok_and(|s| s.connected && s.granted.iter().any(|t| t == topic))
+    }
+
     /// The broker, without the password.
     pub fn broker(&self) -> &str {
         &self.broker

@@ -103,7 +103,19 @@ fn simulate(
             logins.push((spec.vin.clone(), password.clone()));
             spec.broker_password = Some(password);
         }
-        broker::add_logins(&broker::BrokerDir::at(dir), &logins)?;
+        let cluster = autoplug_fleet::nats_cluster::ClusterDir::at(dir);
+        if cluster.logins.is_file() {
+            // A NATS cluster's directory: its running nodes reload the logins.
+            let logins: Vec<(String, String, bool)> = logins
+                .iter()
+                .map(|(u, p)| (u.clone(), p.clone(), false))
+                .collect();
+            autoplug_fleet::nats_cluster::add_logins(&cluster, &logins)?;
+            // A reload takes effect within moments; the first cars connect after it.
+            std::thread::sleep(std::time::Duration::from_millis(500));
+        } else {
+            broker::add_logins(&broker::BrokerDir::at(dir), &logins)?;
+        }
         writeln!(
             out,
             "{} logins added to the broker of {} (one per car: its VIN)",
