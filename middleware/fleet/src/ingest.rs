@@ -474,6 +474,15 @@ impl Ingest {
         }
         self.store.db().commit().map_err(db_error)?;
         self.stats.commits += 1;
+        // When the batch's vehicles were last seen, outside its transaction (see
+        // `FleetStore::record_trips_in_batch`); a failure here loses nothing stored (the
+        // next report of the vehicle writes it).
+        let vins: Vec<&str> = {
+            let set: std::collections::BTreeSet<&str> =
+                reports.iter().map(|r| r.vin.as_str()).collect();
+            set.into_iter().collect()
+        };
+        let _ = self.store.touch_vehicles(&vins, crate::unix_ms());
         Ok(outcomes)
     }
 

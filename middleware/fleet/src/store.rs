@@ -417,6 +417,7 @@ impl FleetStore {
         match self.record_trips_in_batch(&[report]) {
             Ok(stored) => {
                 self.db.commit()?;
+                self.touch_vehicles(&[report.vin.as_str()], now_ms())?;
                 Ok(stored.into_iter().next().unwrap_or(Stored::Duplicate))
             }
             Err(error) => {
@@ -424,6 +425,24 @@ impl FleetStore {
                 Err(error)
             }
         }
+    }
+
+    /// Marks `vins` seen at `at_ms` (never earlier than they were), in a statement of its
+    /// own after a batch's commit: each row's lock lasts that statement only.
+    pub fn touch_vehicles(&mut self, vins: &[&str], at_ms: i64) -> Result<(), StoreError> {
+        for chunk in vins.chunks(500) {
+            let list: Vec<String> = (0..chunk.len()).map(|i| format!("${}", i + 2)).collect();
+            let mut params = vec![Value::Int(at_ms)];
+            params.extend(chunk.iter().map(|v| Value::from(*v)));
+            self.db.execute(
+                &format!(
+                    "UPDATE vehicles SET last_seen_ms = $1 WHERE last_seen_ms < $1 AND vin IN ({})",
+                    list.join(", ")
+                ),
+                &params,
+            )?;
+        }
+        Ok(())
     }
 
     /// Stores trips (each already [`TripReport::check`]ed) in the transaction open, a
@@ -441,7 +460,11 @@ impl FleetStore {
         }
         let received = now_ms();
         let db = self.db.as_mut();
-        // The vehicles first, in VIN order (see `Ingest::take_batch`).
+        // New vehicles first, in VIN order (see `Ingest::take_batch`). A vehicle there
+        // already is left alone: updating its row here would lock it until the commit,
+        // and two services' batches of the same cars would then take turns instead of
+        // running side by side; when it was last seen is written after the commit
+        // ([`Self::touch_vehicles`]).
         let vins: std::collections::BTreeSet<&str> =
             reports.iter().map(|r| r.vin.as_str()).collect();
         let rows: Vec<Vec<Value>> = vins.iter().map(|v| vec![Value::from(*v)]).collect();
@@ -449,9 +472,7 @@ impl FleetStore {
             db,
             "INSERT INTO vehicles (vin, first_seen_ms, last_seen_ms) VALUES ",
             "($P, $0, $0)",
-            " ON CONFLICT (vin) DO UPDATE SET last_seen_ms =
-                 CASE WHEN excluded.last_seen_ms > vehicles.last_seen_ms
-                      THEN excluded.last_seen_ms ELSE vehicles.last_seen_ms END",
+            " ON CONFLICT (vin) DO NOTHING",
             &[Value::Int(received)],
             &rows,
             false,

@@ -339,9 +339,24 @@ fn an_evidence_recall_returns_exactly_the_vehicles_the_drives_convicted() {
                 "{label}"
             );
             // A second, clean drive changes nothing of the evidence.
+            let seen = |store: &mut FleetStore| {
+                store
+                    .db()
+                    .query(
+                        "SELECT last_seen_ms FROM vehicles WHERE vin = $1",
+                        &[autoplug_fleet::db::Value::from(vin(n).as_str())],
+                    )
+                    .unwrap()[0][0]
+                    .int()
+                    .unwrap()
+            };
+            let before = seen(&mut store);
+            std::thread::sleep(std::time::Duration::from_millis(2));
             store
                 .record_trip(&trip(n, 2, (day + 1) * DAY, "ok", &[]))
                 .unwrap();
+            // The vehicle was seen again (written after the trip's commit).
+            assert!(seen(&mut store) > before, "{label}");
         }
         let period = |finding, ecu: Option<&str>| EvidenceQuery {
             finding,
