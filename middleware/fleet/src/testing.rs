@@ -444,12 +444,19 @@ pub fn intake_thread(
         assert!(Instant::now() < deadline, "no SUBACK: {:?}", link.status());
         std::thread::sleep(Duration::from_millis(10));
     }
-    // Named, so that a benchmark can tell the services' CPU time from the cars'.
+    run_intake(crate::ingest::Ingest::new(store, link), stop)
+}
+
+/// Runs `ingest` on a thread named "intake" (so that a benchmark can tell the services'
+/// CPU time from the cars') until `stop`.
+fn run_intake(
+    mut ingest: crate::ingest::Ingest,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<(crate::ingest::IngestStats, crate::mqtt::LinkStatus)> {
     std::thread::Builder::new()
         .name("intake".into())
         .spawn(move || {
-            let mut ingest = crate::ingest::Ingest::new(store, link);
-            ingest.run(&stop, Duration::from_millis(50), |_| {});
+            ingest.run(&stop, std::time::Duration::from_millis(50), |_| {});
             (ingest.stats, ingest.link.status())
         })
         .unwrap()
@@ -473,14 +480,7 @@ pub fn queue_intake_thread(
     link.wait_connected(Duration::from_secs(10)).unwrap();
     let mut queue = crate::nats::WorkQueue::connect(runtime, servers, client_id).unwrap();
     queue.wait_ready(Duration::from_secs(20)).unwrap();
-    std::thread::Builder::new()
-        .name("intake".into())
-        .spawn(move || {
-            let mut ingest = crate::ingest::Ingest::with_queue(store, link, queue);
-            ingest.run(&stop, Duration::from_millis(50), |_| {});
-            (ingest.stats, ingest.link.status())
-        })
-        .unwrap()
+    run_intake(crate::ingest::Ingest::with_queue(store, link, queue), stop)
 }
 
 /// A trip numbered `n` of `vin` as a drive reports it (statistics, the presence verdict of

@@ -20,43 +20,76 @@ fn vins(n: usize) -> Vec<Vin> {
         .collect()
 }
 
+/// Three nodes with the fleet's login ("pw-fleet") and one for each of `cars`
+/// ("pw-VIN").
+fn cluster_for(cars: &[Vin]) -> PrivateCluster {
+    let cluster = PrivateCluster::start(3);
+    let mut logins = vec![(FLEET_USER.to_string(), "pw-fleet".to_string())];
+    logins.extend(cars.iter().map(|v| (v.to_string(), format!("pw-{v}"))));
+    cluster.add_logins(&logins);
+    cluster
+}
+
+/// The three nodes from `n`'s on, in turn (a car's or a service's address list).
+fn from(n: usize) -> [usize; 3] {
+    [n % 3, (n + 1) % 3, (n + 2) % 3]
+}
+
+type Car = std::thread::JoinHandle<(
+    autoplug_fleet::outbox::Outbox,
+    autoplug_fleet::mqtt::LinkStatus,
+    Vec<i64>,
+)>;
+
+/// `cars` reporting `trips` trips each as the gateway does, one every `pace`, sending a
+/// report again after `resend_after_ms` without a receipt; car `i` starts on node `i % 3`.
+fn reporting(
+    runtime: &tokio::runtime::Runtime,
+    cluster: &PrivateCluster,
+    cars: &[Vin],
+    trips: usize,
+    pace: Duration,
+    resend_after_ms: i64,
+) -> Vec<Car> {
+    cars.iter()
+        .enumerate()
+        .map(|(i, vin)| {
+            testing::reporting_car(
+                runtime.handle(),
+                &cluster.mqtt_url(&from(i), vin.as_str(), &format!("pw-{vin}")),
+                *vin,
+                trips,
+                pace,
+                resend_after_ms,
+                Duration::from_secs(120),
+            )
+        })
+        .collect()
+}
+
 #[test]
 fn reports_reach_the_store_through_the_cluster_once_each() {
-    let cluster = PrivateCluster::start(3);
     let cars = vins(4);
-    let mut logins: Vec<(String, String)> = cars
-        .iter()
-        .map(|v| (v.to_string(), format!("pw-{v}")))
-        .collect();
-    logins.push((FLEET_USER.to_string(), "fleet-pw".to_string()));
-    cluster.add_logins(&logins);
+    let cluster = cluster_for(&cars);
     let runtime = autoplug_fleet::mqtt::runtime().unwrap();
     let schema = PgSchema::new();
     let stop = Arc::new(AtomicBool::new(false));
     let service = testing::queue_intake_thread(
         runtime.handle(),
-        &cluster.mqtt_url(&[0, 1, 2], FLEET_USER, "fleet-pw"),
-        &cluster.nats_url(&[0, 1, 2], FLEET_USER, "fleet-pw"),
+        &cluster.mqtt_url(&[0, 1, 2], FLEET_USER, "pw-fleet"),
+        &cluster.nats_url(&[0, 1, 2], FLEET_USER, "pw-fleet"),
         "svc-0",
         FleetStore::open(&schema.url).unwrap(),
         stop.clone(),
     );
-    let drivers: Vec<_> = cars
-        .iter()
-        .enumerate()
-        .map(|(i, vin)| {
-            let nodes = [i % 3, (i + 1) % 3, (i + 2) % 3];
-            testing::reporting_car(
-                runtime.handle(),
-                &cluster.mqtt_url(&nodes, vin.as_str(), &format!("pw-{vin}")),
-                *vin,
-                20,
-                Duration::from_millis(20),
-                5_000,
-                Duration::from_secs(60),
-            )
-        })
-        .collect();
+    let drivers = reporting(
+        &runtime,
+        &cluster,
+        &cars,
+        20,
+        Duration::from_millis(20),
+        5_000,
+    );
     for d in drivers {
         let (outbox, status, waits) = d.join().unwrap();
         assert!(outbox.is_empty(), "{status:?}");
@@ -75,14 +108,8 @@ fn reports_reach_the_store_through_the_cluster_once_each() {
 fn a_node_killed_mid_stream_loses_nothing_and_its_cars_move_to_another() {
     const CARS: usize = 12;
     const TRIPS: usize = 40;
-    let mut cluster = PrivateCluster::start(3);
     let cars = vins(CARS);
-    let mut logins: Vec<(String, String)> = cars
-        .iter()
-        .map(|v| (v.to_string(), format!("pw-{v}")))
-        .collect();
-    logins.push((FLEET_USER.to_string(), "fleet-pw".to_string()));
-    cluster.add_logins(&logins);
+    let mut cluster = cluster_for(&cars);
     let runtime = autoplug_fleet::mqtt::runtime().unwrap();
     let schema = PgSchema::new();
     let stop = Arc::new(AtomicBool::new(false));
@@ -93,8 +120,8 @@ fn a_node_killed_mid_stream_loses_nothing_and_its_cars_move_to_another() {
         .map(|(i, nodes)| {
             testing::queue_intake_thread(
                 runtime.handle(),
-                &cluster.mqtt_url(nodes, FLEET_USER, "fleet-pw"),
-                &cluster.nats_url(nodes, FLEET_USER, "fleet-pw"),
+                &cluster.mqtt_url(nodes, FLEET_USER, "pw-fleet"),
+                &cluster.nats_url(nodes, FLEET_USER, "pw-fleet"),
                 &format!("svc-{i}"),
                 FleetStore::open(&schema.url).unwrap(),
                 stop.clone(),
@@ -102,22 +129,14 @@ fn a_node_killed_mid_stream_loses_nothing_and_its_cars_move_to_another() {
         })
         .collect();
     // A third of the cars start on each node, the others listed after it.
-    let drivers: Vec<_> = cars
-        .iter()
-        .enumerate()
-        .map(|(i, vin)| {
-            let nodes = [i % 3, (i + 1) % 3, (i + 2) % 3];
-            testing::reporting_car(
-                runtime.handle(),
-                &cluster.mqtt_url(&nodes, vin.as_str(), &format!("pw-{vin}")),
-                *vin,
-                TRIPS,
-                Duration::from_millis(50),
-                3_000,
-                Duration::from_secs(120),
-            )
-        })
-        .collect();
+    let drivers = reporting(
+        &runtime,
+        &cluster,
+        &cars,
+        TRIPS,
+        Duration::from_millis(50),
+        3_000,
+    );
     // Mid-stream (the trips take 2 s): node 0 lost; it comes back once the cars are done.
     std::thread::sleep(Duration::from_millis(800));
     cluster.kill_node(0);
@@ -195,11 +214,7 @@ fn vin(text: &str) -> Vin {
 }
 
 fn cluster_with_logins() -> PrivateCluster {
-    let cluster = PrivateCluster::start(3);
-    let mut logins = vec![(FLEET_USER.to_string(), "pw-fleet".to_string())];
-    logins.extend([A, B].map(|v| (v.to_string(), format!("pw-{v}"))));
-    cluster.add_logins(&logins);
-    cluster
+    cluster_for(&[vin(A), vin(B)])
 }
 
 /// A car's connection as `user` with `client_id` through node `node` (then the others).
@@ -215,7 +230,7 @@ fn vehicle(
     options.persistent_session = true;
     options.subscriptions = subscriptions;
     options.max_backoff = Duration::from_millis(500);
-    let nodes = [node % 3, (node + 1) % 3, (node + 2) % 3];
+    let nodes = from(node);
     MqttLink::connect(
         rt.handle(),
         &cluster.mqtt_url(&nodes, user, &format!("pw-{user}")),
@@ -382,13 +397,10 @@ fn receipts(link: &mut MqttLink, wait: Duration) -> Vec<(String, Option<String>)
 fn on_the_cluster_bad_reports_are_refused_and_restarts_lose_nothing() {
     const CARS: usize = 6;
     const TRIPS: usize = 50;
-    let mut cluster = cluster_with_logins();
     let cars = vins(CARS);
-    let logins: Vec<(String, String)> = cars
-        .iter()
-        .map(|v| (v.to_string(), format!("pw-{v}")))
-        .collect();
-    cluster.add_logins(&logins);
+    let mut all = cars.clone();
+    all.extend([vin(A), vin(B)]);
+    let mut cluster = cluster_for(&all);
     let rt = testing_runtime();
     let schema = PgSchema::new();
     let mut store = FleetStore::open(&schema.url).unwrap();
@@ -439,25 +451,14 @@ fn on_the_cluster_bad_reports_are_refused_and_restarts_lose_nothing() {
         2
     );
 
-    let drivers: Vec<_> = cars
-        .iter()
-        .enumerate()
-        .map(|(i, v)| {
-            testing::reporting_car(
-                rt.handle(),
-                &cluster.mqtt_url(
-                    &[i % 3, (i + 1) % 3, (i + 2) % 3],
-                    v.as_str(),
-                    &format!("pw-{v}"),
-                ),
-                *v,
-                TRIPS,
-                Duration::from_millis(40),
-                2_000,
-                Duration::from_secs(120),
-            )
-        })
-        .collect();
+    let drivers = reporting(
+        &rt,
+        &cluster,
+        &cars,
+        TRIPS,
+        Duration::from_millis(40),
+        2_000,
+    );
     std::thread::sleep(Duration::from_millis(600));
     for n in 0..3 {
         cluster.kill_node(n);
