@@ -303,7 +303,10 @@ impl FleetLink {
     }
 
     fn connect(&mut self, vin: autoplug_vin::Vin) {
-        let mut options = LinkOptions::new(vin.to_string());
+        let mut options = LinkOptions::new(autoplug_fleet::mqtt::vehicle_client_id(
+            vin.as_str(),
+            self.config.broker.password.as_deref(),
+        ));
         options.persistent_session = true;
         options.subscriptions = vec![
             autoplug_fleet::topics::command(&vin),

@@ -3,7 +3,8 @@
 //! persistent sessions, and two listeners (the vehicles' and the fleet services').
 //!
 //! The rights (see the configuration's comments): a vehicle's login is its VIN, bound to
-//! its VIN as client id, with a role of its own that lets it publish its reports, and
+//! its own client id (its VIN and a tag only its password makes:
+//! [`crate::mqtt::vehicle_client_id`]), with a role of its own that lets it publish its reports, and
 //! subscribe to its own commands and receipts and to the images, and nothing else: a
 //! SUBSCRIBE to anything more is refused at once, the fleet services' shared group above
 //! all (Mosquitto's ACL file granted it, and the car then took its turn of every car's
@@ -333,7 +334,8 @@ fn check_user(user: &str) -> Result<Option<autoplug_vin::Vin>, String> {
 }
 
 /// The commands that create `user`'s login with `password`: a vehicle's role of its own
-/// (its VIN's topics) and the vehicles' group, its client id bound to its VIN; the fleet's
+/// (its VIN's topics) and the vehicles' group, its client id bound to the one its VIN and
+/// password make ([`crate::mqtt::vehicle_client_id`]); the fleet's
 /// login with the fleet's role and any client id.
 fn create_commands(user: &str, password: &str) -> Result<Vec<Value>, String> {
     Ok(match check_user(user)? {
@@ -359,7 +361,7 @@ fn create_commands(user: &str, password: &str) -> Result<Vec<Value>, String> {
                     "command": "createClient",
                     "username": user,
                     "password": password,
-                    "clientid": user,
+                    "clientid": crate::mqtt::vehicle_client_id(user, Some(password)),
                     "roles": [{ "rolename": format!("vehicle-{vin}") }],
                     "groups": [{ "groupname": VEHICLES_GROUP }],
                 }),
@@ -433,6 +435,14 @@ pub fn add_logins(dir: &BrokerDir, logins: &[(String, String)]) -> Result<(), St
                         "username": command["username"],
                         "password": command["password"],
                     }));
+                    // A vehicle's client id follows its password.
+                    if !command["clientid"].is_null() {
+                        again.push(json!({
+                            "command": "setClientId",
+                            "username": command["username"],
+                            "clientid": command["clientid"],
+                        }));
+                    }
                 }
                 (what, Some(e)) => {
                     return Err(format!(

@@ -240,6 +240,31 @@ impl LinkOptions {
     }
 }
 
+/// A vehicle's MQTT client id: its VIN, and with a password a tag made from it
+/// (`VIN-` and 16 hex digits of SHA-256 over the password and the VIN). A car that knows
+/// another's VIN cannot work out its client id without its password, so it cannot take
+/// over the other's session, also on a broker that does not bind client ids to logins
+/// (NATS); Mosquitto's plugin binds each login to its own (`broker add`). Without a
+/// password (a broker that takes anyone, on one machine) the VIN alone.
+pub fn vehicle_client_id(vin: &str, password: Option<&str>) -> String {
+    use sha2::Digest;
+    match password.filter(|p| !p.is_empty()) {
+        Some(password) => {
+            let mut hash = sha2::Sha256::new();
+            hash.update(b"autoplug mqtt client id\0");
+            hash.update(password.as_bytes());
+            hash.update(b"\0");
+            hash.update(vin.as_bytes());
+            let tag: String = hash.finalize()[..8]
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect();
+            format!("{vin}-{tag}")
+        }
+        None => vin.to_string(),
+    }
+}
+
 /// The keep-alive of a fleet service's connection: a service whose machine stops
 /// answering is out of the shared group 1.5 times this after its last packet (the broker's
 /// rule), and the reports it held go to the others with the cars' resends.
@@ -754,6 +779,22 @@ async fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_vehicles_client_id_is_its_vin_and_a_tag_only_its_password_makes() {
+        let vin = "JA3AP47H0YF000042";
+        let id = vehicle_client_id(vin, Some("s3cret"));
+        assert_eq!(id.len(), 17 + 1 + 16);
+        assert!(id.starts_with("JA3AP47H0YF000042-"), "{id}");
+        assert_eq!(id, vehicle_client_id(vin, Some("s3cret")));
+        assert_ne!(id, vehicle_client_id(vin, Some("s3cret2")));
+        assert_ne!(
+            id[18..],
+            vehicle_client_id("JA3AP47H2YF000043", Some("s3cret"))[18..]
+        );
+        assert_eq!(vehicle_client_id(vin, None), vin);
+        assert_eq!(vehicle_client_id(vin, Some("")), vin);
+    }
 
     #[test]
     fn broker_addresses_parse_and_hide_the_password() {

@@ -13,9 +13,10 @@
 //! `autoplug.v1.vehicles.VIN.report`, subscribe only to its own `…VIN.command` and to the
 //! images (and to `$MQTT.sub.>`, the delivery subjects of its own QoS 1 subscriptions,
 //! which the server keeps from MQTT topics). NATS does not bind an MQTT client id to a
-//! login: a car logging in with another's VIN as client id takes over that session's
-//! connection, but the session's subscriptions are checked against its own rights, so it
-//! reads nothing of the other car's (tested: `tests/nats_engine.rs`).
+//! login; a car's client id carries a tag only its password makes
+//! ([`crate::mqtt::vehicle_client_id`]), so no car can name another's session, and one that
+//! did would still read nothing of the other car's: the session's subscriptions are
+//! checked against its own rights (tested: `tests/nats_engine.rs`).
 
 use std::path::{Path, PathBuf};
 

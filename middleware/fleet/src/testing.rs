@@ -535,7 +535,7 @@ pub fn trip_with_evidence(vin: &autoplug_vin::Vin, n: i64) -> crate::TripReport 
 
 /// A car as the gateway reports: its reports in an outbox until the fleet's receipt, sent
 /// again while none comes (after `resend_after_ms`, doubling), over a persistent session
-/// with its VIN as client id. It publishes `trips` trips one every `pace` and returns once
+/// with its client id ([`crate::mqtt::vehicle_client_id`]). It publishes `trips` trips one every `pace` and returns once
 /// every one is confirmed (or after `deadline`), with its outbox, its link's state and
 /// how long each confirmed report waited for its receipt since its first publish, ms.
 pub fn reporting_car(
@@ -572,7 +572,10 @@ pub fn reporting_car_with(
     make: impl Fn(&autoplug_vin::Vin, i64) -> crate::TripReport + Send + 'static,
 ) -> std::thread::JoinHandle<(crate::outbox::Outbox, crate::mqtt::LinkStatus, Vec<i64>)> {
     use std::time::{Duration, Instant};
-    let mut options = crate::mqtt::LinkOptions::new(vin.to_string());
+    let mut options = crate::mqtt::LinkOptions::new(crate::mqtt::vehicle_client_id(
+        vin.as_str(),
+        broker.password.as_deref(),
+    ));
     options.persistent_session = true;
     options.subscriptions = vec![crate::topics::receipt(&vin)];
     options.max_backoff = Duration::from_millis(500);

@@ -24,13 +24,16 @@ fn next(link: &mut MqttLink, wait: Duration) -> Option<(String, Vec<u8>)> {
     link.recv_timeout(wait).map(|m| (m.topic, m.payload))
 }
 
+/// A car logged in as `user` with the client id of `client_of` (its own, or another's).
 fn vehicle(
     rt: &tokio::runtime::Runtime,
     broker: &PrivateBroker,
     user: &str,
-    client_id: &str,
+    client_of: &str,
     subscriptions: Vec<String>,
 ) -> MqttLink {
+    let client_id =
+        autoplug_fleet::mqtt::vehicle_client_id(client_of, Some(&format!("pw-{client_of}")));
     let mut options = LinkOptions::new(client_id);
     options.persistent_session = true;
     options.subscriptions = subscriptions;

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use autoplug_fleet::broker::FLEET_USER;
 use autoplug_fleet::ingest::IngestStats;
-use autoplug_fleet::mqtt::{LinkOptions, LinkStatus, MqttLink};
+use autoplug_fleet::mqtt::{vehicle_client_id, LinkOptions, LinkStatus, MqttLink};
 use autoplug_fleet::outbox::Outbox;
 use autoplug_fleet::testing::{intake_thread, reporting_car, trip_report};
 use autoplug_fleet::topics::{self, ReportKind};
@@ -32,9 +32,14 @@ struct Car {
 
 impl Car {
     fn start(rt: &tokio::runtime::Runtime, broker: &PrivateBroker, vin: Vin) -> Self {
-        let mut options = rumqttc::MqttOptions::new(vin.to_string(), "127.0.0.1", broker.port);
+        let password = format!("pw-{vin}");
+        let mut options = rumqttc::MqttOptions::new(
+            autoplug_fleet::mqtt::vehicle_client_id(vin.as_str(), Some(&password)),
+            "127.0.0.1",
+            broker.port,
+        );
         options
-            .set_credentials(vin.to_string(), format!("pw-{vin}"))
+            .set_credentials(vin.to_string(), password)
             .set_clean_session(false)
             .set_keep_alive(Duration::from_secs(5))
             .set_inflight(1);
@@ -252,15 +257,25 @@ fn two_services_and_a_campaign_publisher_log_in_side_by_side_and_store_every_rep
 }
 
 #[test]
-fn a_vehicle_logs_in_only_with_its_vin_as_client_id_on_either_listener() {
+fn a_vehicle_logs_in_only_with_its_own_client_id_on_either_listener() {
     let vins = vins(2);
     let broker = broker_with_logins(&vins);
     let rt = runtime();
     let (vin, other) = (vins[0].to_string(), vins[1].to_string());
-    // With another car's VIN as client id a car could take over that car's session: its
+    let own = vehicle_client_id(&vin, Some(&format!("pw-{vin}")));
+    // With another car's client id (as it is, or its bare VIN) a car could take over that
+    // car's session; with its bare VIN it would be the one another car can guess: its
     // login is refused, on the vehicles' listener and on the fleet's alike.
-    for port in [broker.port, broker.fleet_port] {
-        let mut options = LinkOptions::new(other.clone());
+    let others = [
+        vehicle_client_id(&other, Some(&format!("pw-{other}"))),
+        other.clone(),
+        vin.clone(),
+    ];
+    for (port, client_id) in [broker.port, broker.fleet_port]
+        .into_iter()
+        .flat_map(|p| others.iter().map(move |c| (p, c)))
+    {
+        let mut options = LinkOptions::new(client_id.clone());
         options.max_backoff = Duration::from_millis(200);
         let car = MqttLink::connect(
             rt.handle(),
@@ -268,13 +283,16 @@ fn a_vehicle_logs_in_only_with_its_vin_as_client_id_on_either_listener() {
             options,
         );
         let refused = car.wait_connected(Duration::from_secs(5)).unwrap_err();
-        assert!(refused.0.contains("refused the login"), "{port}: {refused}");
+        assert!(
+            refused.0.contains("refused the login"),
+            "{port} {client_id}: {refused}"
+        );
     }
-    // With its own VIN it is let in.
+    // With its own it is let in.
     let car = MqttLink::connect(
         rt.handle(),
         &broker.url(&vin, &format!("pw-{vin}")),
-        LinkOptions::new(vin.clone()),
+        LinkOptions::new(own),
     );
     car.wait_connected(Duration::from_secs(5)).unwrap();
 }
@@ -296,7 +314,10 @@ fn a_vehicle_cannot_join_the_services_group_and_every_report_is_stored() {
         topics::command(&vins[0]),
         "#".to_string(),
     ];
-    let mut options = LinkOptions::new(thief_vin.to_string());
+    let mut options = LinkOptions::new(vehicle_client_id(
+        thief_vin.as_str(),
+        Some(&format!("pw-{thief_vin}")),
+    ));
     options.subscriptions = stolen.to_vec();
     let mut thief = MqttLink::connect(
         rt.handle(),

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use autoplug_fleet::broker::FLEET_USER;
-use autoplug_fleet::mqtt::{LinkOptions, MqttLink};
+use autoplug_fleet::mqtt::{vehicle_client_id, LinkOptions, MqttLink};
 use autoplug_fleet::nats::WorkQueue;
 use autoplug_fleet::testing::{self, PgSchema, PrivateCluster};
 use autoplug_fleet::topics::{self, ReportKind};
@@ -305,7 +305,7 @@ fn on_the_cluster_a_vehicle_publishes_only_as_itself_and_reads_only_its_own_topi
     ];
     let mut subscriptions = vec![topics::command(&vin(A)), topics::receipt(&vin(A))];
     subscriptions.extend(beyond.iter().cloned());
-    let mut a = vehicle(&rt, &cluster, 0, A, A, subscriptions);
+    let mut a = vehicle(&rt, &cluster, 0, A, &own(A), subscriptions);
     a.wait_connected(Duration::from_secs(10)).unwrap();
     wait_answered(&a, 6);
     let status = a.status();
@@ -339,13 +339,14 @@ fn on_the_cluster_a_vehicle_publishes_only_as_itself_and_reads_only_its_own_topi
         queued(&mut queue, Duration::from_secs(2)),
         [(topics::report(&vin(A), ReportKind::Trip), b"own".to_vec())]
     );
-    // B, offline with its session kept, and A taking B's client id: it gets B's
-    // connection but not B's commands (its own rights judge the session's subscriptions).
-    let b = vehicle(&rt, &cluster, 1, B, B, vec![topics::command(&vin(B))]);
+    // B, offline with its session kept, and A taking B's client id (which only B's
+    // password makes: suppose A had it): it gets B's connection but not B's commands (its
+    // own rights judge the session's subscriptions).
+    let b = vehicle(&rt, &cluster, 1, B, &own(B), vec![topics::command(&vin(B))]);
     b.wait_connected(Duration::from_secs(10)).unwrap();
     wait_answered(&b, 1);
     b.close(Duration::from_secs(2));
-    let mut a_as_b = vehicle(&rt, &cluster, 2, A, B, vec![]);
+    let mut a_as_b = vehicle(&rt, &cluster, 2, A, &own(B), vec![]);
     a_as_b.wait_connected(Duration::from_secs(10)).unwrap();
     fleet
         .publish(&topics::command(&vin(B)), b"for B".to_vec(), false)
@@ -365,12 +366,24 @@ fn on_the_cluster_a_vehicle_publishes_only_as_itself_and_reads_only_its_own_topi
     assert_eq!(next(&mut a_as_b, Duration::from_millis(500)), None);
     drop(a_as_b);
     // B comes back and finds its command in its session.
-    let mut b = vehicle(&rt, &cluster, 1, B, B, vec![topics::command(&vin(B))]);
+    let mut b = vehicle(&rt, &cluster, 1, B, &own(B), vec![topics::command(&vin(B))]);
     b.wait_connected(Duration::from_secs(10)).unwrap();
     assert_eq!(
         next(&mut b, Duration::from_secs(10)),
         Some((topics::command(&vin(B)), b"for B".to_vec()))
     );
+    // With B's VIN as client id, all another car can guess, A does not touch B's
+    // connection.
+    let guess = vehicle(&rt, &cluster, 0, A, B, vec![]);
+    guess.wait_connected(Duration::from_secs(10)).unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let status = b.status();
+    assert!(status.connected && status.connects == 1, "{status:?}");
+}
+
+/// `car`'s own client id (its VIN and password make it).
+fn own(car: &str) -> String {
+    vehicle_client_id(car, Some(&format!("pw-{car}")))
 }
 
 fn testing_runtime() -> tokio::runtime::Runtime {
@@ -418,7 +431,7 @@ fn on_the_cluster_bad_reports_are_refused_and_restarts_lose_nothing() {
     );
 
     // The hostile car: malformed, too large, naming another VIN, and one trip twice.
-    let mut a = vehicle(&rt, &cluster, 0, A, A, vec![topics::receipt(&vin(A))]);
+    let mut a = vehicle(&rt, &cluster, 0, A, &own(A), vec![topics::receipt(&vin(A))]);
     a.wait_connected(Duration::from_secs(10)).unwrap();
     wait_answered(&a, 1);
     let topic = topics::report(&vin(A), ReportKind::Trip);
