@@ -305,14 +305,14 @@ fn owner_name(_dir: &Path) -> String {
 }
 
 #[cfg(unix)]
-fn set_mode(path: &Path, mode: u32) -> Result<(), String> {
+pub(crate) fn set_mode(path: &Path, mode: u32) -> Result<(), String> {
     use std::os::unix::fs::PermissionsExt;
     std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode))
         .map_err(|e| format!("cannot set the mode of '{}': {e}", path.display()))
 }
 
 #[cfg(not(unix))]
-fn set_mode(_path: &Path, _mode: u32) -> Result<(), String> {
+pub(crate) fn set_mode(_path: &Path, _mode: u32) -> Result<(), String> {
     Ok(())
 }
 

@@ -232,13 +232,7 @@ pub fn init(dir: &Path, nodes: &[NodeAddress]) -> Result<ClusterDir, String> {
 
 fn write_private(path: &Path, body: &str) -> Result<(), String> {
     std::fs::write(path, body).map_err(|e| format!("cannot write '{}': {e}", path.display()))?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600))
-            .map_err(|e| format!("cannot set the mode of '{}': {e}", path.display()))?;
-    }
-    Ok(())
+    crate::broker::set_mode(path, 0o600)
 }
 
 /// A login's permissions in the nodes' configuration: a vehicle's own subjects; the fleet
@@ -364,6 +358,12 @@ pub fn reload(files: &ClusterDir) -> Result<usize, String> {
         };
         let pid = pid.trim();
         if pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+            continue;
+        }
+        // A pid file left by a node that ended may name another process by now: only a
+        // running nats-server is told.
+        let command = std::fs::read_to_string(format!("/proc/{pid}/comm")).unwrap_or_default();
+        if cfg!(target_os = "linux") && command.trim() != "nats-server" {
             continue;
         }
         let status = std::process::Command::new("kill")
