@@ -18,6 +18,8 @@
 
 pub mod chip;
 pub mod cpu;
+pub mod debug;
+pub mod gdb;
 pub mod map;
 pub mod mcu;
 pub mod node;

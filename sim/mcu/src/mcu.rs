@@ -11,6 +11,7 @@ use crate::chip::can::CanFrame;
 use crate::chip::rcc::ResetCause;
 use crate::chip::Chip;
 use crate::cpu::{Cpu, ExceptionReport, Exit, Halt};
+use crate::debug::{DebugUnit, Debugger, Halted, WatchBus};
 use crate::map::{BOOT_ALIAS, FLASH};
 
 /// Why an emulated MCU stopped.
@@ -100,6 +101,10 @@ pub struct Mcu {
     /// CAN1 on a bus of its own where every frame is acknowledged (true), or attached to
     /// the virtual car's bus ([`crate::node::BusNode`]).
     pub standalone_can: bool,
+    /// The debugger attached to the MCU's debug port, if any ([`crate::debug`]).
+    pub debugger: Option<Box<dyn Debugger>>,
+    /// What a debugger set: breakpoints, watchpoints, how the core resumes.
+    pub debug: DebugUnit,
 }
 
 impl Mcu {
@@ -117,6 +122,8 @@ impl Mcu {
             locked_up: false,
             semihosting_output: Vec::new(),
             standalone_can: true,
+            debugger: None,
+            debug: DebugUnit::default(),
         };
         mcu.cpu
             .reset(&mut mcu.chip, BOOT_ALIAS)
@@ -148,6 +155,9 @@ impl Mcu {
     /// Runs until simulated time `until_ns` (nanoseconds since power-on).
     pub fn run_until(&mut self, until_ns: u64) -> Result<(), Stop> {
         loop {
+            if self.debugger.as_ref().is_some_and(|d| d.wants_halt()) {
+                self.debug_halt(Halted::Request);
+            }
             let now = self.cpu.cycles();
             let now_ns = self.chip.ns_at(now);
             if now_ns >= until_ns {
@@ -183,12 +193,7 @@ impl Mcu {
                 self.cpu.add_cycles(next - now);
                 continue;
             }
-            let exit = self.cpu.run(&mut self.chip, next);
-            if let Some(report) = self.cpu.scs.last_fault.take() {
-                if report.exception == crate::cpu::system::exception::HARD_FAULT {
-                    self.faults.push(report);
-                }
-            }
+            let exit = self.run_core(next);
             match exit {
                 Exit::Budget => {}
                 Exit::Sleeping => {
@@ -208,8 +213,74 @@ impl Mcu {
                     self.locked_up = true;
                 }
                 Exit::Halted(halt) => return Err(Stop::Halted(halt)),
+                // run_core serves the debugger's halts itself.
+                Exit::Debug(_) => {}
             }
         }
+    }
+
+    /// Runs the core to cycle `next` or the first event that ends its run, serving the
+    /// debugger's halts on the way: after one, the core goes on as if it had not stopped
+    /// (the same run, to the same `next`), so a debugged run is the undebugged one.
+    fn run_core(&mut self, next: u64) -> Exit {
+        loop {
+            let (exit, hit) = if self.debug.watchpoints.is_empty() {
+                (self.cpu.run(&mut self.chip, next), None)
+            } else {
+                let mut bus = WatchBus {
+                    chip: &mut self.chip,
+                    watch: &self.debug.watchpoints,
+                    hit: None,
+                };
+                let exit = self.cpu.run(&mut bus, next);
+                (exit, bus.hit)
+            };
+            if let Some(report) = self.cpu.scs.last_fault.take() {
+                if report.exception == crate::cpu::system::exception::HARD_FAULT {
+                    self.faults.push(report);
+                }
+            }
+            let reset = match (exit, hit) {
+                (Exit::Debug(stop), _) => self.debug_halt(Halted::Core(stop)),
+                (Exit::Yield, Some(hit)) => {
+                    let reset = self.debug_halt(Halted::Watch(hit));
+                    if self.chip.is_touched() {
+                        // A peripheral access too: the loop handles it before going on.
+                        return Exit::Yield;
+                    }
+                    reset
+                }
+                (Exit::Halted(Halt::Breakpoint { imm, pc }), _)
+                    if imm != 0xAB && self.debugger.is_some() =>
+                {
+                    self.debug_halt(Halted::Bkpt { imm, pc })
+                }
+                (other, _) => return other,
+            };
+            // After a reset (`monitor reset`) the cycle count starts again: the loop
+            // works out the next event anew.
+            if reset || self.cpu.cycles() >= next {
+                return Exit::Budget;
+            }
+        }
+    }
+
+    /// Hands the halted MCU to its debugger until it resumes the core.
+    fn debug_halt(&mut self, why: Halted) -> bool {
+        let resets = self.resets.len();
+        if let Some(mut debugger) = self.debugger.take() {
+            debugger.halted(self, why);
+            if self.debugger.is_none() {
+                self.debugger = Some(debugger);
+            }
+        }
+        self.resets.len() != resets
+    }
+
+    /// A system reset asked for by a debugger (`monitor reset`), as AIRCR.SYSRESETREQ
+    /// through the debug port does it.
+    pub fn debug_reset(&mut self) -> Result<(), Stop> {
+        self.system_reset(ResetCause::Software)
     }
 
     fn debug_word(&mut self, address: u32) -> u32 {

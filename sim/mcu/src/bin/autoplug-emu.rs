@@ -6,10 +6,12 @@
 //! through the bootloader, found beside it or given with `--boot`.
 //!
 //! ```text
-//! autoplug-emu ELF [--boot BOOT_ELF] [--for SECONDS | --until-exit SECONDS]
+//! autoplug-emu ELF [--boot BOOT_ELF] [--for SECONDS | --until-exit SECONDS] [--gdb [ADDR]]
 //! ```
 //!
-//! Without `--for` or `--until-exit` it runs until stopped, at the pace of real time.
+//! Without `--for` or `--until-exit` it runs until stopped, at the pace of real time. With
+//! `--gdb` the MCU's debug port is a GDB server (default 127.0.0.1:3333): the run waits
+//! for the debugger, halted at the reset vector.
 //!
 //! Exit status: the program's own (semihosting exit), 0 after `--for SECONDS`, 1 on a
 //! HardFault, lockup or unmodelled access, 124 if `--until-exit SECONDS` passed without an
@@ -24,7 +26,7 @@ use autoplug_mcu::programming::FlashContents;
 use autoplug_mcu::rtt::{LogLine, RttLog};
 
 const USAGE: &str =
-    "usage: autoplug-emu ELF [--boot BOOT_ELF] [--for SECONDS | --until-exit SECONDS]";
+    "usage: autoplug-emu ELF [--boot BOOT_ELF] [--for SECONDS | --until-exit SECONDS] [--gdb [ADDR]]";
 
 const HELP: &str = "\
 Runs a firmware ELF on AutoPlug's emulated STM32F446 (a Nucleo-F446RE), as probe-rs runs
@@ -38,6 +40,10 @@ Options:
   --boot BOOT_ELF        the bootloader to start the application through
   --for SECONDS          run this long in simulated time, as fast as the machine goes
   --until-exit SECONDS   as --for, and fail (status 124) if the program has not exited
+  --gdb [ADDR]           a GDB server on the MCU's debug port (default 127.0.0.1:3333,
+                         loopback only): the run waits for the debugger, halted at the
+                         reset vector; simulated time stands still while it holds the
+                         core halted
   -h, --help             this text
 Without --for or --until-exit it runs until stopped, at the pace of real time.
 
@@ -51,6 +57,7 @@ struct Args {
     boot: Option<PathBuf>,
     seconds: f64,
     expect_exit: bool,
+    gdb: Option<std::net::SocketAddr>,
 }
 
 fn parse(args: &[String]) -> Result<Args, String> {
@@ -58,7 +65,8 @@ fn parse(args: &[String]) -> Result<Args, String> {
     let mut boot = None;
     let mut seconds = f64::INFINITY;
     let mut expect_exit = false;
-    let mut it = args.iter();
+    let mut gdb = None;
+    let mut it = args.iter().peekable();
     while let Some(arg) = it.next() {
         match arg.as_str() {
             "-h" | "--help" => {
@@ -68,7 +76,22 @@ fn parse(args: &[String]) -> Result<Args, String> {
                     boot: None,
                     seconds,
                     expect_exit,
+                    gdb,
                 })
+            }
+            "--gdb" => {
+                // An address follows, or the default is meant.
+                let given = it.peek().filter(|a| {
+                    !a.starts_with("--") && autoplug_mcu::gdb::parse_address(a).is_ok()
+                });
+                let address = match given {
+                    Some(_) => it.next().map(String::as_str).unwrap_or_default(),
+                    None => match it.peek() {
+                        Some(a) if a.contains(':') && !a.starts_with("--") => a.as_str(),
+                        _ => autoplug_mcu::gdb::DEFAULT_ADDRESS,
+                    },
+                };
+                gdb = Some(autoplug_mcu::gdb::parse_address(address)?);
             }
             "--boot" => boot = Some(PathBuf::from(it.next().ok_or("--boot needs a file")?)),
             "--for" | "--until-exit" => {
@@ -94,6 +117,7 @@ fn parse(args: &[String]) -> Result<Args, String> {
         boot,
         seconds,
         expect_exit,
+        gdb,
     })
 }
 
@@ -178,6 +202,25 @@ fn run(args: &Args) -> Result<u8, String> {
     )
     .map_err(|e| e.to_string())?;
     mcu.cpu.debugger_attached = true;
+    let gdb_status = match args.gdb {
+        Some(address) => {
+            let server = autoplug_mcu::gdb::GdbServer::bind("the MCU", address)?;
+            let status = server.status();
+            eprintln!(
+                "autoplug-emu: GDB server on {}: gdb-multiarch {} -ex 'target extended-remote {}'",
+                server.local_addr(),
+                args.elf.display(),
+                server.local_addr()
+            );
+            eprintln!(
+                "autoplug-emu: waiting for the debugger (the MCU is halted at its reset vector)"
+            );
+            server.wait_for_client(None);
+            mcu.debugger = Some(Box::new(server));
+            Some(status)
+        }
+        None => None,
+    };
     let mut recent: Vec<LogLine> = Vec::new();
     let print = |lines: Vec<LogLine>, recent: &mut Vec<LogLine>| {
         for line in lines {
@@ -202,8 +245,12 @@ fn run(args: &Args) -> Result<u8, String> {
     let outcome = loop {
         at = at.saturating_add(step_ns).min(limit_ns);
         if paced {
-            let ahead =
-                std::time::Duration::from_nanos(mcu.now_ns()).saturating_sub(wall.elapsed());
+            // The time the debugger held the core is not the firmware's.
+            let halted = gdb_status
+                .as_ref()
+                .map_or(std::time::Duration::ZERO, |s| s.halted_for());
+            let ahead = std::time::Duration::from_nanos(mcu.now_ns())
+                .saturating_sub(wall.elapsed().saturating_sub(halted));
             if !ahead.is_zero() {
                 std::thread::sleep(ahead);
             }

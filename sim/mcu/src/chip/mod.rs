@@ -375,6 +375,11 @@ impl Chip {
         }
     }
 
+    /// Whether a peripheral was written since the last [`Chip::take_touched`].
+    pub fn is_touched(&self) -> bool {
+        self.touched
+    }
+
     /// Whether a peripheral was written since the last call.
     pub fn take_touched(&mut self) -> bool {
         std::mem::take(&mut self.touched)
@@ -483,6 +488,69 @@ impl Chip {
             Model::Gpio(port) => self.gpio[port].read(offset),
             Model::Rcc => self.rcc.read(offset),
             Model::FlashInterface => self.flash_if.read(offset),
+        }
+    }
+
+    /// A peripheral register as a debugger reads it: from a copy of the peripheral where a
+    /// read would change it (a timer or the ADC brought up to `now`), so looking changes
+    /// nothing the firmware sees.
+    fn peripheral_peek(&self, address: u32, now: u64) -> Result<u32, Unmodelled> {
+        let (model, offset) = self.modelled_peripheral(address)?;
+        match model {
+            Model::Tim3 => self.tim3.clone().read(offset, now),
+            Model::Tim12 => self.tim12.clone().read(offset, now),
+            Model::Iwdg => self.iwdg.clone().read(offset, self.ns_at(now)),
+            Model::Can1 => self.can1.read(offset),
+            Model::Pwr => self.rcc.pwr_read(offset),
+            Model::Adc if (0x100..0x300).contains(&offset) => {
+                Err(Unmodelled::feature("ADC2 and ADC3"))
+            }
+            Model::Adc => self.adc.clone().read(offset, now),
+            Model::Gpio(port) => self.gpio[port].read(offset),
+            Model::Rcc => self.rcc.read(offset),
+            Model::FlashInterface => self.flash_if.read(offset),
+        }
+    }
+
+    /// Reads memory or a peripheral register as a debugger does (at core cycle `now`),
+    /// changing nothing: flash, its alias at 0, SRAM, the device signature and the
+    /// modelled peripherals. Elsewhere, and where no model answers, an error.
+    pub fn peek(&self, address: u32, size: Size, now: u64) -> Result<u32, BusError> {
+        let len = size as u32;
+        let narrow = |word: u32, at: u32| {
+            let shift = 8 * (at & 3);
+            match size {
+                Size::Word => word,
+                Size::Half => (word >> shift) & 0xFFFF,
+                Size::Byte => (word >> shift) & 0xFF,
+            }
+        };
+        if address & (len - 1) != 0 {
+            return Err(BusError::Fault);
+        }
+        if address >= SRAM_START && address - SRAM_START + len <= SRAM_SIZE {
+            let mut bytes = [0u8; 4];
+            self.sram_read(address, &mut bytes[..len as usize])
+                .ok_or(BusError::Fault)?;
+            return Ok(u32::from_le_bytes(bytes));
+        }
+        let flash_address = if address < FLASH_SIZE {
+            address + FLASH_BASE
+        } else {
+            address
+        };
+        if FLASH.contains(&flash_address) {
+            return Ok(narrow(self.flash_word(flash_address & !3), flash_address));
+        }
+        match address {
+            0x4000_0000..=0x5FFF_FFFF => {
+                let word = self
+                    .peripheral_peek(address & !3, now)
+                    .map_err(|e| Self::unmodelled(address, e))?;
+                Ok(narrow(word, address))
+            }
+            0x1FFF_0000..=0x1FFF_FFFF => self.system_memory(address, size),
+            _ => Err(BusError::Fault),
         }
     }
 

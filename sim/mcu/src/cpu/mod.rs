@@ -54,6 +54,12 @@ pub trait Bus {
     fn yield_requested(&mut self) -> bool {
         false
     }
+    /// Reads an instruction halfword: a read, which a debugger's data watchpoints do not
+    /// see (the DWT's comparators match data accesses).
+    #[inline]
+    fn fetch(&mut self, address: u32, size: Size, now: u64) -> Result<u32, BusError> {
+        self.read(address, size, now)
+    }
 }
 
 /// Why the core stopped for good (until reset): what a person debugging it needs.
@@ -98,6 +104,43 @@ pub enum Exit {
     Yield,
     /// The core stopped for good.
     Halted(Halt),
+    /// The core halted for a debugger ([`Cpu::debug`]): it resumes where it stopped.
+    Debug(DebugStop),
+}
+
+/// Why the core halted for a debugger.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DebugStop {
+    /// The next instruction's address is a breakpoint's (halted before executing it).
+    Breakpoint(u32),
+    /// One step done: an instruction executed, or an exception entered.
+    Step,
+    /// The instruction count reached [`DebugControl::stop_at_instruction`].
+    Position,
+    /// The core entered the HardFault handler (vector catch).
+    HardFault,
+}
+
+/// What halts the core for a debugger: the FPB's and the debugger's breakpoints, a single
+/// step (DHCSR.C_STEP), a position in the instruction count (the reverse execution's
+/// replays), and the HardFault vector catch (DEMCR.VC_HARDERR).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct DebugControl {
+    /// Instruction addresses that halt the core before it executes them.
+    pub breakpoints: Vec<u32>,
+    /// Halt after one instruction (or exception entry).
+    pub step: bool,
+    /// Halt once the next instruction's address leaves this range, or on exception entry.
+    pub step_range: Option<core::ops::Range<u32>>,
+    /// Halt before executing the instruction that would make the count exceed this.
+    pub stop_at_instruction: Option<u64>,
+    /// Ignore a breakpoint while the instruction count is this (resuming from it).
+    pub pass_breakpoint_at: Option<u64>,
+    /// Halt on entering HardFault.
+    pub catch_hard_fault: bool,
+    /// A step's instruction ended the run (a peripheral access, a watchpoint): the step is
+    /// reported at the next run, once the caller has handled what ended it.
+    pub step_done: bool,
 }
 
 /// A fault of the instruction being executed, before the exception is chosen.
@@ -207,6 +250,9 @@ pub struct Cpu {
     /// End the run after this instruction (an exception returned: the caller samples the
     /// interrupt lines again, as a level-sensitive line re-pends then).
     yield_request: bool,
+    /// Halting debug: what stops the core for a debugger. `None` (no debugger) runs the
+    /// instructions without looking.
+    pub debug: Option<Box<DebugControl>>,
 }
 
 impl Cpu {
@@ -245,6 +291,7 @@ impl Cpu {
             instructions: 0,
             debugger_attached: false,
             yield_request: false,
+            debug: None,
         }
     }
 
@@ -254,9 +301,11 @@ impl Cpu {
         let code = std::mem::take(&mut self.code);
         let code_base = self.code_base;
         let debugger_attached = self.debugger_attached;
+        let debug = self.debug.take();
         *self = Cpu::new(code_base..code_base);
         self.code = code;
         self.debugger_attached = debugger_attached;
+        self.debug = debug;
         self.scs.vtor = vtor;
         let read = |bus: &mut B, address: u32| {
             bus.read(address, Size::Word, 0).map_err(|e| Halt::Lockup {
@@ -343,6 +392,15 @@ impl Cpu {
                 reason: format!("debug write to {address:#010x}: {other:?}"),
             }),
         }
+    }
+
+    /// Reads a register of the private peripheral bus (NVIC, SCB, SysTick, DWT, the FPU's)
+    /// as a debugger does; `None` for an unaligned or unmodelled one.
+    pub fn debug_read_private(&mut self, address: u32, size: Size) -> Option<u32> {
+        if address & (size as u32 - 1) != 0 {
+            return None;
+        }
+        self.scs_read(address, size).ok()
     }
 
     /// Resumes after a BKPT the core halted on (a debugger's semihosting service done).
@@ -434,6 +492,9 @@ impl Cpu {
         if self.sleep.is_some() && !self.wake_check() {
             return Exit::Sleeping;
         }
+        if self.debug.is_some() {
+            return self.run_debugged(bus, until);
+        }
         loop {
             let limit = match self.scs.systick_next {
                 Some(at) if at <= self.cycles => {
@@ -480,6 +541,98 @@ impl Cpu {
         Exit::Budget
     }
 
+    /// As [`Cpu::run`], halting where [`Cpu::debug`] says: the checks cost a few
+    /// comparisons an instruction, so they run only while a debugger is attached.
+    fn run_debugged<B: Bus>(&mut self, bus: &mut B, until: u64) -> Exit {
+        if let Some(control) = self.debug.as_deref_mut() {
+            if std::mem::take(&mut control.step_done) {
+                return Exit::Debug(DebugStop::Step);
+            }
+        }
+        loop {
+            let limit = match self.scs.systick_next {
+                Some(at) if at <= self.cycles => {
+                    self.systick_expired();
+                    continue;
+                }
+                Some(at) => at.min(until),
+                None => until,
+            };
+            if self.cycles >= limit {
+                return Exit::Budget;
+            }
+            match self.run_until_debugged(bus, limit) {
+                Exit::Budget => {}
+                other => return other,
+            }
+        }
+    }
+
+    fn run_until_debugged<B: Bus>(&mut self, bus: &mut B, until: u64) -> Exit {
+        let Some(control) = self.debug.as_deref() else {
+            return self.run_until(bus, until);
+        };
+        let range = control.step_range.clone();
+        let (step, stop_at, pass_at, catch) = (
+            control.step || range.is_some(),
+            control.stop_at_instruction,
+            control.pass_breakpoint_at,
+            control.catch_hard_fault,
+        );
+        let breakpoints = control.breakpoints.clone();
+        while self.cycles < until {
+            if self.scs.check_pending {
+                let before = (self.pc, self.ipsr);
+                if let Err(halt) = self.take_pending_exception(bus) {
+                    return Exit::Halted(halt);
+                }
+                if (self.pc, self.ipsr) != before {
+                    if catch && self.ipsr == system::exception::HARD_FAULT {
+                        return Exit::Debug(DebugStop::HardFault);
+                    }
+                    if step {
+                        return Exit::Debug(DebugStop::Step);
+                    }
+                }
+            }
+            if stop_at == Some(self.instructions) {
+                return Exit::Debug(DebugStop::Position);
+            }
+            if pass_at != Some(self.instructions) && breakpoints.contains(&self.pc) {
+                return Exit::Debug(DebugStop::Breakpoint(self.pc));
+            }
+            let ipsr = self.ipsr;
+            match self.step(bus) {
+                Ok(()) => {}
+                Err(Trap::Sleep) if step => return Exit::Debug(DebugStop::Step),
+                Err(Trap::Sleep) => return Exit::Sleeping,
+                Err(Trap::Yield) => return Exit::Yield,
+                Err(Trap::Halt(halt)) => return Exit::Halted(halt),
+                Err(Trap::Fault(fault)) => {
+                    if let Err(halt) = self.fault(bus, fault) {
+                        return Exit::Halted(halt);
+                    }
+                    if catch && self.ipsr == system::exception::HARD_FAULT && ipsr != self.ipsr {
+                        return Exit::Debug(DebugStop::HardFault);
+                    }
+                }
+                Err(Trap::Returned) => {}
+            }
+            if self.yield_request || bus.yield_requested() {
+                self.yield_request = false;
+                let left = !range.as_ref().is_some_and(|r| r.contains(&self.pc));
+                if let (true, Some(control)) = (step && left, self.debug.as_deref_mut()) {
+                    control.step_done = true;
+                }
+                return Exit::Yield;
+            }
+            if step && !range.as_ref().is_some_and(|r| r.contains(&self.pc)) {
+                return Exit::Debug(DebugStop::Step);
+            }
+        }
+        Exit::Budget
+    }
+
     /// Executes one instruction (or takes a pending exception first).
     pub fn step_one<B: Bus>(&mut self, bus: &mut B) -> Result<(), Halt> {
         if self.scs.check_pending {
@@ -517,7 +670,7 @@ impl Cpu {
     }
 
     fn fetch_half<B: Bus>(&mut self, bus: &mut B, address: u32) -> Result<u16, Trap> {
-        match bus.read(address, Size::Half, self.cycles) {
+        match bus.fetch(address, Size::Half, self.cycles) {
             Ok(value) => Ok(value as u16),
             Err(BusError::Fault) => Err(Fault::Fetch.into()),
             Err(BusError::Unmodelled(what)) => Err(Trap::Halt(Halt::Unmodelled {

@@ -616,6 +616,41 @@ impl Cpu {
         }
     }
 
+    /// A special register as a debugger reads it (MRS's numbering: 8 MSP, 9 PSP, 16
+    /// PRIMASK, 17 BASEPRI, 19 FAULTMASK, 20 CONTROL).
+    pub fn special_register(&self, sysm: u8) -> u32 {
+        self.read_special(sysm)
+    }
+
+    /// Writes a special register as a debugger does: whatever the core's privilege.
+    pub fn set_special_register(&mut self, sysm: u8, value: u32) {
+        match sysm {
+            16 => self.primask = value & 1 != 0,
+            17 => self.basepri = (value & 0xF0) as u8,
+            19 => self.faultmask = value & 1 != 0,
+            20 => {
+                let old_spsel = self.control & 0b10;
+                let mut control = value as u8 & 0b111;
+                if self.ipsr != 0 {
+                    control = (control & !0b10) | old_spsel;
+                } else if control & 0b10 != old_spsel {
+                    std::mem::swap(&mut self.r[13], &mut self.other_sp);
+                }
+                self.control = control;
+            }
+            8 | 9 => {
+                let current = (sysm == 9) == (self.ipsr == 0 && self.control & 0b10 != 0);
+                if current {
+                    self.r[13] = value & !3;
+                } else {
+                    self.other_sp = value & !3;
+                }
+            }
+            _ => {}
+        }
+        self.scs.check_pending = true;
+    }
+
     /// MSR.
     pub(super) fn write_special(&mut self, sysm: u8, mask: u8, value: u32) {
         match sysm {

@@ -1,0 +1,338 @@
+//! The MCU's GDB server against a client speaking the remote protocol byte for byte: what
+//! GDB sends, and what a broken or hostile client might.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use autoplug_flash::sim::SimFlash;
+use autoplug_mcu::gdb::{GdbServer, GdbStatus};
+use autoplug_mcu::map::FLASH;
+use autoplug_mcu::mcu::Mcu;
+
+const COUNTER: u32 = 0x2000_0000;
+/// The loop's store.
+const STORE_PC: u32 = FLASH.start + 0x4C;
+
+/// r0 = COUNTER; loop: r1 = [r0] + 1; [r0] = r1; repeat.
+fn counting() -> Mcu {
+    let code: [u16; 9] = [
+        0xF240, 0x0000, // MOVW r0, #0
+        0xF2C2, 0x0000, // MOVT r0, #0x2000
+        0x6801, // 0x48: LDR r1, [r0]
+        0x3101, // ADDS r1, #1
+        0x6001, // 0x4C: STR r1, [r0]
+        0xE7FB, // B 0x48
+        0xBF00,
+    ];
+    let mut image = vec![0u8; 0x60];
+    for (i, word) in [0x2002_0000u32, FLASH.start + 0x41].iter().enumerate() {
+        image[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
+    }
+    for (i, halfword) in code.iter().enumerate() {
+        image[0x40 + 2 * i..0x42 + 2 * i].copy_from_slice(&halfword.to_le_bytes());
+    }
+    let mut flash = SimFlash::new(1);
+    flash.program(FLASH.start, &image).unwrap();
+    Mcu::power_on(flash, [1, 2, 3]).unwrap()
+}
+
+/// The MCU on a thread of its own, run 1 ms of simulated time at a time until stopped;
+/// the server's address and status.
+struct Running {
+    address: SocketAddr,
+    status: Arc<GdbStatus>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<(Mcu, u64)>>,
+}
+
+impl Running {
+    fn start() -> Self {
+        let mut mcu = counting();
+        let server = GdbServer::bind("test-ecu", "127.0.0.1:0".parse().unwrap()).unwrap();
+        let (address, status) = (server.local_addr(), server.status());
+        mcu.debugger = Some(Box::new(server));
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopping = Arc::clone(&stop);
+        let thread = std::thread::spawn(move || {
+            let mut at = 0u64;
+            while !stopping.load(Ordering::Relaxed) {
+                at += 1_000_000;
+                mcu.run_until(at).unwrap();
+            }
+            (mcu, at)
+        });
+        Running {
+            address,
+            status,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    fn finish(mut self) -> (Mcu, u64) {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.take().unwrap().join().unwrap()
+    }
+}
+
+struct Client {
+    stream: TcpStream,
+    no_ack: bool,
+}
+
+fn checksum(body: &str) -> String {
+    format!("{:02x}", body.bytes().fold(0u8, |a, b| a.wrapping_add(b)))
+}
+
+impl Client {
+    fn connect(address: SocketAddr) -> Self {
+        let stream = TcpStream::connect(address).unwrap();
+        stream
+            .set_read_timeout(Some(Duration::from_secs(20)))
+            .unwrap();
+        Client {
+            stream,
+            no_ack: false,
+        }
+    }
+
+    fn send_raw(&mut self, bytes: &[u8]) {
+        self.stream.write_all(bytes).unwrap();
+    }
+
+    fn byte(&mut self) -> u8 {
+        let mut b = [0u8];
+        self.stream.read_exact(&mut b).unwrap();
+        b[0]
+    }
+
+    /// The next packet's body (acks and noise skipped), acknowledged.
+    fn reply(&mut self) -> String {
+        while self.byte() != b'$' {}
+        let mut body = Vec::new();
+        loop {
+            match self.byte() {
+                b'#' => break,
+                b => body.push(b),
+            }
+        }
+        let (c1, c2) = (self.byte(), self.byte());
+        let raw = String::from_utf8(body).unwrap();
+        assert_eq!(format!("{}{}", c1 as char, c2 as char), checksum(&raw));
+        // Run-length encoding: "X*n" is X and n - 29 more of it.
+        let mut text = String::new();
+        let mut chars = raw.chars();
+        while let Some(c) = chars.next() {
+            if c == '*' {
+                let n = chars.next().unwrap() as usize - 29;
+                let last = text.chars().last().unwrap();
+                text.extend(std::iter::repeat_n(last, n));
+            } else {
+                text.push(c);
+            }
+        }
+        if !self.no_ack {
+            self.send_raw(b"+");
+        }
+        text
+    }
+
+    fn ask(&mut self, body: &str) -> String {
+        self.send_raw(format!("${body}#{}", checksum(body)).as_bytes());
+        self.reply()
+    }
+
+    /// The reply to a command that resumes: console output (`O` packets) skipped.
+    fn stop_reply(&mut self) -> String {
+        loop {
+            let reply = self.reply();
+            if !reply.starts_with('O') || reply == "OK" {
+                return reply;
+            }
+        }
+    }
+
+    fn register(&mut self, n: usize) -> u32 {
+        let regs = self.ask("g");
+        let hex = &regs[8 * n..8 * n + 8];
+        u32::from_le_bytes(
+            (0..4)
+                .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
+                .collect::<Vec<_>>()
+                .try_into()
+                .unwrap(),
+        )
+    }
+
+    fn counter(&mut self) -> u32 {
+        let hex = self.ask(&format!("m{COUNTER:x},4"));
+        u32::from_str_radix(&hex, 16).unwrap().swap_bytes()
+    }
+}
+
+#[test]
+fn a_client_halts_the_mcu_reads_it_steps_it_and_watches_a_write() {
+    let running = Running::start();
+    let mut gdb = Client::connect(running.address);
+    let supported = gdb.ask("qSupported:multiprocess+;swbreak+;hwbreak+;xmlRegisters=arm");
+    assert!(supported.contains("PacketSize=1000"), "{supported}");
+    assert!(supported.contains("qXfer:features:read+"), "{supported}");
+    assert!(supported.contains("qXfer:memory-map:read+"), "{supported}");
+    assert!(supported.contains("ReverseStep") || !supported.is_empty());
+    assert_eq!(gdb.ask("QStartNoAckMode"), "OK");
+    gdb.no_ack = true;
+    assert!(gdb.ask("?").starts_with('S') || gdb.ask("?").starts_with('T'));
+    assert!(running.status.attached() && running.status.halted());
+
+    // Halted: the firmware's counter does not move while the client waits.
+    let before = gdb.counter();
+    std::thread::sleep(Duration::from_millis(50));
+    assert_eq!(gdb.counter(), before, "simulated time stands still");
+
+    // The target description names the Cortex-M4F's features.
+    let xml = gdb.ask("qXfer:features:read:target.xml:0,fff");
+    assert!(
+        xml.contains("org.gnu.gdb.arm.m-profile") && xml.contains("org.gnu.gdb.arm.vfp"),
+        "{xml}"
+    );
+    let map = gdb.ask("qXfer:memory-map:read::0,fff");
+    assert!(map.contains(r#"type="flash" start="0x08000000""#), "{map}");
+
+    // Memory outside the map: an error, not a panic; a request longer than a packet is
+    // answered with what fits.
+    assert!(gdb.ask("m30000000,4").starts_with('E'));
+    let big = gdb.ask("m20000000,100000");
+    assert!(
+        !big.is_empty() && big.len() <= autoplug_mcu::gdb::PACKET_SIZE,
+        "{}",
+        big.len()
+    );
+    let big = gdb.ask("mffff0000,ffffffff");
+    assert!(big.starts_with('E'), "{big}");
+    // Writes reach SRAM; the flash is written only by `load` (vFlashWrite).
+    assert_eq!(gdb.ask("M20000100,4:01020304"), "OK");
+    assert_eq!(gdb.ask("m20000100,4"), "01020304");
+    assert!(gdb.ask("M8000040,2:0000").starts_with('E'));
+
+    // The FPB has six comparators, the DWT four.
+    for i in 0..6 {
+        assert_eq!(
+            gdb.ask(&format!("Z1,{:x},2", FLASH.start + 0x100 + 2 * i)),
+            "OK"
+        );
+    }
+    assert_ne!(gdb.ask(&format!("Z1,{:x},2", FLASH.start + 0x200)), "OK");
+    for i in 0..6 {
+        assert_eq!(
+            gdb.ask(&format!("z1,{:x},2", FLASH.start + 0x100 + 2 * i)),
+            "OK"
+        );
+    }
+    for i in 0..4 {
+        assert_eq!(gdb.ask(&format!("Z2,{:x},4", 0x2000_1000 + 4 * i)), "OK");
+    }
+    assert_ne!(gdb.ask("Z2,20002000,4"), "OK");
+    for i in 0..4 {
+        assert_eq!(gdb.ask(&format!("z2,{:x},4", 0x2000_1000 + 4 * i)), "OK");
+    }
+    // A range one comparator cannot cover is refused (GDB then says so).
+    assert_ne!(gdb.ask("Z2,20000002,4"), "OK");
+
+    // A breakpoint at the loop's store halts before it executes.
+    assert_eq!(gdb.ask(&format!("Z1,{STORE_PC:x},2")), "OK");
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    let stop = gdb.stop_reply();
+    assert!(
+        stop.starts_with("T05") && stop.contains("hwbreak"),
+        "{stop}"
+    );
+    assert_eq!(gdb.register(15), STORE_PC);
+    let counter = gdb.counter();
+    // A step executes the store: the counter moves by one.
+    gdb.send_raw(format!("$s#{}", checksum("s")).as_bytes());
+    let stop = gdb.stop_reply();
+    assert!(stop.starts_with("S05") || stop.starts_with("T05"), "{stop}");
+    assert_eq!(gdb.register(15), STORE_PC + 2);
+    assert_eq!(gdb.counter(), counter.wrapping_add(1));
+    assert_eq!(gdb.ask(&format!("z1,{STORE_PC:x},2")), "OK");
+
+    // A write watchpoint on the counter halts after the store.
+    assert_eq!(gdb.ask(&format!("Z2,{COUNTER:x},4")), "OK");
+    let counter = gdb.counter();
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    let stop = gdb.stop_reply();
+    assert!(stop.contains(&format!("watch:{COUNTER:x}")), "{stop}");
+    assert_eq!(gdb.register(15), STORE_PC + 2);
+    assert_eq!(gdb.counter(), counter.wrapping_add(1));
+    assert_eq!(gdb.ask(&format!("z2,{COUNTER:x},4")), "OK");
+
+    // Ctrl-C halts a running core.
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    std::thread::sleep(Duration::from_millis(30));
+    assert!(!running.status.halted());
+    gdb.send_raw(&[0x03]);
+    let stop = gdb.stop_reply();
+    assert!(stop.starts_with("T02") || stop.starts_with("S02"), "{stop}");
+    assert!(running.status.halted());
+
+    // Detach: the core runs on.
+    assert_eq!(gdb.ask("D"), "OK");
+    let counter = {
+        let mut next = Client::connect(running.address);
+        next.ask("qSupported");
+        let c = next.counter();
+        next.ask("D");
+        c
+    };
+    let (mut mcu, _) = running.finish();
+    assert!(mcu.debug_read(COUNTER, &mut [0; 4]) == 4);
+    assert!(counter > 0);
+}
+
+#[test]
+fn bad_packets_get_errors_a_second_client_is_refused_and_a_vanished_one_releases_the_mcu() {
+    let running = Running::start();
+    let mut gdb = Client::connect(running.address);
+    gdb.ask("qSupported");
+    // A wrong checksum asks for the packet again.
+    gdb.send_raw(b"$g#00");
+    assert_eq!(gdb.byte(), b'-');
+    // A command gdbstub cannot parse: an error, and the session goes on.
+    assert_eq!(gdb.ask("mzz,4"), "E01");
+    assert_eq!(gdb.ask("m20000000,4").len(), 8);
+    // Longer than a packet: an error.
+    let long = format!("M20000000,8000:{}", "00".repeat(0x8000));
+    assert!(gdb.ask(&long).starts_with("E."), "too long");
+    assert_eq!(gdb.ask("m20000000,4").len(), 8);
+
+    // A second client is told who has the port.
+    let mut second = Client::connect(running.address);
+    let refused = second.ask("qSupported");
+    assert!(
+        refused.starts_with("E.the debug port of test-ecu is in use by 127.0.0.1:"),
+        "{refused}"
+    );
+    // And the connection closes (read to its end, or reset: the client's ack came after
+    // the server closed).
+    let mut rest = Vec::new();
+    let _ = second.stream.read_to_end(&mut rest);
+    assert!(!rest.contains(&b'$'), "no more packets");
+
+    // Gone mid-packet: the MCU runs on.
+    let counter = gdb.counter();
+    gdb.send_raw(b"$m2000");
+    drop(gdb);
+    std::thread::sleep(Duration::from_millis(100));
+    assert!(!running.status.attached() && !running.status.halted());
+    let mut next = Client::connect(running.address);
+    next.ask("qSupported");
+    assert!(
+        next.counter() != counter,
+        "the core ran after the client went"
+    );
+    next.ask("D");
+    running.finish();
+}
