@@ -108,6 +108,7 @@ impl<'a> FirmwareBuild<'a> {
         let choice = autoplug_virtual_car::firmware::FirmwareChoice {
             ecus: ecus.to_vec(),
             dir: dir.to_path_buf(),
+            gdb: Vec::new(),
         };
         choice.build_missing(self.root, &self.cargo)
     }

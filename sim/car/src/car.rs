@@ -250,6 +250,9 @@ macro_rules! ecus {
                     Some(choice) => firmware::load_all(&choice.ecus, &choice.dir, scenario.seed)?,
                     None => Vec::new(),
                 };
+                if let Some(choice) = choice {
+                    fw.set_debugged(firmware::serve_debuggers(choice, &mut loaded)?);
+                }
                 $(
                     let emulated = emulate(fw, &mut loaded, Node::$node, bus);
                     let phase_us = phases.next().unwrap_or_default();
@@ -898,6 +901,17 @@ impl VirtualCar {
     /// Whether `node` runs as its firmware on an emulated MCU.
     pub fn emulated(&self, node: Node) -> bool {
         self.ecus.emulated(node)
+    }
+
+    /// The GDB server's status of `node`'s debug port, when it has one (`--gdb`).
+    pub fn debug_status(&self, node: Node) -> Option<std::sync::Arc<autoplug_mcu::gdb::GdbStatus>> {
+        self.firmware.debug_status(node)
+    }
+
+    /// The wall-clock time debuggers held the car halted: what a real-time pacer leaves
+    /// out (the car stood still meanwhile).
+    pub fn debugger_halted_for(&self) -> std::time::Duration {
+        self.firmware.debugger_halted_for()
     }
 
     /// The emulated ECUs' defmt log lines since the last call.

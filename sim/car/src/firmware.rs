@@ -6,12 +6,15 @@
 //! takes from the HAL), and its bxCAN is a node of the car's bit-timed bus.
 
 use std::collections::VecDeque;
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use autoplug_can::{ecu_name, parse_ecu, Node, ECUS, ECU_NAME_LIST};
 use autoplug_ecus::firmware_name;
 use autoplug_mcu::chip::rcc::ResetCause;
 use autoplug_mcu::chip::Chip;
+use autoplug_mcu::gdb::{GdbServer, GdbStatus};
 use autoplug_mcu::mcu::{Mcu, Stop};
 use autoplug_mcu::node::{run_together, BusNode};
 use autoplug_mcu::programming::FlashContents;
@@ -32,6 +35,8 @@ pub struct FirmwareChoice {
     pub ecus: Vec<Node>,
     /// The directory with `boot` and `<ecu>-fw` (a cargo profile's directory).
     pub dir: PathBuf,
+    /// ECUs whose debug port is a GDB server, and its address ([`FirmwareChoice::debug`]).
+    pub gdb: Vec<(Node, SocketAddr)>,
 }
 
 impl FirmwareChoice {
@@ -58,7 +63,56 @@ impl FirmwareChoice {
         Ok(Self {
             ecus,
             dir: dir.to_path_buf(),
+            gdb: Vec::new(),
         })
+    }
+
+    /// Adds GDB servers: `ECU[=ADDR]` items (the `--gdb` values), each ECU one that runs
+    /// as firmware; without an address, 127.0.0.1:3333 for the first and the next ports
+    /// for the others. Loopback addresses only.
+    pub fn debug(mut self, items: &[String]) -> Result<Self, String> {
+        let mut next_port = 3333u16;
+        for item in items {
+            let (name, address) = match item.split_once('=') {
+                Some((name, address)) => (name, Some(address)),
+                None => (item.as_str(), None),
+            };
+            let node = parse_ecu(name).ok_or_else(|| {
+                format!(
+                    "--gdb {item}: no ECU '{}' (one of: {ECU_NAME_LIST})",
+                    name.trim()
+                )
+            })?;
+            if !self.runs(node) {
+                return Err(format!(
+                    "--gdb {item}: {} does not run as firmware (add it to --firmware)",
+                    ecu_name(node)
+                ));
+            }
+            if self.gdb.iter().any(|(n, _)| *n == node) {
+                return Err(format!("--gdb: {} named twice", ecu_name(node)));
+            }
+            let address = match address {
+                Some(text) => autoplug_mcu::gdb::parse_address(text)?,
+                None => {
+                    let taken = |port: u16| self.gdb.iter().any(|(_, a)| a.port() == port);
+                    while taken(next_port) {
+                        next_port += 1;
+                    }
+                    SocketAddr::from(([127, 0, 0, 1], next_port))
+                }
+            };
+            if self.gdb.iter().any(|(_, a)| *a == address) {
+                return Err(format!("--gdb {item}: {address} is given twice"));
+            }
+            self.gdb.push((node, address));
+        }
+        Ok(self)
+    }
+
+    /// The ELF file of `node`'s firmware.
+    pub fn elf(&self, node: Node) -> PathBuf {
+        self.dir.join(format!("{}-fw", firmware_name(node)))
     }
 
     /// Whether `node` runs as firmware.
@@ -249,6 +303,42 @@ pub(crate) struct Firmware {
     log: VecDeque<FirmwareLogLine>,
     dropped_lines: u64,
     stops: Vec<FirmwareStop>,
+    /// The GDB servers' statuses, by ECU.
+    debugged: Vec<(Node, Arc<GdbStatus>)>,
+}
+
+/// Puts a GDB server on the debug port of each of `loaded` that `choice` names, and waits
+/// for their debuggers (a run under a debugger starts at the reset vector, as QEMU's
+/// `-S`). The servers' statuses.
+pub fn serve_debuggers(
+    choice: &FirmwareChoice,
+    loaded: &mut [(Node, Mcu, Vec<RttLog>)],
+) -> Result<Vec<(Node, Arc<GdbStatus>)>, String> {
+    let mut statuses = Vec::new();
+    let mut servers = Vec::new();
+    for &(node, address) in &choice.gdb {
+        let server = GdbServer::bind(ecu_name(node), address)?;
+        eprintln!(
+            "{}: GDB server on {}: gdb-multiarch {} -ex 'target extended-remote {}'",
+            ecu_name(node),
+            server.local_addr(),
+            choice.elf(node).display(),
+            server.local_addr()
+        );
+        statuses.push((node, server.status()));
+        servers.push((node, server));
+    }
+    for (node, server) in servers {
+        eprintln!(
+            "{}: waiting for the debugger (the car is held at power-on)",
+            ecu_name(node)
+        );
+        server.wait_for_client(None);
+        if let Some((_, mcu, _)) = loaded.iter_mut().find(|(n, _, _)| *n == node) {
+            mcu.debugger = Some(Box::new(server));
+        }
+    }
+    Ok(statuses)
 }
 
 /// The unique ID of `node`'s board (the F446's 96-bit UID: lot, wafer, position).
@@ -333,7 +423,26 @@ impl Firmware {
             log: VecDeque::new(),
             dropped_lines: 0,
             stops: Vec::new(),
+            debugged: Vec::new(),
         }
+    }
+
+    /// Keeps the GDB servers' statuses.
+    pub(crate) fn set_debugged(&mut self, statuses: Vec<(Node, Arc<GdbStatus>)>) {
+        self.debugged = statuses;
+    }
+
+    /// The GDB server's status of `node`'s debug port, if it has one.
+    pub(crate) fn debug_status(&self, node: Node) -> Option<Arc<GdbStatus>> {
+        self.debugged
+            .iter()
+            .find(|(n, _)| *n == node)
+            .map(|(_, s)| Arc::clone(s))
+    }
+
+    /// The wall-clock time debuggers held the car halted, all together.
+    pub(crate) fn debugger_halted_for(&self) -> std::time::Duration {
+        self.debugged.iter().map(|(_, s)| s.halted_for()).sum()
     }
 
     /// Puts an ECU's MCU on the bus as `node`'s board.
@@ -575,6 +684,37 @@ mod tests {
             unknown.starts_with("--firmware: no ECU 'brakes' (all, or some of: engine"),
             "{unknown}"
         );
+    }
+
+    #[test]
+    fn gdb_ports_go_to_ecus_that_run_as_firmware_on_loopback() {
+        let dir = Path::new("fw");
+        let choice = FirmwareChoice::parse("cruise,abs", dir).unwrap();
+        let debugged = choice
+            .clone()
+            .debug(&["cruise".into(), "abs=127.0.0.1:4444".into()])
+            .unwrap();
+        assert_eq!(
+            debugged.gdb,
+            [
+                (Node::Cruise, "127.0.0.1:3333".parse().unwrap()),
+                (Node::ABS, "127.0.0.1:4444".parse().unwrap())
+            ]
+        );
+        let not_firmware = choice.clone().debug(&["engine".into()]).unwrap_err();
+        assert!(
+            not_firmware.contains("engine does not run as firmware"),
+            "{not_firmware}"
+        );
+        let remote = choice
+            .clone()
+            .debug(&["cruise=0.0.0.0:3333".into()])
+            .unwrap_err();
+        assert!(remote.contains("loopback only"), "{remote}");
+        let twice = choice
+            .debug(&["cruise=3333".into(), "abs=:3333".into()])
+            .unwrap_err();
+        assert!(twice.contains("given twice"), "{twice}");
     }
 
     #[test]

@@ -93,6 +93,11 @@ enum Command {
         /// Where the firmware ELF files are: `boot` and `<ecu>-fw`.
         #[arg(long, value_name = "DIR", default_value = firmware::DEFAULT_FIRMWARE_DIR)]
         firmware_dir: PathBuf,
+        /// A GDB server on an emulated ECU's debug port (loopback; default address
+        /// 127.0.0.1:3333, then 3334…): the run waits for the debugger at power-on, and
+        /// the whole car stands still while it holds the ECU halted. Repeatable.
+        #[arg(long, value_name = "ECU[=ADDR]")]
+        gdb: Vec<String>,
     },
     /// Runs scenarios twice, on host logic and with ECUs as their firmware on emulated
     /// STM32F446s, and compares the runs: every periodic message at its period, the gear
@@ -159,11 +164,17 @@ fn main() -> ExitCode {
             vin,
             firmware,
             firmware_dir,
+            gdb,
         } => {
+            if !gdb.is_empty() && firmware.is_none() {
+                eprintln!("error: --gdb debugs an ECU's firmware: name it with --firmware too");
+                return ExitCode::from(2);
+            }
             let firmware = match firmware
                 .as_deref()
                 .map(|list| FirmwareChoice::parse(list, &firmware_dir))
                 .transpose()
+                .and_then(|choice| choice.map(|c| c.debug(&gdb)).transpose())
                 .and_then(|choice| choice.map(firmware_at_hand).transpose())
             {
                 Ok(choice) => choice,
@@ -366,7 +377,10 @@ fn run_one(
             }
             if realtime && car.time_us() % 10_000 == 0 {
                 let target = Duration::from_micros(car.time_us());
-                if let Some(wait) = target.checked_sub(wall.elapsed()) {
+                // The car stood still while a debugger held an ECU: that time is not
+                // the car's to catch up.
+                let elapsed = wall.elapsed().saturating_sub(car.debugger_halted_for());
+                if let Some(wait) = target.checked_sub(elapsed) {
                     std::thread::sleep(wait);
                 }
             }
