@@ -42,6 +42,10 @@ pub const PACKET_SIZE: usize = 4096;
 /// A client that stops reading its replies for this long is disconnected.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// How long a client that comes while another is attached waits for it to detach before
+/// it is turned away.
+const HANDOVER_WAIT: Duration = Duration::from_secs(1);
+
 /// Received chunks queued between the client's reader thread and the MCU (a client that
 /// sends faster than the MCU serves waits in TCP's flow control).
 const QUEUED_CHUNKS: usize = 16;
@@ -251,7 +255,6 @@ impl GdbServer {
 
     /// Serves the client while the core is halted, until it resumes the core or goes.
     fn serve(&mut self, mcu: &mut Mcu) {
-        self.shared.status.set_halted(true);
         while let Some(session) = self.session.as_mut() {
             match session.step(mcu, true) {
                 Served::Halted => {}
@@ -262,7 +265,6 @@ impl GdbServer {
                 }
             }
         }
-        self.shared.status.set_halted(false);
     }
 }
 
@@ -280,6 +282,15 @@ impl Debugger for GdbServer {
     }
 
     fn halted(&mut self, mcu: &mut Mcu, why: Halted) {
+        // Halted from here until the core resumes: said before any stop reply goes out.
+        self.shared.status.set_halted(true);
+        self.take_halt(mcu, why);
+        self.shared.status.set_halted(false);
+    }
+}
+
+impl GdbServer {
+    fn take_halt(&mut self, mcu: &mut Mcu, why: Halted) {
         self.shared.attention.store(false, Ordering::Release);
         if self.session.is_none() {
             if matches!(why, Halted::Request) && self.attach(mcu) {
@@ -354,7 +365,7 @@ fn hard_fault_text(mcu: &mut Mcu) -> String {
 }
 
 /// Accepts clients: the first is handed to the MCU, a second is turned away.
-fn listen(listener: TcpListener, shared: &Shared) {
+fn listen(listener: TcpListener, shared: &Arc<Shared>) {
     for stream in listener.incoming() {
         if shared.closing.load(Ordering::Acquire) {
             return;
@@ -371,15 +382,31 @@ fn listen(listener: TcpListener, shared: &Shared) {
         };
         if shared.busy.load(Ordering::Acquire) || pending.is_some() {
             drop(pending);
-            let holder = shared
-                .status
-                .peer()
-                .map_or_else(|| "another client".to_string(), |p| p.to_string());
-            let name = shared.name.clone();
-            // Off this thread: a silent client must not hold up the next one.
+            // Off this thread: a silent client must not hold up the next one. A client
+            // that comes just as the last one detaches (GDB reconnecting) gets the port.
+            let shared = Arc::clone(shared);
             let _ = std::thread::Builder::new()
                 .name("gdb-refuse".into())
-                .spawn(move || refuse(stream, &name, &holder));
+                .spawn(move || {
+                    let start = Instant::now();
+                    while start.elapsed() < HANDOVER_WAIT {
+                        if !shared.busy.load(Ordering::Acquire) {
+                            if let Ok(mut pending) = shared.pending.lock() {
+                                if pending.is_none() {
+                                    *pending = Some((stream, peer));
+                                    shared.attention.store(true, Ordering::Release);
+                                    return;
+                                }
+                            }
+                        }
+                        std::thread::sleep(Duration::from_millis(10));
+                    }
+                    let holder = shared
+                        .status
+                        .peer()
+                        .map_or_else(|| "another client".to_string(), |p| p.to_string());
+                    refuse(stream, &shared.name, &holder);
+                });
             continue;
         }
         *pending = Some((stream, peer));
