@@ -147,8 +147,8 @@ where
     ) {
         if self.emulated {
             // The board's inputs follow the model; the firmware samples them when it will.
-            if let Some(chip) = firmware.chip(E::NODE) {
-                E::drive(&sensors(), &mut Bench::new(chip));
+            if let Some(mcu) = firmware.mcu(E::NODE) {
+                E::drive(&sensors(), &mut Bench::new(mcu));
             }
             return;
         }
@@ -173,8 +173,8 @@ where
     fn read_pins(&mut self, firmware: &mut firmware::Firmware) {
         if self.emulated {
             self.outputs = firmware
-                .chip(E::NODE)
-                .and_then(|chip| E::read(&Bench::new(chip)));
+                .mcu(E::NODE)
+                .and_then(|mcu| E::read(&Bench::new(mcu)));
         }
     }
 

@@ -13,7 +13,6 @@ use std::sync::Arc;
 use autoplug_can::{ecu_name, parse_ecu, Node, ECUS, ECU_NAME_LIST};
 use autoplug_ecus::firmware_name;
 use autoplug_mcu::chip::rcc::ResetCause;
-use autoplug_mcu::chip::Chip;
 use autoplug_mcu::gdb::{GdbServer, GdbStatus};
 use autoplug_mcu::mcu::{Mcu, Stop};
 use autoplug_mcu::node::{run_together, BusNode};
@@ -473,10 +472,10 @@ impl Firmware {
         self.ecus.is_empty() && self.stops.is_empty()
     }
 
-    /// The chip of `node`'s board, while it runs.
-    pub(crate) fn chip(&mut self, node: Node) -> Option<&mut Chip> {
+    /// The MCU of `node`'s board, while it runs.
+    pub(crate) fn mcu(&mut self, node: Node) -> Option<&mut Mcu> {
         let i = self.ecus.iter().position(|e| e.node == node)?;
-        Some(&mut self.nodes[i].mcu.chip)
+        Some(&mut self.nodes[i].mcu)
     }
 
     /// Runs the bus and the MCUs to `until_ns`. An MCU that stops leaves the bus (its node
@@ -518,7 +517,7 @@ impl Firmware {
         for (ecu, node) in self.ecus.iter_mut().zip(&mut self.nodes) {
             Self::read_log(
                 ecu,
-                &mut node.mcu.chip,
+                &mut node.mcu,
                 t_us,
                 &mut self.log,
                 &mut self.dropped_lines,
@@ -565,7 +564,7 @@ impl Firmware {
 
     fn read_log(
         ecu: &mut EmulatedEcu,
-        chip: &mut Chip,
+        chip: &mut impl autoplug_mcu::rtt::HostMemory,
         t_us: i64,
         log: &mut VecDeque<FirmwareLogLine>,
         dropped: &mut u64,

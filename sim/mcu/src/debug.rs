@@ -119,6 +119,10 @@ pub enum Resume {
     /// Instructions while the next one's address is in the range (GDB's range stepping:
     /// a source line's instructions without a round trip each).
     StepRange(core::ops::Range<u32>),
+    /// Back one instruction ([`crate::history`]).
+    ReverseStep,
+    /// Back to the last breakpoint or watchpoint hit.
+    ReverseContinue,
 }
 
 /// What a debugger set on the MCU: the FPB's hardware breakpoints, its own software

@@ -20,6 +20,7 @@ pub mod chip;
 pub mod cpu;
 pub mod debug;
 pub mod gdb;
+pub mod history;
 pub mod map;
 pub mod mcu;
 pub mod node;

@@ -84,7 +84,7 @@ pub struct Mcu {
     /// Flash, SRAM and peripherals.
     pub chip: Chip,
     /// The frame on the wire and the cycle its transmission ends, on the standalone bus.
-    on_wire: Option<(CanFrame, u64)>,
+    pub(crate) on_wire: Option<(CanFrame, u64)>,
     /// Frames sent on the standalone bus (every frame is acknowledged by a listener).
     pub sent: Vec<Sent>,
     /// System resets so far, by cause.
@@ -95,7 +95,7 @@ pub struct Mcu {
     pub lockups: Vec<(u64, Halt)>,
     /// The core is locked up (a fault it could not take): it executes nothing until a
     /// reset, while the chip around it runs on.
-    locked_up: bool,
+    pub(crate) locked_up: bool,
     /// What the program wrote to the console through semihosting.
     pub semihosting_output: Vec<u8>,
     /// CAN1 on a bus of its own where every frame is acknowledged (true), or attached to
@@ -105,6 +105,10 @@ pub struct Mcu {
     pub debugger: Option<Box<dyn Debugger>>,
     /// What a debugger set: breakpoints, watchpoints, how the core resumes.
     pub debug: DebugUnit,
+    /// The execution history a reverse debugger records ([`crate::history`]).
+    pub history: Option<Box<crate::history::History>>,
+    /// A replay reached its position: the run in progress ends there.
+    pub(crate) abort_run: bool,
 }
 
 impl Mcu {
@@ -124,6 +128,8 @@ impl Mcu {
             standalone_can: true,
             debugger: None,
             debug: DebugUnit::default(),
+            history: None,
+            abort_run: false,
         };
         mcu.cpu
             .reset(&mut mcu.chip, BOOT_ALIAS)
@@ -154,6 +160,9 @@ impl Mcu {
 
     /// Runs until simulated time `until_ns` (nanoseconds since power-on).
     pub fn run_until(&mut self, until_ns: u64) -> Result<(), Stop> {
+        if self.history.is_some() {
+            self.record_run(until_ns);
+        }
         loop {
             if self.debugger.as_ref().is_some_and(|d| d.wants_halt()) {
                 self.debug_halt(Halted::Request);
@@ -194,6 +203,9 @@ impl Mcu {
                 continue;
             }
             let exit = self.run_core(next);
+            if std::mem::take(&mut self.abort_run) {
+                return Ok(());
+            }
             match exit {
                 Exit::Budget => {}
                 Exit::Sleeping => {
@@ -259,7 +271,7 @@ impl Mcu {
             };
             // After a reset (`monitor reset`) the cycle count starts again: the loop
             // works out the next event anew.
-            if reset || self.cpu.cycles() >= next {
+            if reset || self.abort_run || self.cpu.cycles() >= next {
                 return Exit::Budget;
             }
         }

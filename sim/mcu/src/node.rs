@@ -17,6 +17,7 @@ use autoplug_virtual_bus::{
 };
 
 use crate::chip::can::CanFrame;
+use crate::history::Input;
 use crate::mcu::{Mcu, Stop};
 
 /// The longest step the MCUs run ahead of the bus, in bit times: under the shortest frame
@@ -120,7 +121,6 @@ impl BusNode {
     /// What the bus did for this node: its frames' outcomes, the frames it received, its
     /// error counters.
     fn collect(&mut self, bus: &mut VirtualBus) {
-        let can = &mut self.mcu.chip.can1;
         while let Some(done) = bus.transmitted(self.node) {
             if let Some(mailbox) = self
                 .offered
@@ -130,23 +130,31 @@ impl BusNode {
                 if !done.retrying {
                     self.offered[mailbox] = None;
                 }
-                can.complete(mailbox, done.ok, done.retrying);
+                self.mcu.input(Input::CanComplete {
+                    mailbox,
+                    ok: done.ok,
+                    retrying: done.retrying,
+                });
             }
         }
         while let Some(delivered) = bus.recv(self.node) {
             let frame = delivered.frame;
             let mut data = [0u8; 8];
             data[..frame.len()].copy_from_slice(frame.data());
-            can.receive(&CanFrame {
+            self.mcu.input(Input::CanReceive(CanFrame {
                 id: u32::from(frame.id()),
                 extended: false,
                 remote: false,
                 dlc: frame.len() as u8,
                 data,
-            });
+            }));
         }
         let status = bus.node_status(self.node);
-        can.set_error_state(status.tec, status.rec, status.state == ErrorState::BusOff);
+        self.mcu.input(Input::CanErrorState {
+            tec: status.tec,
+            rec: status.rec,
+            bus_off: status.state == ErrorState::BusOff,
+        });
     }
 }
 
@@ -177,7 +185,7 @@ pub fn run_together(
                     .iter()
                     .position(|o| o.is_some_and(|(f, _)| f == frame))
             });
-            node.mcu.chip.can1.set_sending(on_wire);
+            node.mcu.input(Input::CanSending(on_wire));
             node.mcu.run_until(next).map_err(|stop| (i, stop))?;
             node.withdraw_aborted(bus);
             for (at, mailbox, frame, cycle) in node.new_requests().map_err(|stop| (i, stop))? {

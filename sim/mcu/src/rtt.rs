@@ -6,6 +6,41 @@ use object::{Object, ObjectSection, ObjectSymbol};
 
 use crate::chip::Chip;
 
+/// The memory a probe reads the RTT buffer from and writes its read offset to: the chip
+/// itself, or the MCU (which journals the write for a reverse debugger's replay).
+pub trait HostMemory {
+    /// Reads SRAM bytes, if all are in SRAM.
+    fn sram_read(&self, address: u32, buf: &mut [u8]) -> Option<()>;
+    /// Writes an SRAM word as a probe does.
+    fn host_write_word(&mut self, address: u32, value: u32);
+    /// The SRAM word at `address`.
+    fn sram_word(&self, address: u32) -> Option<u32> {
+        let mut bytes = [0u8; 4];
+        self.sram_read(address, &mut bytes)?;
+        Some(u32::from_le_bytes(bytes))
+    }
+}
+
+impl HostMemory for Chip {
+    fn sram_read(&self, address: u32, buf: &mut [u8]) -> Option<()> {
+        Chip::sram_read(self, address, buf)
+    }
+
+    fn host_write_word(&mut self, address: u32, value: u32) {
+        self.sram_set_word(address, value);
+    }
+}
+
+impl HostMemory for crate::mcu::Mcu {
+    fn sram_read(&self, address: u32, buf: &mut [u8]) -> Option<()> {
+        self.chip.sram_read(address, buf)
+    }
+
+    fn host_write_word(&mut self, address: u32, value: u32) {
+        self.input(crate::history::Input::HostWrite { address, value });
+    }
+}
+
 /// One decoded log line.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LogLine {
@@ -112,7 +147,7 @@ impl RttLog {
     }
 
     /// Drains up-buffer 0 (moving RdOff as a probe does) and returns the lines completed.
-    pub fn poll(&mut self, chip: &mut Chip) -> Vec<LogLine> {
+    pub fn poll(&mut self, chip: &mut impl HostMemory) -> Vec<LogLine> {
         let cb = self.control_block;
         if cb == 0 {
             return Vec::new();
@@ -147,7 +182,7 @@ impl RttLog {
             bytes.extend_from_slice(&chunk);
             at = if end == size { 0 } else { end };
         }
-        chip.sram_set_word(up + 16, write);
+        chip.host_write_word(up + 16, write);
         self.decode(&bytes)
     }
 

@@ -102,6 +102,8 @@ fn checksum(body: &str) -> String {
 impl Client {
     fn connect(address: SocketAddr) -> Self {
         let stream = TcpStream::connect(address).unwrap();
+        // As GDB does: a packet goes out at once, not held back for an ack (Nagle).
+        stream.set_nodelay(true).unwrap();
         stream
             .set_read_timeout(Some(Duration::from_secs(20)))
             .unwrap();
@@ -346,5 +348,98 @@ fn bad_packets_get_errors_a_second_client_is_refused_and_a_vanished_one_releases
         "the core ran after the client went"
     );
     next.ask("D");
+    running.finish();
+}
+
+#[test]
+fn execution_runs_backwards_to_the_last_write_and_forwards_to_the_present() {
+    let running = Running::start();
+    let mut gdb = Client::connect(running.address);
+    gdb.ask("qSupported:swbreak+;hwbreak+");
+    // Let the history fill: 300 ms of simulated time, three snapshots.
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    std::thread::sleep(Duration::from_millis(300));
+    gdb.send_raw(&[0x03]);
+    gdb.stop_reply();
+
+    assert_eq!(gdb.ask(&format!("Z2,{COUNTER:x},4")), "OK");
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    assert!(gdb.stop_reply().contains("watch:"));
+    let present = gdb.counter();
+    assert_eq!(gdb.register(15), STORE_PC + 2);
+
+    // One instruction back: before the store.
+    let stop = gdb.ask("bs");
+    assert!(stop.starts_with("S05") || stop.starts_with("T05"), "{stop}");
+    assert_eq!(gdb.register(15), STORE_PC);
+    assert_eq!(gdb.counter(), present - 1);
+    // The past cannot be changed.
+    assert!(gdb.ask("M20000100,4:00000000").starts_with('E'));
+
+    // Back to the write before: after it, the counter one lower.
+    let stop = gdb.ask("bc");
+    assert!(stop.contains(&format!("watch:{COUNTER:x}")), "{stop}");
+    assert_eq!(gdb.register(15), STORE_PC + 2);
+    assert_eq!(gdb.counter(), present - 1);
+    // And many writes back, still exact.
+    for back in 2..50 {
+        assert!(gdb.ask("bc").contains("watch:"));
+        assert_eq!(gdb.counter(), present - back);
+    }
+
+    // Forwards through the past: the next write, then the present again.
+    assert_eq!(gdb.ask(&format!("z2,{COUNTER:x},4")), "OK");
+    let stop = gdb.ask("c");
+    assert!(stop.contains("replaylog:end"), "{stop}");
+    assert_eq!(gdb.counter(), present);
+    assert_eq!(gdb.register(15), STORE_PC + 2);
+
+    // Far back: the history reaches its beginning and says so.
+    let stop = gdb.ask("bc");
+    assert!(stop.contains("replaylog:begin"), "{stop}");
+    assert!(
+        gdb.counter() < present - 1000,
+        "{} of {present}",
+        gdb.counter()
+    );
+    // `monitor history`: console output (O packets), then OK.
+    let mut reply = gdb.ask(&format!(
+        "qRcmd,{}",
+        b"history"
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect::<String>()
+    ));
+    let mut text = Vec::new();
+    while reply != "OK" {
+        text.extend(
+            (1..reply.len())
+                .step_by(2)
+                .filter_map(|i| reply.get(i..i + 2))
+                .filter_map(|h| u8::from_str_radix(h, 16).ok()),
+        );
+        reply = gdb.reply();
+    }
+    let text = String::from_utf8_lossy(&text);
+    assert!(
+        text.contains("history: ") && text.contains("looking at the past"),
+        "{text}"
+    );
+    let stop = gdb.ask("c");
+    assert!(stop.contains("replaylog:end"), "{stop}");
+    assert_eq!(gdb.counter(), present);
+
+    // Live again: the core runs on from the present.
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    std::thread::sleep(Duration::from_millis(30));
+    gdb.send_raw(&[0x03]);
+    let stop = gdb.stop_reply();
+    let now = gdb.counter();
+    assert!(
+        now > present,
+        "{now} after {present} ({stop}, pc {:#x})",
+        gdb.register(15)
+    );
+    gdb.ask("D");
     running.finish();
 }

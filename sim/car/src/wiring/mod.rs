@@ -7,7 +7,8 @@
 use autoplug_ecu::pins::{AnalogIn, DigitalIn, DigitalOut, Pull, PwmOut};
 use autoplug_ecu::{EcuLogic, Instant, Variant};
 use autoplug_image::SoftwareVariant;
-use autoplug_mcu::chip::Chip;
+use autoplug_mcu::history::Input;
+use autoplug_mcu::mcu::Mcu;
 use autoplug_vehicle::VehicleState;
 
 use crate::driver::DriverControls;
@@ -40,9 +41,10 @@ fn variant(software: SoftwareVariant) -> Variant {
     }
 }
 
-/// The bench's side of a board's pins: what the vehicle model drives and reads.
+/// The bench's side of a board's pins: what the vehicle model drives and reads. What it
+/// drives reaches the MCU as an input (journaled for a reverse debugger).
 pub(crate) struct Bench<'a> {
-    chip: &'a mut Chip,
+    mcu: &'a mut Mcu,
 }
 
 /// GPIO mode bits (RM0390 8.4.1).
@@ -50,15 +52,16 @@ const MODE_OUTPUT: u32 = 1;
 const MODE_ALTERNATE: u32 = 2;
 
 impl<'a> Bench<'a> {
-    pub(crate) fn new(chip: &'a mut Chip) -> Self {
-        Self { chip }
+    pub(crate) fn new(mcu: &'a mut Mcu) -> Self {
+        Self { mcu }
     }
 
     /// Puts the voltage for `value` on an analog input.
     fn analog(&mut self, input: &AnalogIn, value: f32) {
-        self.chip
-            .adc
-            .set_input(usize::from(input.adc_channel), input.volts(value));
+        self.mcu.input(Input::Analog {
+            channel: usize::from(input.adc_channel),
+            volts: input.volts(value),
+        });
     }
 
     /// A switch between the pin and GND (pull-up inputs): closed pulls it low, open leaves
@@ -66,23 +69,32 @@ impl<'a> Bench<'a> {
     fn switch(&mut self, input: &DigitalIn, closed: bool) {
         debug_assert_eq!(input.pull, Pull::Up);
         let pin = input.pin;
-        self.chip.gpio[pin.port_index()].drive(u32::from(pin.number), closed.then_some(false));
+        self.mcu.input(Input::Drive {
+            port: pin.port_index(),
+            pin: u32::from(pin.number),
+            level: closed.then_some(false),
+        });
     }
 
     /// A line driven high or low by the other side (pull-down inputs).
     fn level(&mut self, input: &DigitalIn, high: bool) {
         let pin = input.pin;
-        self.chip.gpio[pin.port_index()].drive(u32::from(pin.number), Some(high));
+        self.mcu.input(Input::Drive {
+            port: pin.port_index(),
+            pin: u32::from(pin.number),
+            level: Some(high),
+        });
     }
 
     /// The value a PWM output stands for, once the firmware drives it (pin in its
     /// alternate function, the timer channel enabled in a PWM mode).
     fn pwm(&self, output: &PwmOut) -> Option<f32> {
         let pin = output.pin;
-        if self.chip.gpio[pin.port_index()].mode(u32::from(pin.number)) != MODE_ALTERNATE {
+        if self.mcu.chip.gpio[pin.port_index()].mode(u32::from(pin.number)) != MODE_ALTERNATE {
             return None;
         }
         let duty = self
+            .mcu
             .chip
             .tim3
             .pwm_duty(usize::from(output.tim3_channel) - 1)?;
@@ -92,7 +104,7 @@ impl<'a> Bench<'a> {
     /// An output's level, once the firmware made the pin an output.
     fn output(&self, output: &DigitalOut) -> Option<bool> {
         let pin = output.pin;
-        let port = &self.chip.gpio[pin.port_index()];
+        let port = &self.mcu.chip.gpio[pin.port_index()];
         (port.mode(u32::from(pin.number)) == MODE_OUTPUT)
             .then(|| port.output(u32::from(pin.number)))
     }
@@ -104,13 +116,13 @@ mod tests {
     use autoplug_can::Gear;
     use autoplug_flash::sim::SimFlash;
 
-    fn chip() -> Chip {
-        Chip::new(SimFlash::new(1), [0; 3])
+    fn mcu() -> Mcu {
+        Mcu::power_on(SimFlash::new(1), [0; 3]).unwrap()
     }
 
     #[test]
     fn sensors_reach_the_boards_pins() {
-        let mut chip = chip();
+        let mut mcu = mcu();
         let sensors = autoplug_ecus::steering::Sensors {
             wheel_angle_deg: 67.5,
             shift_up_button: true,
@@ -126,63 +138,62 @@ mod tests {
             &autoplug_ecus::steering::pins::CRUISE_OFF,
         ] {
             let n = u32::from(pin.pin.number);
-            chip.gpio[pin.pin.port_index()]
+            mcu.chip.gpio[pin.pin.port_index()]
                 .write(0x0C, 1 << (2 * n), 3 << (2 * n))
                 .unwrap();
         }
-        autoplug_ecus::steering::SteeringEcu::drive(&sensors, &mut Bench::new(&mut chip));
+        autoplug_ecus::steering::SteeringEcu::drive(&sensors, &mut Bench::new(&mut mcu));
         // 67.5° of ±135° is three quarters of 3.3 V.
-        assert!((chip.adc.inputs()[0] - 2.475).abs() < 1e-4);
-        let idr = |chip: &Chip, pin: &DigitalIn| {
+        assert!((mcu.chip.adc.inputs()[0] - 2.475).abs() < 1e-4);
+        let idr = |chip: &autoplug_mcu::chip::Chip, pin: &DigitalIn| {
             chip.gpio[pin.pin.port_index()].read(0x10).unwrap() >> pin.pin.number & 1
         };
         use autoplug_ecus::steering::pins::*;
-        assert_eq!(idr(&chip, &SHIFT_UP), 0, "pressed: to GND");
-        assert_eq!(idr(&chip, &SHIFT_DOWN), 1, "open: the pull-up");
-        assert_eq!(idr(&chip, &CRUISE_OFF), 0);
+        assert_eq!(idr(&mcu.chip, &SHIFT_UP), 0, "pressed: to GND");
+        assert_eq!(idr(&mcu.chip, &SHIFT_DOWN), 1, "open: the pull-up");
+        assert_eq!(idr(&mcu.chip, &CRUISE_OFF), 0);
 
-        let mut chip = self::chip();
+        let mut mcu = self::mcu();
         let gear = autoplug_ecus::trans::Sensors {
             current_gear: Gear::Fifth,
         };
-        autoplug_ecus::trans::TransEcu::drive(&gear, &mut Bench::new(&mut chip));
+        autoplug_ecus::trans::TransEcu::drive(&gear, &mut Bench::new(&mut mcu));
         let code: u32 = autoplug_ecus::trans::pins::GEAR_ENGAGED
             .iter()
             .enumerate()
-            .map(|(bit, line)| idr(&chip, line) << bit)
+            .map(|(bit, line)| idr(&mcu.chip, line) << bit)
             .sum();
         assert_eq!(i64::from(code), Gear::Fifth.raw());
     }
 
     #[test]
     fn actuators_are_read_once_the_firmware_drives_the_pins() {
-        let mut chip = chip();
+        let mut mcu = mcu();
         assert_eq!(
-            autoplug_ecus::diff::DiffEcu::read(&Bench::new(&mut chip)),
+            autoplug_ecus::diff::DiffEcu::read(&Bench::new(&mut mcu)),
             None,
             "pins not set up"
         );
         // PB4 in its alternate function, TIM3 channel 1 in PWM mode 1 at 3/4 duty.
         let pb4 = autoplug_ecus::diff::pins::TORQUE_SPLIT.pin;
-        chip.gpio[pb4.port_index()]
+        mcu.chip.gpio[pb4.port_index()]
             .write(0x00, 2 << 8, 3 << 8)
             .unwrap();
-        chip.tim3.write(0x2C, 9_999, u32::MAX, 0).unwrap(); // ARR
-        chip.tim3.write(0x18, 6 << 4, u32::MAX, 0).unwrap(); // CCMR1: OC1M = PWM 1
-        chip.tim3.write(0x34, 7_500, u32::MAX, 0).unwrap(); // CCR1
-        chip.tim3.write(0x20, 1, u32::MAX, 0).unwrap(); // CCER: CC1E
-        chip.tim3.write(0x14, 1, u32::MAX, 0).unwrap(); // EGR: UG loads ARR
-        let split = autoplug_ecus::diff::DiffEcu::read(&Bench::new(&mut chip)).expect("driven");
+        mcu.chip.tim3.write(0x2C, 9_999, u32::MAX, 0).unwrap(); // ARR
+        mcu.chip.tim3.write(0x18, 6 << 4, u32::MAX, 0).unwrap(); // CCMR1: OC1M = PWM 1
+        mcu.chip.tim3.write(0x34, 7_500, u32::MAX, 0).unwrap(); // CCR1
+        mcu.chip.tim3.write(0x20, 1, u32::MAX, 0).unwrap(); // CCER: CC1E
+        mcu.chip.tim3.write(0x14, 1, u32::MAX, 0).unwrap(); // EGR: UG loads ARR
+        let split = autoplug_ecus::diff::DiffEcu::read(&Bench::new(&mut mcu)).expect("driven");
         assert!((split.torque_split_nm - 25.0).abs() < 0.01, "{split:?}");
 
         // The lamp: PA5 an output, high.
         let lamp = autoplug_ecus::cruise::pins::ENGAGED_LAMP.pin;
-        chip.gpio[0].write(0x00, 1 << 10, 3 << 10).unwrap();
-        chip.gpio[0]
+        mcu.chip.gpio[0].write(0x00, 1 << 10, 3 << 10).unwrap();
+        mcu.chip.gpio[0]
             .write(0x14, 1 << lamp.number, 1 << lamp.number)
             .unwrap();
-        let status =
-            autoplug_ecus::cruise::CruiseEcu::read(&Bench::new(&mut chip)).expect("driven");
+        let status = autoplug_ecus::cruise::CruiseEcu::read(&Bench::new(&mut mcu)).expect("driven");
         assert!(status.engaged);
     }
 }

@@ -257,7 +257,7 @@ fn run(args: &Args) -> Result<u8, String> {
         }
         let result = mcu.run_until(at);
         for log in logs.iter_mut().chain(semihosting_defmt.as_mut()) {
-            let lines = log.poll(&mut mcu.chip);
+            let lines = log.poll(&mut mcu);
             print(lines, &mut recent);
         }
         if !mcu.semihosting_output.is_empty() {

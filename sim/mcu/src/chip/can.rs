@@ -146,6 +146,11 @@ impl Can {
         self.btr & 0xC000_0000
     }
 
+    /// The mailbox whose frame is on the wire, as the bus last said.
+    pub fn sending(&self) -> Option<usize> {
+        self.sending
+    }
+
     /// Which mailbox's frame the bus has on the wire (`autoplug_mcu::node`): an abort
     /// request waits for its transmission's end.
     pub fn set_sending(&mut self, mailbox: Option<usize>) {

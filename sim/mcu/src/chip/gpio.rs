@@ -55,6 +55,11 @@ impl Port {
         self.odr & (1 << pin) != 0
     }
 
+    /// The levels driven from outside and which pins they drive (levels, mask).
+    pub fn driven(&self) -> (u16, u16) {
+        (self.driven, self.driven_mask)
+    }
+
     /// Drives pin `pin` from outside (None: released, it floats to its pull).
     pub fn drive(&mut self, pin: u32, level: Option<bool>) {
         let bit = 1u16 << pin;

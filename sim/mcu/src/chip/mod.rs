@@ -235,7 +235,7 @@ pub mod irq {
 }
 
 /// What happened during an access that the MCU loop must act on.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct Pending {
     /// Core cycles to stall (the flash was busy).
     pub stall: Duration,
@@ -243,6 +243,44 @@ pub struct Pending {
     pub code_changed: Option<core::ops::Range<u32>>,
     /// The simulated flash refused an operation (a power cut).
     pub flash_failed: Option<FlashError>,
+}
+
+/// SRAM in pages for snapshots: a page that did not change since the last snapshot is
+/// shared with it, so a snapshot costs the pages the firmware wrote.
+pub const SNAPSHOT_PAGE: usize = 4096;
+
+/// The chip's state at a moment (a reverse debugger's snapshot): the peripherals copied,
+/// SRAM in shared pages, the flash shared while it is unchanged.
+#[derive(Clone)]
+pub struct ChipSnapshot {
+    flash: std::sync::Arc<SimFlash>,
+    sram: Vec<std::sync::Arc<[u8]>>,
+    uid: [u32; 3],
+    rcc: Rcc,
+    flash_if: FlashInterface,
+    gpio: [Port; 8],
+    adc: Adc,
+    tim3: Timer,
+    tim12: Timer,
+    iwdg: Iwdg,
+    can1: Can,
+    pending: Pending,
+    touched: bool,
+    clocks: Clocks,
+    epoch_ns: u64,
+    epoch_cycle: u64,
+}
+
+impl ChipSnapshot {
+    /// The flash operations done when it was taken (the flash is shared while equal).
+    pub fn flash_operations(&self) -> u64 {
+        self.flash.operations()
+    }
+
+    /// The SRAM pages and the flash, for what the snapshot costs.
+    pub fn memories(&self) -> (&[std::sync::Arc<[u8]>], &std::sync::Arc<SimFlash>) {
+        (&self.sram, &self.flash)
+    }
 }
 
 /// The chip around the core.
@@ -326,6 +364,70 @@ impl Chip {
         self.pending = Pending::default();
         self.epoch_ns = now_ns;
         self.epoch_cycle = 0;
+    }
+
+    /// The chip's state now; `last`, an earlier snapshot, lends the pages and flash that
+    /// did not change since.
+    pub fn snapshot(&self, last: Option<&ChipSnapshot>) -> ChipSnapshot {
+        let flash = match last {
+            Some(l) if l.flash.operations() == self.flash.operations() => {
+                std::sync::Arc::clone(&l.flash)
+            }
+            _ => std::sync::Arc::new(self.flash.clone()),
+        };
+        let sram = self
+            .sram
+            .chunks(SNAPSHOT_PAGE)
+            .enumerate()
+            .map(|(i, page)| match last.and_then(|l| l.sram.get(i)) {
+                Some(old) if **old == *page => std::sync::Arc::clone(old),
+                _ => std::sync::Arc::from(page),
+            })
+            .collect();
+        ChipSnapshot {
+            flash,
+            sram,
+            uid: self.uid,
+            rcc: self.rcc.clone(),
+            flash_if: self.flash_if.clone(),
+            gpio: self.gpio.clone(),
+            adc: self.adc.clone(),
+            tim3: self.tim3.clone(),
+            tim12: self.tim12.clone(),
+            iwdg: self.iwdg.clone(),
+            can1: self.can1.clone(),
+            pending: self.pending.clone(),
+            touched: self.touched,
+            clocks: self.clocks,
+            epoch_ns: self.epoch_ns,
+            epoch_cycle: self.epoch_cycle,
+        }
+    }
+
+    /// Puts the chip back as `snapshot` found it; whether the flash's contents changed.
+    pub fn restore(&mut self, snapshot: &ChipSnapshot) -> bool {
+        let flash_changed = self.flash.operations() != snapshot.flash.operations();
+        if flash_changed {
+            self.flash = (*snapshot.flash).clone();
+        }
+        for (page, saved) in self.sram.chunks_mut(SNAPSHOT_PAGE).zip(&snapshot.sram) {
+            page.copy_from_slice(saved);
+        }
+        self.uid = snapshot.uid;
+        self.rcc = snapshot.rcc.clone();
+        self.flash_if = snapshot.flash_if.clone();
+        self.gpio = snapshot.gpio.clone();
+        self.adc = snapshot.adc.clone();
+        self.tim3 = snapshot.tim3.clone();
+        self.tim12 = snapshot.tim12.clone();
+        self.iwdg = snapshot.iwdg.clone();
+        self.can1 = snapshot.can1.clone();
+        self.pending = snapshot.pending.clone();
+        self.touched = snapshot.touched;
+        self.clocks = snapshot.clocks;
+        self.epoch_ns = snapshot.epoch_ns;
+        self.epoch_cycle = snapshot.epoch_cycle;
+        flash_changed
     }
 
     /// The clock rates now.

@@ -132,8 +132,10 @@ pub struct DebugControl {
     pub step: bool,
     /// Halt once the next instruction's address leaves this range, or on exception entry.
     pub step_range: Option<core::ops::Range<u32>>,
-    /// Halt before executing the instruction that would make the count exceed this.
-    pub stop_at_instruction: Option<u64>,
+    /// Halt when the instruction count is this, before the next instruction executes:
+    /// before a pending exception is taken (`true`: the state the last instruction left),
+    /// or after (`false`: where a breakpoint is checked).
+    pub stop_at_instruction: Option<(u64, bool)>,
     /// Ignore a breakpoint while the instruction count is this (resuming from it).
     pub pass_breakpoint_at: Option<u64>,
     /// Halt on entering HardFault.
@@ -198,6 +200,7 @@ struct Cached {
 }
 
 /// The core.
+#[derive(Clone)]
 pub struct Cpu {
     /// r0–r15. r13 is the current stack pointer; r15 reads as the instruction's address
     /// plus 4 while it executes.
@@ -320,6 +323,26 @@ impl Cpu {
         self.pc = reset & !1;
         self.thumb = reset & 1 != 0;
         Ok(())
+    }
+
+    /// The core's state now, without its cache of decoded instructions (a reverse
+    /// debugger's snapshot).
+    pub fn snapshot(&mut self) -> Cpu {
+        let code = std::mem::take(&mut self.code);
+        let saved = self.clone();
+        self.code = code;
+        saved
+    }
+
+    /// Puts the core back as `snapshot` found it, keeping the decoded instructions
+    /// (forgotten with `code_changed`: the flash differs).
+    pub fn restore(&mut self, snapshot: &Cpu, code_changed: bool) {
+        let mut code = std::mem::take(&mut self.code);
+        if code_changed {
+            code.iter_mut().for_each(|slot| *slot = None);
+        }
+        *self = snapshot.clone();
+        self.code = code;
     }
 
     /// Forgets decoded instructions in `range` (after flash is programmed or erased).
@@ -581,6 +604,9 @@ impl Cpu {
         );
         let breakpoints = control.breakpoints.clone();
         while self.cycles < until {
+            if stop_at == Some((self.instructions, true)) {
+                return Exit::Debug(DebugStop::Position);
+            }
             if self.scs.check_pending {
                 let before = (self.pc, self.ipsr);
                 if let Err(halt) = self.take_pending_exception(bus) {
@@ -595,7 +621,7 @@ impl Cpu {
                     }
                 }
             }
-            if stop_at == Some(self.instructions) {
+            if stop_at == Some((self.instructions, false)) {
                 return Exit::Debug(DebugStop::Position);
             }
             if pass_at != Some(self.instructions) && breakpoints.contains(&self.pc) {

@@ -31,9 +31,10 @@ use gdbstub::stub::{GdbStub, SingleThreadStopReason};
 use gdbstub::target::ext::breakpoints::WatchKind as GdbWatchKind;
 
 use crate::cpu::DebugStop;
-use crate::debug::{Debugger, Halted, WatchKind};
+use crate::debug::{Debugger, Halted, Resume, WatchKind};
 use crate::mcu::Mcu;
 use framer::{Framed, Framer};
+use gdbstub::target::ext::base::reverse_exec::ReplayLogPosition;
 
 /// The packet buffer: GDB is told this size (`PacketSize`), and a longer packet is
 /// answered with an error.
@@ -318,11 +319,7 @@ impl GdbServer {
             }
             Halted::Watch(hit) => Some(SingleThreadStopReason::Watch {
                 tid: (),
-                kind: match hit.kind {
-                    WatchKind::Write => GdbWatchKind::Write,
-                    WatchKind::Read => GdbWatchKind::Read,
-                    WatchKind::Access => GdbWatchKind::ReadWrite,
-                },
+                kind: gdb_watch_kind(hit.kind),
                 addr: hit.watched,
             }),
             Halted::Bkpt { .. } => Some(SingleThreadStopReason::Signal(Signal::SIGTRAP)),
@@ -340,6 +337,14 @@ impl GdbServer {
             Served::Running => {}
             Served::Gone(why) => self.detach(mcu, &why),
         }
+    }
+}
+
+fn gdb_watch_kind(kind: WatchKind) -> GdbWatchKind {
+    match kind {
+        WatchKind::Write => GdbWatchKind::Write,
+        WatchKind::Read => GdbWatchKind::Read,
+        WatchKind::Access => GdbWatchKind::ReadWrite,
     }
 }
 
@@ -540,6 +545,7 @@ impl Session {
         mcu.cpu.debugger_attached = true;
         mcu.debug = Default::default();
         mcu.cpu.debug = Some(Box::new(mcu.debug.control()));
+        mcu.start_history();
         Ok(Self {
             machine: Some(machine),
             stream: spare,
@@ -567,6 +573,9 @@ impl Session {
 
     /// The session over: the breakpoints and watchpoints go, the core runs on.
     fn end(self, mcu: &mut Mcu) {
+        // The car goes on from the present, whatever the debugger last looked at.
+        mcu.return_to_present();
+        mcu.history = None;
         mcu.debug = Default::default();
         mcu.cpu.debug = None;
         mcu.cpu.debugger_attached = self.debugger_attached_before;
@@ -641,6 +650,16 @@ impl Session {
                 }
                 Some(running @ GdbStubStateMachine::Running(_)) => {
                     self.machine = Some(running);
+                    if let Some(reason) = self.replayed(mcu) {
+                        match self.report(mcu, reason) {
+                            Served::Halted => continue,
+                            other => return other,
+                        }
+                    }
+                    if std::mem::take(&mut mcu.debug.changed_by_debugger) {
+                        // What came before no longer leads here.
+                        mcu.start_history();
+                    }
                     // Resuming from a breakpoint executes its instruction (whether or
                     // not the client removed the breakpoint first).
                     let mut control = mcu.debug.control();
@@ -655,6 +674,59 @@ impl Session {
                 None => return Served::Gone("the session failed".into()),
             }
         }
+    }
+
+    /// A resume served from the history: backwards, or forwards while the debugger looks
+    /// at the past. The stop to report; `None` for a live resume.
+    fn replayed(&mut self, mcu: &mut Mcu) -> Option<SingleThreadStopReason<u32>> {
+        use crate::history::{Arrival, ReplayError};
+        let resume = mcu.debug.resume.clone();
+        let outcome = match resume {
+            Resume::ReverseStep => mcu.reverse_step(),
+            Resume::ReverseContinue => mcu.reverse_continue(),
+            _ if !mcu.in_past() => return None,
+            Resume::Continue => mcu.replay_continue(),
+            Resume::Step => mcu.replay_step(),
+            Resume::StepRange(range) => loop {
+                match mcu.replay_step() {
+                    Ok(Arrival::Position) if range.contains(&mcu.cpu.pc()) => continue,
+                    other => break other,
+                }
+            },
+        };
+        let reason = match outcome {
+            Ok(Arrival::Position) => SingleThreadStopReason::DoneStep,
+            Ok(Arrival::Breakpoint(pc)) => {
+                if mcu.debug.hw_breakpoints.contains(&pc) {
+                    SingleThreadStopReason::HwBreak(())
+                } else {
+                    SingleThreadStopReason::SwBreak(())
+                }
+            }
+            Ok(Arrival::Watch(hit)) => SingleThreadStopReason::Watch {
+                tid: (),
+                kind: gdb_watch_kind(hit.kind),
+                addr: hit.watched,
+            },
+            Ok(Arrival::Beginning) | Err(ReplayError::Empty) => SingleThreadStopReason::ReplayLog {
+                tid: None,
+                pos: ReplayLogPosition::Begin,
+            },
+            Ok(Arrival::Present) => SingleThreadStopReason::ReplayLog {
+                tid: None,
+                pos: ReplayLogPosition::End,
+            },
+            Err(ReplayError::Diverged(why)) => {
+                // Never expected: said, and the MCU put back at the present.
+                self.console(&format!(
+                    "reverse execution failed ({why}); back at the present\n"
+                ));
+                mcu.return_to_present();
+                SingleThreadStopReason::Signal(Signal::SIGTRAP)
+            }
+        };
+        mcu.debug.resume = Resume::Continue;
+        Some(reason)
     }
 
     fn is_idle(&self) -> bool {

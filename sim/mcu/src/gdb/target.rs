@@ -2,6 +2,9 @@
 //! `monitor` commands, the memory map and flash programming (`load`).
 
 use gdbstub::common::Signal;
+use gdbstub::target::ext::base::reverse_exec::{
+    ReverseCont, ReverseContOps, ReverseStep, ReverseStepOps,
+};
 use gdbstub::target::ext::base::singlethread::{
     SingleThreadBase, SingleThreadRangeStepping, SingleThreadRangeSteppingOps, SingleThreadResume,
     SingleThreadResumeOps, SingleThreadSingleStep, SingleThreadSingleStepOps,
@@ -21,6 +24,10 @@ use crate::cpu::{ArchState, Size};
 use crate::debug::{Resume, WatchKind, Watchpoint, HW_BREAKPOINTS, WATCHPOINTS};
 use crate::map::{FLASH, PRIVATE_PERIPHERALS};
 use crate::mcu::Mcu;
+
+/// The error a write gets while the debugger looks at the past (EROFS: the past cannot
+/// be changed).
+const PAST: u8 = 30;
 
 /// A debugger's software breakpoints are matched by address: a bound keeps a hostile
 /// client from growing the list without end.
@@ -141,6 +148,9 @@ impl SingleThreadBase for Mcu {
     }
 
     fn write_registers(&mut self, regs: &CortexM4fRegisters) -> TargetResult<(), Self> {
+        if self.in_past() {
+            return Err(TargetError::Errno(PAST));
+        }
         self.cpu.set_arch_state(&ArchState {
             r: regs.r,
             xpsr: regs.xpsr,
@@ -172,6 +182,9 @@ impl SingleThreadBase for Mcu {
     }
 
     fn write_addrs(&mut self, start: u32, data: &[u8]) -> TargetResult<(), Self> {
+        if self.in_past() {
+            return Err(TargetError::Errno(PAST));
+        }
         self.debug.changed_by_debugger = true;
         self.debug_write_bytes(start, data)
             .map_err(|_| TargetError::Errno(14))
@@ -194,6 +207,28 @@ impl SingleThreadResume for Mcu {
 
     fn support_range_step(&mut self) -> Option<SingleThreadRangeSteppingOps<'_, Self>> {
         Some(self)
+    }
+
+    fn support_reverse_step(&mut self) -> Option<ReverseStepOps<'_, (), Self>> {
+        Some(self)
+    }
+
+    fn support_reverse_cont(&mut self) -> Option<ReverseContOps<'_, (), Self>> {
+        Some(self)
+    }
+}
+
+impl ReverseStep<()> for Mcu {
+    fn reverse_step(&mut self, _tid: ()) -> Result<(), Self::Error> {
+        self.debug.resume = Resume::ReverseStep;
+        Ok(())
+    }
+}
+
+impl ReverseCont<()> for Mcu {
+    fn reverse_cont(&mut self) -> Result<(), Self::Error> {
+        self.debug.resume = Resume::ReverseContinue;
+        Ok(())
     }
 }
 
@@ -343,6 +378,9 @@ impl MemoryMap for Mcu {
 
 impl Flash for Mcu {
     fn flash_erase(&mut self, start: u32, length: u32) -> TargetResult<(), Self> {
+        if self.in_past() {
+            return Err(TargetError::Errno(PAST));
+        }
         self.debug.changed_by_debugger = true;
         let end = start.checked_add(length).ok_or(TargetError::Errno(22))?;
         self.chip
@@ -352,6 +390,9 @@ impl Flash for Mcu {
     }
 
     fn flash_write(&mut self, start: u32, data: &[u8]) -> TargetResult<(), Self> {
+        if self.in_past() {
+            return Err(TargetError::Errno(PAST));
+        }
         self.debug.changed_by_debugger = true;
         // Whole words, as the flash is programmed; the padding (0xFF) leaves bits as
         // they are.
@@ -380,6 +421,9 @@ impl MonitorCmd for Mcu {
     ) -> Result<(), Self::Error> {
         let cmd = String::from_utf8_lossy(cmd);
         match cmd.split_whitespace().collect::<Vec<_>>().as_slice() {
+            ["reset"] | ["reset", "halt"] | ["reset", "init"] if self.in_past() => {
+                outputln!(out, "reset: the debugger looks at the past; continue to the present (or detach) first");
+            }
             ["reset"] | ["reset", "halt"] | ["reset", "init"] => {
                 // The core stays halted at its reset vector either way: GDB would not know
                 // of a core that ran on.
@@ -394,6 +438,21 @@ impl MonitorCmd for Mcu {
                 }
             }
             ["fault"] | ["faults"] => self.fault_report(&mut out),
+            ["history"] => match &self.history {
+                Some(h) => outputln!(
+                    out,
+                    "history: {:.1} s of simulated time, {} KiB ({}); {}",
+                    h.span_ns() as f64 * 1e-9,
+                    h.bytes() / 1024,
+                    "snapshots and the journal of inputs",
+                    if h.in_past() {
+                        "looking at the past"
+                    } else {
+                        "at the present"
+                    }
+                ),
+                None => outputln!(out, "history: none recorded"),
+            },
             ["help"] | [] => {
                 outputln!(out, "monitor reset [halt]  a system reset; the MCU stays halted at its reset vector");
                 outputln!(
