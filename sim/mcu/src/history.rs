@@ -376,8 +376,8 @@ impl Default for History {
 /// The debugger a replay installs: it notes the hits and ends the run at the position.
 struct Probe {
     hits: Arc<Mutex<Vec<Hit>>>,
-    /// Hits are noted after this position only.
-    after: u64,
+    /// Hits are noted after this position only (all of them with `None`).
+    after: Option<u64>,
 }
 
 impl Debugger for Probe {
@@ -402,7 +402,7 @@ impl Debugger for Probe {
             Halted::Watch(hit) => Arrival::Watch(hit),
             _ => return,
         };
-        if position > self.after {
+        if self.after.is_none_or(|after| position > after) {
             if let Ok(mut hits) = self.hits.lock() {
                 hits.push(Hit { position, arrival });
             }
@@ -470,6 +470,18 @@ impl Mcu {
         before_entry: bool,
         with_hits: bool,
     ) -> Result<Vec<Hit>, ReplayError> {
+        self.replay_noting(from, Some(from), to, before_entry, with_hits)
+    }
+
+    /// [`Mcu::replay`], noting the hits after `after` (all with `None`).
+    fn replay_noting(
+        &mut self,
+        from: u64,
+        after: Option<u64>,
+        to: u64,
+        before_entry: bool,
+        with_hits: bool,
+    ) -> Result<Vec<Hit>, ReplayError> {
         let history = self.history.take().ok_or(ReplayError::Empty)?;
         let Some(index) = history
             .snapshots
@@ -484,7 +496,7 @@ impl Mcu {
         let hits = Arc::new(Mutex::new(Vec::new()));
         let debugger = self.debugger.replace(Box::new(Probe {
             hits: Arc::clone(&hits),
-            after: from,
+            after,
         }));
         let saved_control = self.cpu.debug.take();
         let watchpoints = std::mem::take(&mut self.debug.watchpoints);
@@ -583,7 +595,14 @@ impl Mcu {
         // has one.
         let mut end = here;
         for &segment_start in positions.iter().rev().filter(|&&p| p < here) {
-            let hits = self.replay(segment_start.saturating_sub(1), end, false, true)?;
+            // Hits from the segment's first instruction on.
+            let hits = self.replay_noting(
+                segment_start,
+                segment_start.checked_sub(1),
+                end,
+                false,
+                true,
+            )?;
             let before: Vec<Hit> = hits
                 .into_iter()
                 .filter(|h| h.position < here && h.position >= segment_start)
