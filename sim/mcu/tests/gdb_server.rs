@@ -443,3 +443,64 @@ fn execution_runs_backwards_to_the_last_write_and_forwards_to_the_present() {
     gdb.ask("D");
     running.finish();
 }
+
+/// The fuzz target's path (`fuzz/fuzz_targets/gdb_packets.rs`) on what a hostile client
+/// might send: nothing panics, and the session over leaves the MCU as a detach does.
+#[test]
+fn hostile_bytes_through_the_whole_packet_path() {
+    let packet = |body: &str| format!("${body}#{}", checksum(body));
+    let cases: Vec<Vec<u8>> = vec![
+        vec![],
+        b"$".to_vec(),
+        b"$#".to_vec(),
+        b"#00$$$###\x03\x03+-".to_vec(),
+        packet("m").into_bytes(),
+        packet("mffffffff,ffffffff").into_bytes(),
+        packet("M20000000,ffffffff:00").into_bytes(),
+        packet("X20000000,4:\x7d\x03\x7d").into_bytes(),
+        packet("Z2,1fffffff,80000000").into_bytes(),
+        packet("Z1,0,2").into_bytes(),
+        packet("Z0,20000000,2").into_bytes(),
+        packet("G00").into_bytes(),
+        packet("P99=00000000").into_bytes(),
+        packet("p28").into_bytes(),
+        packet("vFlashErase:08000000,00080000").into_bytes(),
+        packet("vFlashErase:ffffffff,ffffffff").into_bytes(),
+        packet("vFlashWrite:08003ffe:\x01\x02\x03").into_bytes(),
+        packet("vFlashWrite:fffffffe:\x01\x02\x03").into_bytes(),
+        packet("vFlashDone").into_bytes(),
+        packet("qRcmd,7265736574").into_bytes(),
+        packet("qRcmd,").into_bytes(),
+        packet("qRcmd,zz").into_bytes(),
+        packet("qXfer:memory-map:read::ffffffff,ffffffff").into_bytes(),
+        packet("qXfer:features:read:target.xml:fffffff0,100").into_bytes(),
+        [
+            packet("c"),
+            packet("bs"),
+            packet("bc"),
+            packet("s"),
+            packet("vCont;r0,ffffffff"),
+        ]
+        .concat()
+        .into_bytes(),
+        [
+            packet("QStartNoAckMode"),
+            packet("mzz"),
+            packet("g"),
+            packet("D"),
+        ]
+        .concat()
+        .into_bytes(),
+        (0..=255u8).collect(),
+        std::iter::repeat_n(b'$', 20_000).collect(),
+    ];
+    for bytes in cases {
+        let mut mcu = counting();
+        autoplug_mcu::gdb::fuzz_session(&mut mcu, &bytes);
+        assert!(mcu.cpu.debug.is_none() && mcu.history.is_none());
+        assert!(mcu.debug.hw_breakpoints.is_empty() && mcu.debug.watchpoints.is_empty());
+        // The MCU runs on (or stops as its program has it: a client may have erased the
+        // flash or written the registers).
+        let _ = mcu.run_until(1_000_000);
+    }
+}

@@ -149,7 +149,7 @@ pub const DEFAULT_ADDRESS: &str = "127.0.0.1:3333";
 pub struct GdbServer {
     shared: Arc<Shared>,
     local: SocketAddr,
-    session: Option<Session>,
+    session: Option<Session<TcpStream>>,
 }
 
 impl GdbServer {
@@ -447,6 +447,37 @@ fn refuse(mut stream: TcpStream, name: &str, holder: &str) {
     let _ = stream.flush();
 }
 
+/// The fuzz target's entry: `bytes`, as a client sends them, through the whole packet
+/// path (framing, gdbstub, the target's handlers, reverse execution) of a session with
+/// `mcu`. A resume is answered at once with a step's stop, as if the core had run.
+/// Whatever comes, nothing panics and the MCU is left as a detach leaves it.
+pub fn fuzz_session(mcu: &mut Mcu, bytes: &[u8]) {
+    let (tx, rx) = sync_channel(bytes.len() / 64 + 2);
+    for chunk in bytes.chunks(64) {
+        let _ = tx.send(chunk.to_vec());
+    }
+    drop(tx);
+    let Ok(mut session) = Session::new(MemoryWire::default(), rx, mcu) else {
+        return;
+    };
+    // Each chunk is served once; a resume's stop counts as one too.
+    for _ in 0..bytes.len() + 2 {
+        match session.step(mcu, true) {
+            Served::Halted => {}
+            Served::Running => {
+                if !matches!(
+                    session.report(mcu, SingleThreadStopReason::DoneStep),
+                    Served::Halted
+                ) {
+                    break;
+                }
+            }
+            Served::Gone(_) => break,
+        }
+    }
+    session.end(mcu);
+}
+
 /// How serving the client ended.
 enum Served {
     /// The core stays halted: serve on.
@@ -457,15 +488,61 @@ enum Served {
     Gone(String),
 }
 
+/// The client's end of a session, as the server writes to it: its socket, or memory (the
+/// fuzz target's session).
+pub(crate) trait Wire: Write + Send + Sized + 'static {
+    /// Another handle on the same end.
+    fn duplicate(&self) -> std::io::Result<Self>;
+    /// Closes it.
+    fn close(&self);
+}
+
+impl Wire for TcpStream {
+    fn duplicate(&self) -> std::io::Result<Self> {
+        self.try_clone()
+    }
+
+    fn close(&self) {
+        let _ = self.shutdown(std::net::Shutdown::Both);
+    }
+}
+
+/// Replies kept in memory (the last [`PACKET_SIZE`] × 4 bytes of them).
+#[derive(Clone, Default)]
+pub(crate) struct MemoryWire(Arc<Mutex<Vec<u8>>>);
+
+impl Write for MemoryWire {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if let Ok(mut out) = self.0.lock() {
+            out.extend_from_slice(buf);
+            let excess = out.len().saturating_sub(4 * PACKET_SIZE);
+            out.drain(..excess);
+        }
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Wire for MemoryWire {
+    fn duplicate(&self) -> std::io::Result<Self> {
+        Ok(self.clone())
+    }
+
+    fn close(&self) {}
+}
+
 /// Bytes to the client. Replies are collected and sent at each flush; muted, they are
 /// dropped (a restarted session replaying the client's negotiation).
-struct Link {
-    stream: TcpStream,
+struct Link<W: Wire> {
+    stream: W,
     out: Vec<u8>,
     mute: bool,
 }
 
-impl gdbstub::conn::Connection for Link {
+impl<W: Wire> gdbstub::conn::Connection for Link<W> {
     type Error = std::io::Error;
 
     fn write(&mut self, byte: u8) -> Result<(), Self::Error> {
@@ -486,19 +563,15 @@ impl gdbstub::conn::Connection for Link {
         Write::write_all(&mut self.stream, &out)?;
         Write::flush(&mut self.stream)
     }
-
-    fn on_session_start(&mut self) -> Result<(), Self::Error> {
-        self.stream.set_nodelay(true)
-    }
 }
 
-type Machine = GdbStubStateMachine<'static, Mcu, Link>;
+type Machine<W> = GdbStubStateMachine<'static, Mcu, Link<W>>;
 
 /// One client's session.
-struct Session {
-    machine: Option<Machine>,
+struct Session<W: Wire> {
+    machine: Option<Machine<W>>,
     /// Another handle on the client's socket: a restarted session's, and the console's.
-    stream: TcpStream,
+    stream: W,
     input: Receiver<Vec<u8>>,
     framer: Framer,
     /// What the client negotiated (its qSupported and QStartNoAckMode packets), replayed
@@ -510,7 +583,8 @@ struct Session {
     restarts: u32,
 }
 
-impl Session {
+impl Session<TcpStream> {
+    /// A session with the client on `stream`, its bytes read on a thread of their own.
     fn start(
         stream: TcpStream,
         peer: SocketAddr,
@@ -520,8 +594,8 @@ impl Session {
         stream
             .set_write_timeout(Some(WRITE_TIMEOUT))
             .map_err(|e| e.to_string())?;
+        stream.set_nodelay(true).map_err(|e| e.to_string())?;
         let reader = stream.try_clone().map_err(|e| e.to_string())?;
-        let spare = stream.try_clone().map_err(|e| e.to_string())?;
         let (tx, rx) = sync_channel::<Vec<u8>>(QUEUED_CHUNKS);
         let flag = Arc::clone(shared);
         std::thread::Builder::new()
@@ -540,6 +614,14 @@ impl Session {
                 }
             })
             .map_err(|e| e.to_string())?;
+        Session::new(stream, rx, mcu)
+    }
+}
+
+impl<W: Wire> Session<W> {
+    /// A session writing to `stream`, reading what `input` brings.
+    fn new(stream: W, input: Receiver<Vec<u8>>, mcu: &mut Mcu) -> Result<Self, String> {
+        let spare = stream.duplicate().map_err(|e| e.to_string())?;
         let machine = Self::new_machine(stream, mcu)?;
         let debugger_attached_before = mcu.cpu.debugger_attached;
         mcu.cpu.debugger_attached = true;
@@ -549,7 +631,7 @@ impl Session {
         Ok(Self {
             machine: Some(machine),
             stream: spare,
-            input: rx,
+            input,
             framer: Framer::default(),
             negotiation: Vec::new(),
             debugger_attached_before,
@@ -557,7 +639,7 @@ impl Session {
         })
     }
 
-    fn new_machine(stream: TcpStream, mcu: &mut Mcu) -> Result<Machine, String> {
+    fn new_machine(stream: W, mcu: &mut Mcu) -> Result<Machine<W>, String> {
         let link = Link {
             stream,
             out: Vec::new(),
@@ -579,15 +661,16 @@ impl Session {
         mcu.debug = Default::default();
         mcu.cpu.debug = None;
         mcu.cpu.debugger_attached = self.debugger_attached_before;
-        let _ = self.stream.shutdown(std::net::Shutdown::Both);
+        self.stream.close();
     }
 
     /// Text on GDB's console (an `O` packet, which GDB takes while the target runs).
     fn console(&mut self, text: &str) {
         let hex: String = text.bytes().map(|b| format!("{b:02x}")).collect();
-        let _ = self
-            .stream
-            .write_all(&framer::packet(format!("O{hex}").as_bytes()));
+        let _ = Write::write_all(
+            &mut self.stream,
+            &framer::packet(format!("O{hex}").as_bytes()),
+        );
     }
 
     /// Reports why the running core stopped.
@@ -737,9 +820,7 @@ impl Session {
     fn feed(&mut self, mcu: &mut Mcu, byte: u8) -> Result<(), String> {
         match self.framer.push(byte) {
             None => Ok(()),
-            Some(Framed::Reply(reply)) => self
-                .stream
-                .write_all(&reply)
+            Some(Framed::Reply(reply)) => Write::write_all(&mut self.stream, &reply)
                 .map_err(|e| format!("the connection failed: {e}")),
             Some(Framed::Byte(b)) => self.pump(mcu, &[b]),
             Some(Framed::Packet(packet)) => {
@@ -789,7 +870,7 @@ impl Session {
     /// gdbstub gave up on a packet it could not parse: a new session on the same
     /// connection, told what the client negotiated, answers it with an error.
     fn restart(&mut self, mcu: &mut Mcu, why: &str) -> Result<(), String> {
-        let stream = self.stream.try_clone().map_err(|e| e.to_string())?;
+        let stream = self.stream.duplicate().map_err(|e| e.to_string())?;
         let mut machine = Self::new_machine(stream, mcu)?;
         let negotiation = self.negotiation.clone();
         for packet in &negotiation {
@@ -814,8 +895,7 @@ impl Session {
         let ack = if self.framer.no_ack() { "" } else { "+" };
         let mut reply = ack.as_bytes().to_vec();
         reply.extend(framer::packet(b"E01"));
-        self.stream
-            .write_all(&reply)
+        Write::write_all(&mut self.stream, &reply)
             .map_err(|e| format!("the connection failed: {e}"))
     }
 }

@@ -394,12 +394,21 @@ impl Flash for Mcu {
             return Err(TargetError::Errno(PAST));
         }
         self.debug.changed_by_debugger = true;
-        // Whole words, as the flash is programmed; the padding (0xFF) leaves bits as
-        // they are.
+        // Whole words, as the flash is programmed: the bytes around the data are
+        // programmed with what they hold, which changes nothing.
         let aligned = start & !3;
-        let mut words = vec![0xFF; (start - aligned) as usize];
-        words.extend_from_slice(data);
-        words.resize(words.len().next_multiple_of(4), 0xFF);
+        let end = start
+            .checked_add(data.len() as u32)
+            .ok_or(TargetError::Errno(22))?;
+        let aligned_end = end
+            .checked_next_multiple_of(4)
+            .ok_or(TargetError::Errno(22))?;
+        let mut words = vec![0xFF; (aligned_end - aligned) as usize];
+        self.chip
+            .flash
+            .read(aligned, &mut words)
+            .map_err(|_| TargetError::Errno(5))?;
+        words[(start - aligned) as usize..(end - aligned) as usize].copy_from_slice(data);
         self.chip
             .flash
             .program(aligned, &words)
