@@ -518,6 +518,14 @@ impl Cpu {
         if self.debug.is_some() {
             return self.run_debugged(bus, until);
         }
+        self.run_to_systick::<B, false>(bus, until)
+    }
+
+    /// The run in stretches between SysTick's expiries (a SysTick that expires pends its
+    /// exception between instructions), each stretch run by `run_until`, or with the
+    /// debugger's checks by `run_until_debugged` (`DEBUGGED`).
+    #[inline(always)]
+    fn run_to_systick<B: Bus, const DEBUGGED: bool>(&mut self, bus: &mut B, until: u64) -> Exit {
         loop {
             let limit = match self.scs.systick_next {
                 Some(at) if at <= self.cycles => {
@@ -530,7 +538,12 @@ impl Cpu {
             if self.cycles >= limit {
                 return Exit::Budget;
             }
-            match self.run_until(bus, limit) {
+            let exit = if DEBUGGED {
+                self.run_until_debugged(bus, limit)
+            } else {
+                self.run_until(bus, limit)
+            };
+            match exit {
                 Exit::Budget => {}
                 other => return other,
             }
@@ -575,23 +588,7 @@ impl Cpu {
                 return Exit::Debug(DebugStop::Step);
             }
         }
-        loop {
-            let limit = match self.scs.systick_next {
-                Some(at) if at <= self.cycles => {
-                    self.systick_expired();
-                    continue;
-                }
-                Some(at) => at.min(until),
-                None => until,
-            };
-            if self.cycles >= limit {
-                return Exit::Budget;
-            }
-            match self.run_until_debugged(bus, limit) {
-                Exit::Budget => {}
-                other => return other,
-            }
-        }
+        self.run_to_systick::<B, true>(bus, until)
     }
 
     fn run_until_debugged<B: Bus>(&mut self, bus: &mut B, until: u64) -> Exit {
