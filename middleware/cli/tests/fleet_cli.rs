@@ -463,11 +463,7 @@ fn get_with_host(addr: &str, path: &str, host: &str) -> (u16, String) {
 #[test]
 fn fleet_serve_with_its_page_answers_only_its_own_names_and_ends_cleanly_on_postgresql() {
     let schema = autoplug_fleet::testing::PgSchema::new();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let port = autoplug_fleet::testing::free_port();
     let addr = format!("127.0.0.1:{port}");
     let client_id = format!("fleet-web-test-{}", std::process::id());
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_autoplug"))

@@ -181,8 +181,17 @@ fn scale_in(nats: bool, signal: &str, resend_after_ms: i64) -> (Vec<Outbox>, Vec
         .collect();
     // A third of the way through the stream, service 0 goes, while the database holds
     // every service up (a lock on the trips), so that reports wait in flight at each
-    // service when it goes.
-    std::thread::sleep(Duration::from_millis(1000));
+    // service when it goes. A third counted in stored trips, not in time: on a loaded
+    // machine the cars may take a second to start, and a service stopped before the
+    // stream reached it has nothing to show.
+    let mut watch = FleetStore::open(&schema.url).unwrap();
+    let third = (CARS * PER_CAR) as i64 / 3;
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while count(&mut watch, "SELECT count(*) FROM trips") < third {
+        assert!(Instant::now() < deadline, "the stream did not get going");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(watch);
     let mut lock = FleetStore::open(&schema.url).unwrap();
     lock.db().begin().unwrap();
     lock.db()

@@ -6,6 +6,36 @@
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
+/// A free loopback port for a test's own server, below the kernel's ephemeral range: a port
+/// found free in that range may be taken by any outgoing connection's source port before
+/// the server binds it (a cluster node failed so in CI, "address already in use"). Never
+/// the same port twice in one process; spread by process id across processes.
+pub fn free_port() -> u16 {
+    use std::collections::BTreeSet;
+    use std::sync::Mutex;
+    static TAKEN: Mutex<BTreeSet<u16>> = Mutex::new(BTreeSet::new());
+    let ephemeral_start = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|range| range.split_whitespace().next()?.parse::<u32>().ok())
+        .unwrap_or(32768)
+        .clamp(12_000, 65_535);
+    let (low, span) = (10_000u32, ephemeral_start - 10_000);
+    let mut taken = TAKEN.lock().unwrap_or_else(|e| e.into_inner());
+    let start = std::process::id().wrapping_mul(2_654_435_761) % span;
+    for i in 0..span {
+        // A stride coprime with most spans walks the range without repeats.
+        let port = (low + (start + i * 7_919) % span) as u16;
+        if taken.contains(&port) {
+            continue;
+        }
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            taken.insert(port);
+            return port;
+        }
+    }
+    panic!("no free loopback port between {low} and {ephemeral_start}")
+}
+
 /// The broker the tests use: `AUTOPLUG_TEST_MQTT`, default the local Mosquitto.
 pub fn broker_url() -> String {
     std::env::var("AUTOPLUG_TEST_MQTT").unwrap_or_else(|_| "mqtt://127.0.0.1:1883".to_string())
@@ -87,14 +117,7 @@ impl PrivateBroker {
         ));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let free = || {
-            std::net::TcpListener::bind("127.0.0.1:0")
-                .unwrap()
-                .local_addr()
-                .unwrap()
-                .port()
-        };
-        let (port, fleet_port) = (free(), free());
+        let (port, fleet_port) = (free_port(), free_port());
         let files = crate::broker::init(
             &dir.join("broker"),
             "127.0.0.1",
@@ -221,20 +244,13 @@ impl PrivateCluster {
             NEXT.fetch_add(1, Ordering::Relaxed)
         ));
         let _ = std::fs::remove_dir_all(&dir);
-        // Three ports a node from three free ranges (bound once to find them).
-        let free = || {
-            std::net::TcpListener::bind("127.0.0.1:0")
-                .unwrap()
-                .local_addr()
-                .unwrap()
-                .port()
-        };
+        // Three ports a node.
         let addresses: Vec<crate::nats_cluster::NodeAddress> = (0..nodes)
             .map(|_| crate::nats_cluster::NodeAddress {
                 host: "127.0.0.1".into(),
-                mqtt_port: free(),
-                client_port: free(),
-                cluster_port: free(),
+                mqtt_port: free_port(),
+                client_port: free_port(),
+                cluster_port: free_port(),
             })
             .collect();
         let files = crate::nats_cluster::init(&dir, &addresses).unwrap();
