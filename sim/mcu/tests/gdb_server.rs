@@ -334,6 +334,13 @@ fn bad_packets_get_errors_a_second_client_is_refused_and_a_vanished_one_releases
     let _ = second.stream.read_to_end(&mut rest);
     assert!(!rest.contains(&b'$'), "no more packets");
 
+    // A flood of connections: the extra ones are closed, the attached client is served.
+    let flood: Vec<TcpStream> = (0..40)
+        .filter_map(|_| TcpStream::connect(running.address).ok())
+        .collect();
+    assert_eq!(gdb.ask("m20000000,4").len(), 8);
+    drop(flood);
+
     // Gone mid-packet: the MCU runs on.
     let counter = gdb.counter();
     gdb.send_raw(b"$m2000");

@@ -43,6 +43,18 @@ pub const PACKET_SIZE: usize = 4096;
 /// A client that stops reading its replies for this long is disconnected.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// At most this many clients are being turned away with a reason at once.
+const MAX_REFUSING: usize = 8;
+
+/// Counts a refusing thread out however it ends.
+struct Refusing(Arc<Shared>);
+
+impl Drop for Refusing {
+    fn drop(&mut self) {
+        self.0.refusing.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
 /// How long a client that comes while another is attached waits for it to detach before
 /// it is turned away.
 const HANDOVER_WAIT: Duration = Duration::from_secs(1);
@@ -117,6 +129,8 @@ struct Shared {
     busy: AtomicBool,
     /// The server is going away.
     closing: AtomicBool,
+    /// Clients being turned away (each on a short-lived thread of its own).
+    refusing: std::sync::atomic::AtomicUsize,
     status: Arc<GdbStatus>,
 }
 
@@ -171,6 +185,7 @@ impl GdbServer {
             attention: AtomicBool::new(false),
             busy: AtomicBool::new(false),
             closing: AtomicBool::new(false),
+            refusing: std::sync::atomic::AtomicUsize::new(0),
             status: Arc::new(GdbStatus::default()),
         });
         let listening = Arc::clone(&shared);
@@ -387,12 +402,21 @@ fn listen(listener: TcpListener, shared: &Arc<Shared>) {
         };
         if shared.busy.load(Ordering::Acquire) || pending.is_some() {
             drop(pending);
+            // A flood of connections is closed at once beyond a few being answered: the
+            // threads that answer them are bounded.
+            if shared.refusing.fetch_add(1, Ordering::AcqRel) >= MAX_REFUSING {
+                shared.refusing.fetch_sub(1, Ordering::AcqRel);
+                continue;
+            }
             // Off this thread: a silent client must not hold up the next one. A client
             // that comes just as the last one detaches (GDB reconnecting) gets the port.
+            let counter = Arc::clone(shared);
             let shared = Arc::clone(shared);
-            let _ = std::thread::Builder::new()
+            let spawned = std::thread::Builder::new()
                 .name("gdb-refuse".into())
                 .spawn(move || {
+                    let shared = Refusing(shared);
+                    let shared = &shared.0;
                     let start = Instant::now();
                     while start.elapsed() < HANDOVER_WAIT {
                         if !shared.busy.load(Ordering::Acquire) {
@@ -412,6 +436,9 @@ fn listen(listener: TcpListener, shared: &Arc<Shared>) {
                         .map_or_else(|| "another client".to_string(), |p| p.to_string());
                     refuse(stream, &shared.name, &holder);
                 });
+            if spawned.is_err() {
+                counter.refusing.fetch_sub(1, Ordering::AcqRel);
+            }
             continue;
         }
         *pending = Some((stream, peer));
