@@ -174,6 +174,9 @@ pub enum Halted {
     Core(DebugStop),
     /// A watchpoint matched the last instruction's access.
     Watch(WatchHit),
+    /// The core locked up (a fault it cannot take, as in its HardFault handler): it
+    /// stays locked until a reset, which the debugger may ask for.
+    Lockup(crate::cpu::Halt),
     /// The core executed a BKPT instruction (other than a semihosting call).
     Bkpt {
         /// Its immediate.

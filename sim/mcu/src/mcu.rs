@@ -14,6 +14,9 @@ use crate::cpu::{Cpu, ExceptionReport, Exit, Halt};
 use crate::debug::{DebugUnit, Debugger, Halted, WatchBus};
 use crate::map::{BOOT_ALIAS, FLASH};
 
+/// What reads the probe's other channels as a debugger halts the core ([`Mcu::on_debug_halt`]).
+pub type OnDebugHalt = Box<dyn FnMut(&mut Mcu) + Send>;
+
 /// Why an emulated MCU stopped.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Stop {
@@ -103,6 +106,10 @@ pub struct Mcu {
     pub standalone_can: bool,
     /// The debugger attached to the MCU's debug port, if any ([`crate::debug`]).
     pub debugger: Option<Box<dyn Debugger>>,
+    /// Called as the debugger halts the core, before it waits: what reads the probe's
+    /// other channels then, as probe-rs does (the RTT log up to the halt, so the lines
+    /// logged before a breakpoint show while it holds).
+    pub on_debug_halt: Option<OnDebugHalt>,
     /// What a debugger set: breakpoints, watchpoints, how the core resumes.
     pub debug: DebugUnit,
     /// The execution history a reverse debugger records ([`crate::history`]).
@@ -127,6 +134,7 @@ impl Mcu {
             semihosting_output: Vec::new(),
             standalone_can: true,
             debugger: None,
+            on_debug_halt: None,
             debug: DebugUnit::default(),
             history: None,
             abort_run: false,
@@ -267,6 +275,14 @@ impl Mcu {
                 {
                     self.debug_halt(Halted::Bkpt { imm, pc })
                 }
+                // The debugger sees the lockup, as a probe does; unless it resets the
+                // chip, the core stays locked (the loop's lockup handling).
+                (Exit::Halted(halt @ Halt::Lockup { .. }), _) if self.debugger.is_some() => {
+                    if !self.debug_halt(Halted::Lockup(halt.clone())) {
+                        return Exit::Halted(halt);
+                    }
+                    true
+                }
                 (other, _) => return other,
             };
             // After a reset (`monitor reset`) the cycle count starts again: the loop
@@ -281,6 +297,10 @@ impl Mcu {
     fn debug_halt(&mut self, why: Halted) -> bool {
         let resets = self.resets.len();
         if let Some(mut debugger) = self.debugger.take() {
+            if let Some(mut on_halt) = self.on_debug_halt.take() {
+                on_halt(self);
+                self.on_debug_halt.get_or_insert(on_halt);
+            }
             debugger.halted(self, why);
             if self.debugger.is_none() {
                 self.debugger = Some(debugger);

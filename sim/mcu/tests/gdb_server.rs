@@ -169,6 +169,21 @@ impl Client {
         }
     }
 
+    /// The reply to a command that resumes, and the console output before it.
+    fn stop_reply_and_console(&mut self) -> (String, String) {
+        let mut console = String::new();
+        loop {
+            let reply = self.reply();
+            match reply.strip_prefix('O') {
+                Some(hex) if reply != "OK" => console.extend(
+                    (0..hex.len() / 2)
+                        .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap() as char),
+                ),
+                _ => return (reply, console),
+            }
+        }
+    }
+
     fn register(&mut self, n: usize) -> u32 {
         let regs = self.ask("g");
         let hex = &regs[8 * n..8 * n + 8];
@@ -510,4 +525,81 @@ fn hostile_bytes_through_the_whole_packet_path() {
         // flash or written the registers).
         let _ = mcu.run_until(1_000_000);
     }
+}
+
+/// UDF, whose HardFault handler is another UDF: the core locks up (no watchdog runs).
+fn locking_up() -> Mcu {
+    let code: [u16; 2] = [
+        0xDE00, // 0x40: UDF, a UsageFault escalated to HardFault
+        0xDE00, // 0x42: the handler: UDF again, a fault it cannot take
+    ];
+    let mut image = vec![0u8; 0x60];
+    for (i, word) in [0x2002_0000u32, FLASH.start + 0x41, 0, FLASH.start + 0x43]
+        .iter()
+        .enumerate()
+    {
+        image[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
+    }
+    for (i, halfword) in code.iter().enumerate() {
+        image[0x40 + 2 * i..0x42 + 2 * i].copy_from_slice(&halfword.to_le_bytes());
+    }
+    let mut flash = SimFlash::new(1);
+    flash.program(FLASH.start, &image).unwrap();
+    Mcu::power_on(flash, [1, 2, 3]).unwrap()
+}
+
+#[test]
+fn a_lockup_halts_into_the_debugger_with_the_fault_registers() {
+    let mut mcu = locking_up();
+    let server = GdbServer::bind("test-ecu", "127.0.0.1:0".parse().unwrap()).unwrap();
+    let address = server.local_addr();
+    let mut gdb = Client::connect(address);
+    // The run starts under the debugger, as `--gdb` runs do.
+    assert!(server.wait_for_client(Some(Duration::from_secs(10))));
+    mcu.debugger = Some(Box::new(server));
+    let thread = std::thread::spawn(move || {
+        for ms in 1..=10_000u64 {
+            if let Err(stop) = mcu.run_until(ms * 1_000_000) {
+                return Some(stop);
+            }
+        }
+        None
+    });
+    assert_eq!(gdb.ask("QStartNoAckMode"), "OK");
+    gdb.no_ack = true;
+    assert!(gdb.ask("?").starts_with(['S', 'T']));
+    // The vector catch stops at the HardFault first, as probe-rs's does.
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    let (reply, console) = gdb.stop_reply_and_console();
+    assert!(
+        reply.starts_with("S0b") || reply.starts_with("T0b"),
+        "{reply}"
+    );
+    assert!(console.starts_with("HardFault"), "{console}");
+    // Its handler faults again: the core locks up, and the debugger is told why.
+    gdb.send_raw(format!("$c#{}", checksum("c")).as_bytes());
+    let (reply, console) = gdb.stop_reply_and_console();
+    assert!(
+        reply.starts_with("S0b") || reply.starts_with("T0b"),
+        "{reply}"
+    );
+    assert!(
+        console.contains(&format!(
+            "the core locked up at {:#010x}",
+            FLASH.start + 0x42
+        )) && console.contains("HFSR 0x40000000"),
+        "{console}"
+    );
+    // Detached, the lockup ends the run (no watchdog) with its report.
+    gdb.send_raw(format!("$D#{}", checksum("D")).as_bytes());
+    let stop = thread.join().unwrap();
+    assert!(
+        matches!(
+            stop,
+            Some(autoplug_mcu::mcu::Stop::Halted(
+                autoplug_mcu::cpu::Halt::Lockup { .. }
+            ))
+        ),
+        "{stop:?}"
+    );
 }

@@ -19,6 +19,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
 
 use autoplug_mcu::map::FLASH_BASE;
 use autoplug_mcu::mcu::{Mcu, Stop};
@@ -188,7 +189,7 @@ fn run(args: &Args) -> Result<u8, String> {
     // Semihosting output is the program's defmt log when it has a defmt table (through
     // its RTT log, or a decoder of its own for defmt-semihosting); without one it is text.
     let name = args.elf.display().to_string();
-    let mut semihosting_defmt = match logs.pop() {
+    let semihosting_defmt = match logs.pop() {
         Some(log) if log.name() == name => Some(log),
         other => {
             logs.extend(other);
@@ -221,6 +222,21 @@ fn run(args: &Args) -> Result<u8, String> {
         }
         None => None,
     };
+    // The RTT logs are read after each step, and by the debug port's halt (the lines
+    // logged before a breakpoint show while it holds, as probe-rs shows them).
+    let shared = Arc::new(Mutex::new(Logs {
+        rtt: logs,
+        own: semihosting_defmt,
+        recent: Vec::new(),
+    }));
+    if gdb_status.is_some() {
+        let logs = Arc::clone(&shared);
+        mcu.on_debug_halt = Some(Box::new(move |mcu| {
+            if let Ok(mut logs) = logs.lock() {
+                logs.poll(mcu);
+            }
+        }));
+    }
     let mut recent: Vec<LogLine> = Vec::new();
     let print = |lines: Vec<LogLine>, recent: &mut Vec<LogLine>| {
         for line in lines {
@@ -256,13 +272,17 @@ fn run(args: &Args) -> Result<u8, String> {
             }
         }
         let result = mcu.run_until(at);
-        for log in logs.iter_mut().chain(semihosting_defmt.as_mut()) {
-            let lines = log.poll(&mut mcu);
-            print(lines, &mut recent);
+        let Ok(mut logs) = shared.lock() else {
+            break 1;
+        };
+        logs.poll(&mut mcu);
+        recent.append(&mut logs.recent);
+        if recent.len() > 10 {
+            recent.drain(..recent.len() - 10);
         }
         if !mcu.semihosting_output.is_empty() {
             let bytes = std::mem::take(&mut mcu.semihosting_output);
-            match semihosting_defmt.as_mut() {
+            match logs.own.as_mut() {
                 // A write of printable text with no zero byte outside a defmt frame is the
                 // program's own text (hprintln!): defmt frames are binary and end in zero.
                 Some(log) if log.mid_frame() || !looks_like_text(&bytes) => {
@@ -306,6 +326,29 @@ fn run(args: &Args) -> Result<u8, String> {
         }
     }
     Ok(outcome)
+}
+
+/// The RTT logs of the images loaded, and the lines they printed since the last look.
+struct Logs {
+    rtt: Vec<RttLog>,
+    /// The program's own (its defmt table decodes its semihosting output too).
+    own: Option<RttLog>,
+    recent: Vec<LogLine>,
+}
+
+impl Logs {
+    /// Prints what each log holds now.
+    fn poll(&mut self, mcu: &mut Mcu) {
+        for log in self.rtt.iter_mut().chain(self.own.as_mut()) {
+            for line in log.poll(mcu) {
+                println!("{line}");
+                self.recent.push(line);
+            }
+        }
+        if self.recent.len() > 10 {
+            self.recent.drain(..self.recent.len() - 10);
+        }
+    }
 }
 
 /// A program's plain semihosting text, printed line by line as it comes (a line may come in
