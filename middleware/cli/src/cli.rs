@@ -743,11 +743,22 @@ pub struct FirmwareArgs {
         requires = "firmware"
     )]
     pub(crate) firmware_dir: PathBuf,
+    /// A GDB server on this ECU's emulated MCU (one that runs as firmware), at ADDR
+    /// (loopback only; 127.0.0.1:3333 and up by default); repeatable. Without a page the
+    /// car waits at power-on for the debugger; with one (the dashboard, --web) it runs,
+    /// and the debugger halts it when it attaches.
+    #[arg(long, value_name = "ECU[=ADDR]", requires = "firmware")]
+    pub(crate) gdb: Vec<String>,
 }
 
 impl FirmwareArgs {
-    /// The choice, for a bus that is the virtual car.
-    pub(crate) fn choice(&self, bus: &BusUrl) -> Result<Option<FirmwareChoice>, CliError> {
+    /// The choice, for a bus that is the virtual car; `with_page`: a web page shows the
+    /// car, so it does not wait at power-on for its debuggers.
+    pub(crate) fn choice(
+        &self,
+        bus: &BusUrl,
+        with_page: bool,
+    ) -> Result<Option<FirmwareChoice>, CliError> {
         let Some(list) = &self.firmware else {
             return Ok(None);
         };
@@ -756,9 +767,11 @@ impl FirmwareArgs {
                 "--firmware runs ECUs of the virtual car: the bus is not the virtual car".into(),
             ));
         }
-        FirmwareChoice::parse(list, &self.firmware_dir)
-            .map(Some)
-            .map_err(CliError::Log)
+        let mut choice = FirmwareChoice::parse(list, &self.firmware_dir)
+            .and_then(|c| c.debug(&self.gdb))
+            .map_err(CliError::Log)?;
+        choice.hold_for_debugger = !with_page;
+        Ok(Some(choice))
     }
 }
 

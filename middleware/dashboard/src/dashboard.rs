@@ -109,6 +109,7 @@ impl<'a> FirmwareBuild<'a> {
             ecus: ecus.to_vec(),
             dir: dir.to_path_buf(),
             gdb: Vec::new(),
+            hold_for_debugger: false,
         };
         choice.build_missing(self.root, &self.cargo)
     }

@@ -26,7 +26,7 @@ use autoplug_store::SqliteStore;
 use autoplug_tester::bus_tester::{BusTester, Outbox};
 use autoplug_tester::names::ECUS;
 use autoplug_tester::{identification_table, vin_line, TesterConfig};
-use autoplug_virtual_car::firmware::FirmwareChoice;
+use autoplug_virtual_car::firmware::{DebugPorts, FirmwareChoice};
 use autoplug_web::LiveTable;
 
 /// Why a run did not start or did not end well.
@@ -108,8 +108,11 @@ pub fn run(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
     // The dashboard's live table, before the source: the virtual car publishes its world
     // beside it.
     let table = options.web.as_ref().map(|_| Arc::new(LiveTable::new()));
-    let (mut source, replay_desk) =
-        open_source(bus, &options, pace, desk.clone(), table.as_ref(), out)?;
+    let Opened {
+        mut source,
+        player: replay_desk,
+        debug_ports,
+    } = open_source(bus, &options, pace, desk.clone(), table.as_ref(), out)?;
     let replaying = matches!(bus, BusUrl::Replay(_));
     if replaying && options.transmit.is_some() {
         return Err(RunError::Failed(
@@ -225,6 +228,9 @@ pub fn run(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
                 BusUrl::Transport(_) => SourceKind::Bus,
                 BusUrl::Replay(_) => SourceKind::Replay,
             };
+            // Beside the session: its thread stands still with a car a debugger holds.
+            let debugger_watch =
+                autoplug_dashboard::debuggers::DebuggerWatch::start(debug_ports, table.clone());
             let mut session = Session::new(watch, table, commands, kind, source.describe());
             if let Some(choice) = &options.firmware {
                 session = session.with_firmware_ecus(&choice.ecus);
@@ -259,6 +265,7 @@ pub fn run(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
                 session.restart_analysis();
             };
             let recorded = session.stop_recording();
+            drop(debugger_watch);
             drop(server);
             (result, session.watch, recorded)
         }
@@ -307,9 +314,17 @@ fn pace(bus: &BusUrl, options: &GatewayOptions) -> Result<Option<f64>, RunError>
 /// The dashboard's player of a recorded log, shared with its session.
 type Player = Rc<RefCell<ReplayDesk>>;
 
+/// What [`open_source`] opened.
+struct Opened {
+    source: Box<dyn FrameSource>,
+    player: Option<Player>,
+    debug_ports: DebugPorts,
+}
+
 /// The frames: the dashboard's player over a recorded log (with the recording's world, if
 /// it has one), or the bus opened at `pace`, the virtual car publishing its world into
-/// `table`. Gives the player too, which the dashboard's session drives.
+/// `table`. Gives the player too, which the dashboard's session drives, and the GDB servers'
+/// statuses of the ECUs debugged.
 fn open_source(
     bus: &BusUrl,
     options: &GatewayOptions,
@@ -317,8 +332,9 @@ fn open_source(
     desk: Option<Rc<RefCell<DriverDesk>>>,
     table: Option<&Arc<LiveTable>>,
     out: &mut dyn Write,
-) -> Result<(Box<dyn FrameSource>, Option<Player>), RunError> {
+) -> Result<Opened, RunError> {
     let mut replay_desk = None;
+    let mut debug_ports = Vec::new();
     let source = match (bus, &options.web) {
         (BusUrl::Replay(path), Some(_)) => {
             let (first_us, last_us) =
@@ -342,16 +358,24 @@ fn open_source(
             }
             Box::new(source) as Box<dyn FrameSource>
         }
-        _ => bus
-            .open(
-                pace,
-                desk,
-                options.firmware.as_ref(),
-                table.map(|t| world_publisher(t.world().clone())),
-            )
-            .map_err(RunError::Failed)?,
+        _ => {
+            let (source, ports) = bus
+                .open(
+                    pace,
+                    desk,
+                    options.firmware.as_ref(),
+                    table.map(|t| world_publisher(t.world().clone())),
+                )
+                .map_err(RunError::Failed)?;
+            debug_ports = ports;
+            source
+        }
     };
-    Ok((source, replay_desk))
+    Ok(Opened {
+        source,
+        player: replay_desk,
+        debug_ports,
+    })
 }
 
 /// The gateway without the dashboard: the watch, and the recording with `--record`. Gives

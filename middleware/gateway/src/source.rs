@@ -69,6 +69,13 @@ pub trait FrameSource {
     fn clock_us(&self) -> Option<u64> {
         None
     }
+
+    /// The wall-clock time the source has stood still on purpose so far, its own time
+    /// not moving (a debugger holding the virtual car halted): what a pacer leaves out,
+    /// so the source goes on at its pace afterwards instead of racing to catch up.
+    fn paused_for(&self) -> Duration {
+        Duration::ZERO
+    }
 }
 
 /// A boxed source is a source (a wrapper generic over its inner source takes both).
@@ -87,6 +94,10 @@ impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
 
     fn clock_us(&self) -> Option<u64> {
         (**self).clock_us()
+    }
+
+    fn paused_for(&self) -> Duration {
+        (**self).paused_for()
     }
 }
 
@@ -261,6 +272,14 @@ impl Pacer {
         self.anchor.get_or_insert((Instant::now(), t_us));
     }
 
+    /// Moves the anchor `by` later: the log's time stood still that long on the wall
+    /// clock (a source paused on purpose), and is due that much later from now on.
+    pub fn postpone(&mut self, by: Duration) {
+        if let Some((wall, _)) = &mut self.anchor {
+            *wall += by;
+        }
+    }
+
     /// Stops counting: the next [`Pacer::start_at`] (or frame) anchors again.
     pub fn restart(&mut self) {
         self.anchor = None;
@@ -298,6 +317,8 @@ pub struct Paced<S> {
     inner: S,
     pacer: Pacer,
     held: Option<LogFrame>,
+    /// The inner source's pauses taken into account so far.
+    paused: Duration,
 }
 
 impl<S: FrameSource> Paced<S> {
@@ -307,26 +328,34 @@ impl<S: FrameSource> Paced<S> {
             inner,
             pacer: Pacer::new(speed),
             held: None,
+            paused: Duration::ZERO,
         }
     }
 }
 
 impl<S: FrameSource> FrameSource for Paced<S> {
     fn poll(&mut self, max_wait: Duration) -> Result<Poll, SourceError> {
-        let frame = match self.held.take() {
-            Some(frame) => frame,
-            None => match self.inner.poll(max_wait)? {
-                Poll::Frame(frame) => frame,
-                Poll::Idle => {
-                    // A source with a clock (the virtual car) went on through a silence:
-                    // its time is paced like its frames', or it would race ahead.
-                    if let Some(t_us) = self.inner.clock_us() {
-                        self.pacer.wait_until_due(t_us, max_wait);
-                    }
-                    return Ok(Poll::Idle);
+        let polled = match self.held.take() {
+            Some(frame) => Poll::Frame(frame),
+            None => self.inner.poll(max_wait)?,
+        };
+        // A pause of the inner source (taken while it was polled) is not caught up on.
+        let paused = self.inner.paused_for();
+        if paused > self.paused {
+            self.pacer.postpone(paused - self.paused);
+            self.paused = paused;
+        }
+        let frame = match polled {
+            Poll::Frame(frame) => frame,
+            Poll::Idle => {
+                // A source with a clock (the virtual car) went on through a silence:
+                // its time is paced like its frames', or it would race ahead.
+                if let Some(t_us) = self.inner.clock_us() {
+                    self.pacer.wait_until_due(t_us, max_wait);
                 }
-                other => return Ok(other),
-            },
+                return Ok(Poll::Idle);
+            }
+            other => return Ok(other),
         };
         if self.pacer.wait_until_due(frame.t_us, max_wait) {
             Ok(Poll::Frame(frame))
@@ -347,5 +376,81 @@ impl<S: FrameSource> FrameSource for Paced<S> {
 
     fn clock_us(&self) -> Option<u64> {
         self.inner.clock_us()
+    }
+
+    fn paused_for(&self) -> Duration {
+        self.inner.paused_for()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Frames 100 ms apart; pauses of 10 s (on purpose) once its first frame was taken.
+    struct Pausing {
+        next: u64,
+        paused: Duration,
+    }
+
+    impl FrameSource for Pausing {
+        fn poll(&mut self, _max_wait: Duration) -> Result<Poll, SourceError> {
+            let t_us = self.next;
+            self.next += 100_000;
+            if t_us > 0 {
+                self.paused = Duration::from_secs(10);
+            }
+            Ok(Poll::Frame(LogFrame::from_can(
+                t_us,
+                0,
+                &autoplug_can::Frame::new(0x100, &[]).unwrap(),
+            )))
+        }
+
+        fn describe(&self) -> String {
+            "pausing".into()
+        }
+
+        fn paused_for(&self) -> Duration {
+            self.paused
+        }
+    }
+
+    #[test]
+    fn a_pacer_postponed_counts_the_rest_from_later() {
+        let mut pacer = Pacer::new(2.0);
+        let start = pacer.due(1_000_000);
+        pacer.postpone(Duration::from_secs(3));
+        assert_eq!(pacer.due(1_000_000), start + Duration::from_secs(3));
+        assert_eq!(
+            pacer.due(3_000_000),
+            start + Duration::from_secs(3) + Duration::from_secs(1),
+            "2 s of the log at 2x: 1 s on the wall"
+        );
+    }
+
+    #[test]
+    fn a_source_paused_on_purpose_is_not_caught_up_on() {
+        let mut paced = Paced::new(
+            Pausing {
+                next: 0,
+                paused: Duration::ZERO,
+            },
+            1.0,
+        );
+        let t = |poll| match poll {
+            Poll::Frame(f) => f.t_us,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(t(paced.poll(Duration::from_secs(1)).unwrap()), 0);
+        // The 10 s pause came during the second poll: its frame, 100 ms on, is 10.1 s
+        // from the first on the wall clock, so it is held (no catching up).
+        assert!(matches!(
+            paced.poll(Duration::from_millis(1)).unwrap(),
+            Poll::Idle
+        ));
+        let due = paced.pacer.due(100_000);
+        let from_now = due.saturating_duration_since(Instant::now());
+        assert!(from_now > Duration::from_secs(9), "{from_now:?}");
     }
 }

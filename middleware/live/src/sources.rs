@@ -12,6 +12,7 @@ use autoplug_can::Frame;
 use autoplug_gateway::{FrameSource, Paced, Poll, SourceError};
 use autoplug_logs::LogFrame;
 use autoplug_virtual_car::car::VirtualCar;
+use autoplug_virtual_car::firmware::DebugPorts;
 use autoplug_virtual_car::scenario::Scenario;
 
 use autoplug_tester::bus_tester::Outbox;
@@ -128,6 +129,10 @@ impl FrameSource for VirtualCarSource {
 
     fn clock_us(&self) -> Option<u64> {
         Some(self.car.time_us())
+    }
+
+    fn paused_for(&self) -> Duration {
+        self.car.debugger_halted_for()
     }
 }
 
@@ -262,6 +267,10 @@ impl<S: FrameSource> FrameSource for Transmitting<S> {
     fn clock_us(&self) -> Option<u64> {
         self.inner.clock_us()
     }
+
+    fn paused_for(&self) -> Duration {
+        self.inner.paused_for()
+    }
 }
 
 /// The dashboard's car: it stands until a person drives it.
@@ -316,13 +325,14 @@ impl BusUrl {
     /// `desk`: a person may drive the virtual car (ignored for a real bus).
     /// `firmware`: ECUs of the virtual car that run as their firmware on emulated MCUs.
     /// `world`: takes the virtual car's world (ignored for a real bus).
+    /// Gives the source, and the GDB servers' statuses of the ECUs debugged (`--gdb`).
     pub fn open(
         &self,
         speed: Option<f64>,
         desk: Option<Rc<RefCell<crate::driving::DriverDesk>>>,
         firmware: Option<&autoplug_virtual_car::firmware::FirmwareChoice>,
         world: Option<WorldSink>,
-    ) -> Result<Box<dyn FrameSource>, String> {
+    ) -> Result<(Box<dyn FrameSource>, DebugPorts), String> {
         match self {
             BusUrl::Virtual(_) | BusUrl::Dashboard => {
                 let scenario = match self {
@@ -341,21 +351,28 @@ impl BusUrl {
                 if let Some(world) = world {
                     source = source.with_world(world);
                 }
-                Ok(match speed {
-                    Some(speed) => Box::new(Paced::new(source, speed)),
-                    None => Box::new(source),
-                })
+                let debugged = source.car().debug_ports();
+                Ok((
+                    match speed {
+                        Some(speed) => Box::new(Paced::new(source, speed)),
+                        None => Box::new(source),
+                    },
+                    debugged,
+                ))
             }
             BusUrl::Transport(via) => {
                 let transport = autoplug_transport::open(via).map_err(|e| e.to_string())?;
-                Ok(Box::new(TransportSource::new(transport)))
+                Ok((Box::new(TransportSource::new(transport)), Vec::new()))
             }
             BusUrl::Replay(path) => {
                 let source = autoplug_gateway::LogSource::open(path).map_err(|e| e.to_string())?;
-                Ok(match speed {
-                    Some(speed) => Box::new(Paced::new(source, speed)),
-                    None => Box::new(source),
-                })
+                Ok((
+                    match speed {
+                        Some(speed) => Box::new(Paced::new(source, speed)),
+                        None => Box::new(source),
+                    },
+                    Vec::new(),
+                ))
             }
         }
     }

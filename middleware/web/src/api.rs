@@ -147,6 +147,17 @@ async fn act(shared: &Shared, action: Action) -> Response {
             "this gateway takes no commands (it only shows the bus)",
         );
     };
+    // The session stands still with the car: an action would wait for the debugger.
+    let halted = shared.table.halted_by_debugger();
+    if !halted.is_empty() {
+        return error(
+            StatusCode::CONFLICT,
+            format!(
+                "the car is halted by the debugger ({}): continue it in GDB first",
+                halted.join(", ")
+            ),
+        );
+    }
     let (reply, answer) = oneshot::channel();
     match control.send(Command::Act { action, reply }) {
         Ok(()) => {}

@@ -27,6 +27,11 @@
 //!    `bus` only with what changed). A client that reads slowly gets fewer updates with the latest values,
 //!    never a backlog.
 //!
+//!    When ECUs of the virtual car run under GDB servers (`--gdb`), an update carries
+//!    `debugger`: `{"ecus":[{"ecu":"cruise","address":"127.0.0.1:3333","attached":true,
+//!    "halted":true,"client":"127.0.0.1:50210"}]}`, sent when it changes. While an ECU is
+//!    halted the whole car stands still: no other update comes until it runs again.
+//!
 //! 4. `{"type":"world",…}` messages when the bus is the virtual car's: the simulator's own
 //!    view of the car on its road, a channel apart from the signals (see [`world`]).
 //!

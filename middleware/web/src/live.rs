@@ -71,6 +71,13 @@ struct Table {
     /// written by the session whole; empty until it first does.
     session: String,
     session_changed: u64,
+    /// The debuggers of the virtual car's emulated ECUs (`--gdb`) as a JSON object,
+    /// written from outside the pipeline (which stands still while a debugger holds the
+    /// car); empty without any.
+    debugger: String,
+    debugger_changed: u64,
+    /// The ECUs a debugger holds halted now (from the same object).
+    halted_by_debugger: Vec<String>,
     /// Where the bus load was last measured from: bus time (µs) and wire bits so far.
     load_from: Option<(u64, u64)>,
 }
@@ -318,6 +325,34 @@ impl LiveTable {
         table.version
     }
 
+    /// Replaces what the page shows of the debuggers (a JSON object: see the crate
+    /// docs). Streamed only when its text changed; returns the version. Called from the
+    /// thread that watches the GDB servers, not the pipeline's.
+    pub fn set_debugger(&self, debugger: &serde_json::Value) -> u64 {
+        let text = debugger.to_string();
+        let mut table = self.lock();
+        if table.debugger != text {
+            table.halted_by_debugger = debugger["ecus"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|e| e["halted"] == true)
+                .filter_map(|e| e["ecu"].as_str().map(str::to_string))
+                .collect();
+            table.version += 1;
+            table.debugger = text;
+            table.debugger_changed = table.version;
+            let version = table.version;
+            self.version.send_replace(version);
+        }
+        table.version
+    }
+
+    /// The ECUs a debugger holds halted now (the whole car stands still meanwhile).
+    pub fn halted_by_debugger(&self) -> Vec<String> {
+        self.lock().halted_by_debugger.clone()
+    }
+
     /// The latest version.
     pub fn version(&self) -> u64 {
         self.lock().version
@@ -400,6 +435,10 @@ impl LiveTable {
         if !table.session.is_empty() && (since == 0 || table.session_changed > since) {
             json.push_str(",\"session\":");
             json.push_str(&table.session);
+        }
+        if !table.debugger.is_empty() && (since == 0 || table.debugger_changed > since) {
+            json.push_str(",\"debugger\":");
+            json.push_str(&table.debugger);
         }
         json.push('}');
         (json, table.version)

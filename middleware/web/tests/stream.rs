@@ -693,3 +693,56 @@ fn the_dbc_downloads_as_the_file_it_is() {
     assert_eq!(body, autoplug_can::DBC_FILE);
     assert!(body.contains("BO_ 3 VehicleSpeedMsg"), "a DBC");
 }
+
+#[test]
+fn a_car_halted_by_a_debugger_is_streamed_and_refuses_actions_with_the_reason() {
+    let table = Arc::new(LiveTable::new());
+    let mut config = WebConfig::loopback(0);
+    config.token = Some("debugger-token-0123456789".into());
+    let (control, commands) = autoplug_web::control::channel();
+    let server = WebServer::start(config, table.clone(), Some(control)).expect("server");
+    let debugger = |halted: bool| {
+        serde_json::json!({"ecus": [{"ecu": "cruise", "address": "127.0.0.1:3333",
+            "attached": halted, "halted": halted,
+            "client": halted.then_some("127.0.0.1:50210")}]})
+    };
+    let version = table.set_debugger(&debugger(true));
+    assert_eq!(
+        table.set_debugger(&debugger(true)),
+        version,
+        "the same object again is no change"
+    );
+    assert_eq!(table.halted_by_debugger(), ["cruise"]);
+    let post = |path: &str| {
+        use std::io::{Read, Write};
+        let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
+        write!(
+            stream,
+            "POST {path} HTTP/1.1\r\nHost: {}\r\nAuthorization: Bearer debugger-token-0123456789\r\nContent-Type: application/json\r\nContent-Length: 11\r\nConnection: close\r\n\r\n{{\"on\":true}}",
+            server.addr()
+        )
+        .expect("request");
+        let mut response = String::new();
+        stream.read_to_string(&mut response).expect("response");
+        response
+    };
+    let refused = post("/api/recording");
+    assert!(refused.starts_with("HTTP/1.1 409"), "{refused}");
+    let body: Value = serde_json::from_str(refused.split("\r\n\r\n").nth(1).unwrap()).unwrap();
+    assert_eq!(
+        body["error"],
+        "the car is halted by the debugger (cruise): continue it in GDB first"
+    );
+    assert!(commands.next().is_none(), "nothing reached the session");
+    runtime().block_on(async {
+        let mut client = connect(&server).await;
+        assert_eq!(next_json(&mut client).await["type"], "catalog");
+        let first = next_json(&mut client).await;
+        assert_eq!(first["debugger"], debugger(true), "{first}");
+        table.set_debugger(&debugger(false));
+        let update = next_json(&mut client).await;
+        assert_eq!(update["debugger"], debugger(false), "{update}");
+        assert!(update["signals"].as_object().unwrap().is_empty());
+    });
+    assert!(table.halted_by_debugger().is_empty());
+}

@@ -908,6 +908,12 @@ impl VirtualCar {
         self.firmware.debug_status(node)
     }
 
+    /// Every GDB server's status, by ECU (`--gdb`): for whoever shows the car (the
+    /// dashboard), read from any thread while the car is halted.
+    pub fn debug_ports(&self) -> crate::firmware::DebugPorts {
+        self.firmware.debug_ports()
+    }
+
     /// The wall-clock time debuggers held the car halted: what a real-time pacer leaves
     /// out (the car stood still meanwhile).
     pub fn debugger_halted_for(&self) -> std::time::Duration {

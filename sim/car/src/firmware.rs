@@ -36,6 +36,11 @@ pub struct FirmwareChoice {
     pub dir: PathBuf,
     /// ECUs whose debug port is a GDB server, and its address ([`FirmwareChoice::debug`]).
     pub gdb: Vec<(Node, SocketAddr)>,
+    /// Whether the car waits at power-on for every debugger to attach (a run under a
+    /// debugger starting at the reset vector, as QEMU's `-S`); otherwise it runs, and a
+    /// debugger that attaches later halts it where it is (the dashboard: the page comes up
+    /// first; `monitor reset halt` starts over).
+    pub hold_for_debugger: bool,
 }
 
 impl FirmwareChoice {
@@ -63,6 +68,7 @@ impl FirmwareChoice {
             ecus,
             dir: dir.to_path_buf(),
             gdb: Vec::new(),
+            hold_for_debugger: true,
         })
     }
 
@@ -303,16 +309,19 @@ pub(crate) struct Firmware {
     dropped_lines: u64,
     stops: Vec<FirmwareStop>,
     /// The GDB servers' statuses, by ECU.
-    debugged: Vec<(Node, Arc<GdbStatus>)>,
+    debugged: DebugPorts,
 }
 
+/// The GDB servers' statuses, by the ECU each debugs.
+pub type DebugPorts = Vec<(Node, Arc<GdbStatus>)>;
+
 /// Puts a GDB server on the debug port of each of `loaded` that `choice` names, and waits
-/// for their debuggers (a run under a debugger starts at the reset vector, as QEMU's
-/// `-S`). The servers' statuses.
+/// for their debuggers when the choice holds for them (a run under a debugger then starts
+/// at the reset vector, as QEMU's `-S`). The servers' statuses.
 pub fn serve_debuggers(
     choice: &FirmwareChoice,
     loaded: &mut [(Node, Mcu, Vec<RttLog>)],
-) -> Result<Vec<(Node, Arc<GdbStatus>)>, String> {
+) -> Result<DebugPorts, String> {
     let mut statuses = Vec::new();
     let mut servers = Vec::new();
     for &(node, address) in &choice.gdb {
@@ -328,11 +337,13 @@ pub fn serve_debuggers(
         servers.push((node, server));
     }
     for (node, server) in servers {
-        eprintln!(
-            "{}: waiting for the debugger (the car is held at power-on)",
-            ecu_name(node)
-        );
-        server.wait_for_client(None);
+        if choice.hold_for_debugger {
+            eprintln!(
+                "{}: waiting for the debugger (the car is held at power-on)",
+                ecu_name(node)
+            );
+            server.wait_for_client(None);
+        }
         if let Some((_, mcu, _)) = loaded.iter_mut().find(|(n, _, _)| *n == node) {
             mcu.debugger = Some(Box::new(server));
         }
@@ -427,7 +438,7 @@ impl Firmware {
     }
 
     /// Keeps the GDB servers' statuses.
-    pub(crate) fn set_debugged(&mut self, statuses: Vec<(Node, Arc<GdbStatus>)>) {
+    pub(crate) fn set_debugged(&mut self, statuses: DebugPorts) {
         self.debugged = statuses;
     }
 
@@ -437,6 +448,11 @@ impl Firmware {
             .iter()
             .find(|(n, _)| *n == node)
             .map(|(_, s)| Arc::clone(s))
+    }
+
+    /// Every GDB server's status, by ECU.
+    pub(crate) fn debug_ports(&self) -> DebugPorts {
+        self.debugged.clone()
     }
 
     /// The wall-clock time debuggers held the car halted, all together.

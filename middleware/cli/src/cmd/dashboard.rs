@@ -42,7 +42,7 @@ pub(crate) fn run(args: DashboardArgs, out: &mut dyn Write) -> Result<(), CliErr
     let folder = DataFolder::prepare(&data).map_err(CliError::Log)?;
     let bus = log.map_or(bus, BusUrl::Replay);
     let virtual_car = matches!(bus, BusUrl::Virtual(_) | BusUrl::Dashboard);
-    let firmware = firmware.choice(&bus)?;
+    let firmware = firmware.choice(&bus, true)?;
     if virtual_car {
         firmware_library(&folder, firmware.as_ref(), out)?;
     }

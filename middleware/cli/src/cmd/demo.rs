@@ -20,6 +20,11 @@ pub(crate) fn run(args: DemoArgs, out: &mut dyn Write) -> Result<(), CliError> {
         firmware,
         images,
     } = args;
+    if !firmware.gdb.is_empty() {
+        return Err(CliError::Demo(
+            "--gdb: a demonstration runs as fast as it can; debug its firmware in `autoplug dashboard --firmware ... --gdb ECU` or `virtual-car run`".into(),
+        ));
+    }
     let on_firmware = match &firmware.firmware {
         None => None,
         Some(list) => Some(demo_on_firmware(

@@ -30,7 +30,7 @@ pub(crate) fn run(args: GatewayArgs, out: &mut dyn Write) -> Result<(), CliError
         firmware,
     } = args;
     let options = GatewayOptions {
-        firmware: firmware.choice(&bus)?,
+        firmware: firmware.choice(&bus, web.is_some())?,
         transmit: transmit.then_some((dtc_interval * 1e6) as u64),
         record,
         rotate: autoplug_logs::RotatePolicy {

@@ -75,6 +75,12 @@ export interface Session {
   fleet: FleetLink | null;
 }
 
+// The GDB servers on the virtual car's emulated ECUs (--gdb), as the gateway watches them
+// (see middleware/dashboard/src/debuggers.rs). While one is halted the whole car stands still.
+export interface Debuggers {
+  ecus: { ecu: string; address: string; attached: boolean; halted: boolean; client: string | null }[];
+}
+
 // The vehicle's link to its fleet (the gateway started with --fleet).
 export interface FleetLink {
   broker: string;
@@ -142,6 +148,7 @@ export class Live {
   messages = new Map<string, MessageInfo>();
   bus: BusFigures | null = null;
   session: Session | null = null;
+  debuggers: Debuggers | null = null;
   /** The simulator's world (the virtual car on its road), from the `world` messages. */
   world = new World();
   /** Bus time of the latest update, s. */
@@ -222,6 +229,7 @@ export class Live {
       }
       if (message.bus) this.bus = message.bus;
       if (message.session) this.session = message.session;
+      if (message.debugger) this.debuggers = message.debugger;
       this.notify();
     } else if (message.type === 'world') {
       // Drawn at the display's rate by the world view: no notify.

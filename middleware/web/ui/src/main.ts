@@ -117,6 +117,23 @@ function updatePlayer(): void {
   setText(where, `${seconds(r.position_s)} / ${seconds(r.duration_s)}${r.at_end ? ' (end)' : ''}`);
 }
 
+// The debuggers of emulated ECUs (--gdb): a halt stops the whole car, which the page says.
+const debuggerBar = document.getElementById('debugger')!;
+function updateDebugger(): void {
+  const ecus = live.debuggers?.ecus ?? [];
+  debuggerBar.hidden = ecus.length === 0;
+  const halted = ecus.filter((e) => e.halted);
+  debuggerBar.classList.toggle('halted', halted.length > 0);
+  if (halted.length > 0) {
+    const who = halted.map((e) => `${e.ecu} (GDB from ${e.client ?? 'a client'})`).join(', ');
+    setText(debuggerBar, `Halted by the debugger: ${who}. The whole car stands still at t = ${num(live.t, 3)} s: bus, vehicle and the other ECUs wait, and no diagnosis counts the pause. Continue in GDB to go on.`);
+    return;
+  }
+  setText(debuggerBar, ecus.map((e) => e.attached
+    ? `${e.ecu}: GDB attached from ${e.client ?? '?'}, running`
+    : `${e.ecu}: GDB server on ${e.address} (target extended-remote ${e.address})`).join(' · '));
+}
+
 const offer = offerBanner(live, ctx.toast);
 document.getElementById('offer-slot')!.append(offer.el);
 
@@ -141,6 +158,7 @@ live.subscribe(() => {
       seenEvents = last;
     }
     updatePlayer();
+    updateDebugger();
     offer.update();
     current?.update();
   });

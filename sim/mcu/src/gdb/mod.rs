@@ -64,8 +64,10 @@ const HANDOVER_WAIT: Duration = Duration::from_secs(1);
 const QUEUED_CHUNKS: usize = 16;
 
 /// What the GDB server tells the rest of the program (the dashboard, a pacer).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct GdbStatus {
+    /// Where the server listens.
+    address: SocketAddr,
     attached: AtomicBool,
     halted: AtomicBool,
     halted_ns: AtomicU64,
@@ -74,6 +76,22 @@ pub struct GdbStatus {
 }
 
 impl GdbStatus {
+    fn new(address: SocketAddr) -> Self {
+        Self {
+            address,
+            attached: AtomicBool::new(false),
+            halted: AtomicBool::new(false),
+            halted_ns: AtomicU64::new(0),
+            halted_since: Mutex::new(None),
+            peer: Mutex::new(None),
+        }
+    }
+
+    /// Where the server listens (what a client connects to).
+    pub fn address(&self) -> SocketAddr {
+        self.address
+    }
+
     /// Whether a client is attached.
     pub fn attached(&self) -> bool {
         self.attached.load(Ordering::Relaxed)
@@ -186,7 +204,7 @@ impl GdbServer {
             busy: AtomicBool::new(false),
             closing: AtomicBool::new(false),
             refusing: std::sync::atomic::AtomicUsize::new(0),
-            status: Arc::new(GdbStatus::default()),
+            status: Arc::new(GdbStatus::new(local)),
         });
         let listening = Arc::clone(&shared);
         std::thread::Builder::new()
@@ -337,6 +355,16 @@ impl GdbServer {
                 kind: gdb_watch_kind(hit.kind),
                 addr: hit.watched,
             }),
+            Halted::Lockup(halt) => {
+                if let Some(session) = self.session.as_mut() {
+                    session.console(&format!(
+                        "{}; the core stays locked until a reset (monitor reset, or a running watchdog's); {}\n",
+                        crate::mcu::Stop::Halted(halt),
+                        fault_registers(mcu)
+                    ));
+                }
+                Some(SingleThreadStopReason::Signal(Signal::SIGSEGV))
+            }
             Halted::Bkpt { .. } => Some(SingleThreadStopReason::Signal(Signal::SIGTRAP)),
         };
         let Some(session) = self.session.as_mut() else {
@@ -365,6 +393,19 @@ fn gdb_watch_kind(kind: WatchKind) -> GdbWatchKind {
 
 /// The HardFault the vector catch stopped at, as GDB's console shows it.
 fn hard_fault_text(mcu: &mut Mcu) -> String {
+    let at = mcu
+        .faults
+        .last()
+        .map(|f| format!(" ({:?} at pc {:#010x}, lr {:#010x})", f.fault, f.pc, f.lr))
+        .unwrap_or_default();
+    format!(
+        "HardFault{at}: {}; the core is halted at the handler (monitor fault repeats this)\n",
+        fault_registers(mcu)
+    )
+}
+
+/// The fault status and address registers, as GDB's console shows them.
+fn fault_registers(mcu: &mut Mcu) -> String {
     let mut word = |a: u32| {
         mcu.cpu
             .debug_read_private(a, crate::cpu::Size::Word)
@@ -376,12 +417,7 @@ fn hard_fault_text(mcu: &mut Mcu) -> String {
         word(0xE000_ED38),
         word(0xE000_ED34),
     );
-    let at = mcu
-        .faults
-        .last()
-        .map(|f| format!(" ({:?} at pc {:#010x}, lr {:#010x})", f.fault, f.pc, f.lr))
-        .unwrap_or_default();
-    format!("HardFault{at}: CFSR {cfsr:#010x}, HFSR {hfsr:#010x}, BFAR {bfar:#010x}, MMFAR {mmfar:#010x}; the core is halted at the handler (monitor fault repeats this)\n")
+    format!("CFSR {cfsr:#010x}, HFSR {hfsr:#010x}, BFAR {bfar:#010x}, MMFAR {mmfar:#010x}")
 }
 
 /// Accepts clients: the first is handed to the MCU, a second is turned away.
