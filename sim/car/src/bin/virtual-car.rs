@@ -340,6 +340,7 @@ fn run_one(
 ) -> std::io::Result<bool> {
     let wall = Instant::now();
     let scenario = car.scenario().clone();
+    let debug_ports = car.debug_ports();
     let dir = out.join(&scenario.name);
     std::fs::create_dir_all(&dir)?;
     let mut bus_log = BufWriter::new(File::create(dir.join("bus.log"))?);
@@ -395,7 +396,13 @@ fn run_one(
         use std::io::Write as _;
         file.flush()?;
     }
-    let elapsed = wall.elapsed().as_secs_f64();
+    // The time a debugger held the car is not the run's.
+    let halted = debug_ports
+        .iter()
+        .map(|(_, status)| status.halted_for())
+        .sum::<Duration>()
+        .as_secs_f64();
+    let elapsed = wall.elapsed().as_secs_f64() - halted;
     outln!("{}", scenario.name);
     if !scenario.description.is_empty() {
         outln!("  {}", scenario.description);
@@ -412,11 +419,16 @@ fn run_one(
         );
     }
     outln!(
-        "  {:<28} {:.3} s wall for {:.1} s simulated ({:.0}x real time)",
+        "  {:<28} {:.3} s wall for {:.1} s simulated ({:.0}x real time){}",
         "run time",
         elapsed,
         scenario.duration_s,
-        scenario.duration_s / elapsed.max(1e-9)
+        scenario.duration_s / elapsed.max(1e-9),
+        if halted > 0.0 {
+            format!(", besides {halted:.3} s halted by the debugger")
+        } else {
+            String::new()
+        }
     );
     outln!("  {:<28} {}", "written to", dir.display());
     for stop in &record.summary.firmware_stops {
