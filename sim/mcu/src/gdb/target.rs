@@ -446,6 +446,9 @@ impl MonitorCmd for Mcu {
                     Err(e) => outputln!(out, "reset failed: {e}"),
                 }
             }
+            // What a client asks of a probe's server before it looks (Cortex-Debug's
+            // attach): the core is halted whenever a monitor command comes.
+            ["halt"] => outputln!(out, "halt: the MCU is halted (pc {:#010x})", self.cpu.pc()),
             ["fault"] | ["faults"] => self.fault_report(&mut out),
             ["history"] => match &self.history {
                 Some(h) => outputln!(
@@ -467,6 +470,14 @@ impl MonitorCmd for Mcu {
                 outputln!(
                     out,
                     "monitor fault         the fault status registers and the last HardFault"
+                );
+                outputln!(
+                    out,
+                    "monitor history       how far back reverse execution reaches, and its memory"
+                );
+                outputln!(
+                    out,
+                    "monitor halt          nothing to do: the MCU is halted while GDB talks to it"
                 );
             }
             _ => outputln!(
