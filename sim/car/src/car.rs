@@ -583,7 +583,7 @@ const PHASE_SPACING_US: u64 = 600;
 impl VirtualCar {
     /// The car at the start of a scenario, every ECU on host logic.
     pub fn new(scenario: &Scenario) -> Self {
-        match Self::build(scenario, None) {
+        match Self::build(scenario, None, None) {
             Ok(car) => car,
             // Only loading firmware can fail.
             Err(e) => unreachable!("{e}"),
@@ -593,6 +593,18 @@ impl VirtualCar {
     /// The car at the start of a scenario, the chosen ECUs running as their firmware on
     /// emulated STM32F446s. Fails, saying why, when an image cannot be loaded.
     pub fn with_firmware(scenario: &Scenario, choice: &FirmwareChoice) -> Result<Self, String> {
+        Self::with_firmware_showing_log(scenario, choice, None)
+    }
+
+    /// The same, each line of the ECUs' defmt logs shown by `show` as the car reads it,
+    /// from the first start on, and as a debugger halts an ECU (read then, as probe-rs
+    /// reads RTT at a halt, while the car's thread stands still): the terminal of a
+    /// real-time run. The lines are kept for [`VirtualCar::take_firmware_log`] all the same.
+    pub fn with_firmware_showing_log(
+        scenario: &Scenario,
+        choice: &FirmwareChoice,
+        show: Option<crate::firmware::LiveLogSink>,
+    ) -> Result<Self, String> {
         for (node, software) in [
             (Node::Cruise, scenario.ecus.cruise),
             (Node::ABS, scenario.ecus.abs),
@@ -605,12 +617,16 @@ impl VirtualCar {
                 ));
             }
         }
-        let mut car = Self::build(scenario, Some(choice))?;
+        let mut car = Self::build(scenario, Some(choice), show)?;
         car.warm_up(WARM_UP_US);
         Ok(car)
     }
 
-    fn build(scenario: &Scenario, choice: Option<&FirmwareChoice>) -> Result<Self, String> {
+    fn build(
+        scenario: &Scenario,
+        choice: Option<&FirmwareChoice>,
+        show: Option<crate::firmware::LiveLogSink>,
+    ) -> Result<Self, String> {
         let environment = environment_of(scenario);
         let start = scenario.track.as_ref().map_or(
             autoplug_road::Pose {
@@ -645,6 +661,9 @@ impl VirtualCar {
             ..BusConfig::default()
         });
         let mut fw = firmware::Firmware::new();
+        if let Some(show) = show {
+            fw.show_log(show);
+        }
         let ecus = Ecus::build(scenario, choice, &mut fw, &mut bus)?;
         // The gateway listens to everything (and acknowledges), like the middleware on
         // the bench; tools attached over socketcand send through this node too.

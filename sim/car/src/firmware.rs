@@ -8,7 +8,8 @@
 use std::collections::VecDeque;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 use autoplug_can::{ecu_name, parse_ecu, Node, ECUS, ECU_NAME_LIST};
 use autoplug_ecus::firmware_name;
@@ -17,7 +18,7 @@ use autoplug_mcu::gdb::{GdbServer, GdbStatus};
 use autoplug_mcu::mcu::{Mcu, Stop};
 use autoplug_mcu::node::{run_together, BusNode};
 use autoplug_mcu::programming::FlashContents;
-use autoplug_mcu::rtt::RttLog;
+use autoplug_mcu::rtt::{LogLine, RttLog};
 use autoplug_virtual_bus::{NodeId, VirtualBus};
 
 /// Where the firmware the car runs comes from when none is named: the firmware build of
@@ -286,7 +287,8 @@ pub struct FirmwareStop {
 /// One ECU on its emulated MCU.
 pub(crate) struct EmulatedEcu {
     pub(crate) node: Node,
-    logs: Vec<RttLog>,
+    /// Its RTT logs, shared with its debug port's halt.
+    logs: Arc<Mutex<LogTap>>,
     /// Its last lines, for a stop's report.
     recent: VecDeque<String>,
     /// HardFaults already reported.
@@ -300,13 +302,21 @@ pub(crate) struct EmulatedEcu {
     logged_set_speed_kmh: Option<f32>,
 }
 
+/// An ECU's RTT logs and the lines its debug port's halt read from them, as probe-rs
+/// reads RTT when the core halts: the lines logged before a breakpoint show while it
+/// holds, though the car's own thread stands still.
+struct LogTap {
+    rtt: Vec<RttLog>,
+    /// Read at a halt (and shown then), with the time: for the car's next read.
+    read_at_halt: Vec<(i64, LogLine)>,
+}
+
 /// The emulated ECUs of a car and their bus nodes (kept apart: the bus runs them as a
 /// slice).
 pub(crate) struct Firmware {
     ecus: Vec<EmulatedEcu>,
     nodes: Vec<BusNode>,
-    log: VecDeque<FirmwareLogLine>,
-    dropped_lines: u64,
+    log: LogBook,
     stops: Vec<FirmwareStop>,
     /// The GDB servers' statuses, by ECU.
     debugged: DebugPorts,
@@ -430,8 +440,7 @@ impl Firmware {
         Self {
             ecus: Vec::new(),
             nodes: Vec::new(),
-            log: VecDeque::new(),
-            dropped_lines: 0,
+            log: LogBook::default(),
             stops: Vec::new(),
             debugged: Vec::new(),
         }
@@ -468,6 +477,33 @@ impl Firmware {
         mcu: Mcu,
         logs: Vec<RttLog>,
     ) -> NodeId {
+        let logs = Arc::new(Mutex::new(LogTap {
+            rtt: logs,
+            read_at_halt: Vec::new(),
+        }));
+        let mut mcu = mcu;
+        if mcu.debugger.is_some() {
+            let (tap, live) = (Arc::clone(&logs), Arc::clone(&self.log.live));
+            mcu.on_debug_halt = Some(Box::new(move |mcu: &mut Mcu| {
+                let Ok(mut tap) = tap.lock() else {
+                    return;
+                };
+                let t_us = scenario_us(mcu.now_ns() / 1000, live.start_us.load(Ordering::Relaxed));
+                let mut read = Vec::new();
+                for rtt in &mut tap.rtt {
+                    read.extend(rtt.poll(mcu));
+                }
+                for line in read {
+                    live.show(&FirmwareLogLine {
+                        t_us,
+                        ecu: ecu_name(node),
+                        level: line.level.clone(),
+                        text: line.text.clone(),
+                    });
+                    tap.read_at_halt.push((t_us, line));
+                }
+            }));
+        }
         let bus_node = BusNode::attach(bus, node.name(), mcu);
         let id = bus_node.node;
         self.nodes.push(bus_node);
@@ -497,18 +533,13 @@ impl Firmware {
     /// Runs the bus and the MCUs to `until_ns`. An MCU that stops leaves the bus (its node
     /// falls silent) and is reported; the others run on.
     pub(crate) fn run(&mut self, bus: &mut VirtualBus, until_ns: u64, start_us: u64) {
+        self.log.live.start_us.store(start_us, Ordering::Relaxed);
         while let Err((i, stop)) = run_together(bus, &mut self.nodes, until_ns) {
             let node = self.nodes.remove(i);
             let mut ecu = self.ecus.remove(i);
             let mut chip = node.mcu.chip;
             let t_us = scenario_us(bus.now_ns() / 1000, start_us);
-            Self::read_log(
-                &mut ecu,
-                &mut chip,
-                t_us,
-                &mut self.log,
-                &mut self.dropped_lines,
-            );
+            Self::read_log(&mut ecu, &mut chip, t_us, &mut self.log);
             bus.set_silenced(node.node, true);
             let mut reason = stop.to_string();
             if let Some(fault) = node.mcu.faults.last() {
@@ -531,19 +562,13 @@ impl Firmware {
     pub(crate) fn poll_logs(&mut self, bus_us: u64, start_us: u64) {
         let t_us = scenario_us(bus_us, start_us);
         for (ecu, node) in self.ecus.iter_mut().zip(&mut self.nodes) {
-            Self::read_log(
-                ecu,
-                &mut node.mcu,
-                t_us,
-                &mut self.log,
-                &mut self.dropped_lines,
-            );
+            Self::read_log(ecu, &mut node.mcu, t_us, &mut self.log);
             for fault in &node.mcu.faults[ecu.faults_seen..] {
                 let text = format!(
                     "emulator: HardFault at PC {:#010x}, LR {:#010x}, CFSR {:#010x}, HFSR {:#010x}, BFAR {:#010x} ({:?})",
                     fault.pc, fault.lr, fault.cfsr, fault.hfsr, fault.bfar, fault.fault
                 );
-                emulator_error(&mut self.log, &mut self.dropped_lines, t_us, ecu.node, text);
+                emulator_error(&mut self.log, t_us, ecu.node, text);
             }
             ecu.faults_seen = node.mcu.faults.len();
             // A lockup with the watchdog running: the chip waits for its reset, as a board
@@ -551,7 +576,6 @@ impl Firmware {
             for (at_ns, halt) in &node.mcu.lockups[ecu.lockups_seen..] {
                 emulator_error(
                     &mut self.log,
-                    &mut self.dropped_lines,
                     scenario_us(at_ns / 1000, start_us),
                     ecu.node,
                     format!(
@@ -567,7 +591,6 @@ impl Firmware {
                 if *cause == ResetCause::Watchdog {
                     emulator_error(
                         &mut self.log,
-                        &mut self.dropped_lines,
                         scenario_us(at_ns / 1000, start_us),
                         ecu.node,
                         "emulator: reset by the independent watchdog (IWDG): the firmware stopped feeding it".into(),
@@ -582,42 +605,60 @@ impl Firmware {
         ecu: &mut EmulatedEcu,
         chip: &mut impl autoplug_mcu::rtt::HostMemory,
         t_us: i64,
-        log: &mut VecDeque<FirmwareLogLine>,
-        dropped: &mut u64,
+        log: &mut LogBook,
     ) {
-        for rtt in &mut ecu.logs {
-            for line in rtt.poll(chip) {
-                if ecu.recent.len() == 20 {
-                    ecu.recent.pop_front();
-                }
-                ecu.recent.push_back(line.text.clone());
-                if ecu.node == Node::Cruise {
-                    if let Some(kmh) = logged_set_speed(&line.text) {
-                        ecu.logged_set_speed_kmh = Some(kmh);
-                    }
-                }
-                push_line(
-                    log,
-                    dropped,
-                    FirmwareLogLine {
-                        t_us,
-                        ecu: ecu_name(ecu.node),
-                        level: line.level,
-                        text: line.text,
-                    },
-                );
+        let Ok(mut tap) = ecu.logs.lock() else {
+            return;
+        };
+        // What a debugger's halt read first (shown then), then what came since.
+        let mut lines: Vec<(i64, LogLine, bool)> = std::mem::take(&mut tap.read_at_halt)
+            .into_iter()
+            .map(|(t_us, line)| (t_us, line, true))
+            .collect();
+        for rtt in &mut tap.rtt {
+            lines.extend(rtt.poll(chip).into_iter().map(|line| (t_us, line, false)));
+        }
+        drop(tap);
+        for (t_us, line, shown) in lines {
+            if ecu.recent.len() == 20 {
+                ecu.recent.pop_front();
             }
+            ecu.recent.push_back(line.text.clone());
+            if ecu.node == Node::Cruise {
+                if let Some(kmh) = logged_set_speed(&line.text) {
+                    ecu.logged_set_speed_kmh = Some(kmh);
+                }
+            }
+            let line = FirmwareLogLine {
+                t_us,
+                ecu: ecu_name(ecu.node),
+                level: line.level,
+                text: line.text,
+            };
+            if shown {
+                log.keep(line);
+            } else {
+                log.push(line);
+            }
+        }
+    }
+
+    /// Shows each log line as it is read (and as a debugger halts an ECU) from now on:
+    /// set before anything runs.
+    pub(crate) fn show_log(&mut self, sink: LiveLogSink) {
+        if let Ok(mut show) = self.log.live.show.lock() {
+            *show = Some(sink);
         }
     }
 
     /// The log lines since the last call.
     pub(crate) fn take_log(&mut self) -> Vec<FirmwareLogLine> {
-        self.log.drain(..).collect()
+        self.log.lines.drain(..).collect()
     }
 
     /// Lines dropped because nobody took them in time.
     pub(crate) fn dropped_lines(&self) -> u64 {
-        self.dropped_lines
+        self.log.dropped
     }
 
     /// The ECUs that stopped.
@@ -654,31 +695,61 @@ fn scenario_us(bus_us: u64, start_us: u64) -> i64 {
 
 /// What the emulator itself reports about an ECU's chip (a fault, a lockup, a watchdog
 /// reset), as an error line of that ECU's log.
-fn emulator_error(
-    log: &mut VecDeque<FirmwareLogLine>,
-    dropped: &mut u64,
-    t_us: i64,
-    node: Node,
-    text: String,
-) {
-    push_line(
-        log,
-        dropped,
-        FirmwareLogLine {
-            t_us,
-            ecu: ecu_name(node),
-            level: Some("ERROR".into()),
-            text,
-        },
-    );
+fn emulator_error(log: &mut LogBook, t_us: i64, node: Node, text: String) {
+    log.push(FirmwareLogLine {
+        t_us,
+        ecu: ecu_name(node),
+        level: Some("ERROR".into()),
+        text,
+    });
 }
 
-fn push_line(log: &mut VecDeque<FirmwareLogLine>, dropped: &mut u64, line: FirmwareLogLine) {
-    if log.len() == LOG_CAPACITY {
-        log.pop_front();
-        *dropped += 1;
+/// The lines the car read from its ECUs, kept for its caller, and shown as they come by
+/// whoever watches live.
+#[derive(Default)]
+struct LogBook {
+    lines: VecDeque<FirmwareLogLine>,
+    /// Lines dropped because nobody took them in time.
+    dropped: u64,
+    live: Arc<LiveLog>,
+}
+
+impl LogBook {
+    /// Shows a line live and keeps it.
+    fn push(&mut self, line: FirmwareLogLine) {
+        self.live.show(&line);
+        self.keep(line);
     }
-    log.push_back(line);
+
+    /// Keeps a line (shown already).
+    fn keep(&mut self, line: FirmwareLogLine) {
+        if self.lines.len() == LOG_CAPACITY {
+            self.lines.pop_front();
+            self.dropped += 1;
+        }
+        self.lines.push_back(line);
+    }
+}
+
+/// What shows the log live, as the car reads it and as a debugger halts an ECU (when the
+/// car's own thread stands still); and the car's start, for the halt's time stamps.
+#[derive(Default)]
+pub(crate) struct LiveLog {
+    show: Mutex<Option<LiveLogSink>>,
+    start_us: AtomicU64,
+}
+
+/// Shows a log line as it is read (`VirtualCar::with_firmware_showing_log`).
+pub type LiveLogSink = Box<dyn FnMut(&FirmwareLogLine) + Send>;
+
+impl LiveLog {
+    fn show(&self, line: &FirmwareLogLine) {
+        if let Ok(mut show) = self.show.lock() {
+            if let Some(show) = show.as_mut() {
+                show(line);
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -219,7 +219,14 @@ fn main() -> ExitCode {
                         }
                         let car = match &firmware {
                             None => VirtualCar::new(&scenario),
-                            Some(choice) => match VirtualCar::with_firmware(&scenario, choice) {
+                            // A real-time run shows the firmware's log as the car reads
+                            // it, from the first start on and at a debugger's halts.
+                            Some(choice) => match VirtualCar::with_firmware_showing_log(
+                                &scenario,
+                                choice,
+                                (realtime || server.is_some())
+                                    .then(|| Box::new(|line: &_| outln!("{line}")) as _),
+                            ) {
                                 Ok(car) => car,
                                 Err(e) => {
                                     eprintln!("error: {e}");
@@ -356,9 +363,6 @@ fn run_one(
         |car, frames| {
             for line in car.take_firmware_log() {
                 let text = line.to_string();
-                if realtime {
-                    outln!("{text}");
-                }
                 if firmware_log_error.is_none() {
                     use std::io::Write as _;
                     let written = match &mut firmware_log {
