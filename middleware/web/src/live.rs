@@ -316,12 +316,16 @@ impl LiveTable {
         let text = session.to_string();
         let mut table = self.lock();
         if table.session != text {
-            table.version += 1;
             table.session = text;
-            table.session_changed = table.version;
-            let version = table.version;
-            self.version.send_replace(version);
+            table.session_changed = self.next_version(&mut table);
         }
+        table.version
+    }
+
+    /// A new version of `table`, announced to the streams.
+    fn next_version(&self, table: &mut Table) -> u64 {
+        table.version += 1;
+        self.version.send_replace(table.version);
         table.version
     }
 
@@ -339,11 +343,8 @@ impl LiveTable {
                 .filter(|e| e["halted"] == true)
                 .filter_map(|e| e["ecu"].as_str().map(str::to_string))
                 .collect();
-            table.version += 1;
             table.debugger = text;
-            table.debugger_changed = table.version;
-            let version = table.version;
-            self.version.send_replace(version);
+            table.debugger_changed = self.next_version(&mut table);
         }
         table.version
     }

@@ -234,13 +234,17 @@ fn http_get(server: &WebServer, path: &str) -> String {
 
 /// The same with the given header lines (each ending in CRLF) instead of the `Host`.
 fn http_get_with(server: &WebServer, path: &str, headers: &str) -> String {
+    http(
+        server,
+        &format!("GET {path} HTTP/1.1\r\n{headers}Connection: close\r\n\r\n"),
+    )
+}
+
+/// The whole response to a request written as it goes on the wire.
+fn http(server: &WebServer, request: &str) -> String {
     use std::io::{Read, Write};
     let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
-    write!(
-        stream,
-        "GET {path} HTTP/1.1\r\n{headers}Connection: close\r\n\r\n"
-    )
-    .expect("request");
+    stream.write_all(request.as_bytes()).expect("request");
     let mut response = String::new();
     stream.read_to_string(&mut response).expect("response");
     response
@@ -265,19 +269,13 @@ fn http_errors_say_what_was_wrong() {
     let view = get("/ecus");
     assert!(view.starts_with("HTTP/1.1 200"), "{view}");
     assert!(view.contains("text/html"), "{view}");
-    let post = {
-        use std::io::{Read, Write};
-        let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
-        write!(
-            stream,
+    let post = http(
+        &server,
+        &format!(
             "POST /ecus HTTP/1.1\r\nHost: {}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
             server.addr()
-        )
-        .expect("request");
-        let mut response = String::new();
-        stream.read_to_string(&mut response).expect("response");
-        response
-    };
+        ),
+    );
     assert!(post.starts_with("HTTP/1.1 405"), "{post}");
     let not_ws = get("/api/stream");
     assert!(not_ws.starts_with("HTTP/1.1 400"), "{not_ws}");
@@ -713,20 +711,13 @@ fn a_car_halted_by_a_debugger_is_streamed_and_refuses_actions_with_the_reason() 
         "the same object again is no change"
     );
     assert_eq!(table.halted_by_debugger(), ["cruise"]);
-    let post = |path: &str| {
-        use std::io::{Read, Write};
-        let mut stream = std::net::TcpStream::connect(server.addr()).expect("connect");
-        write!(
-            stream,
-            "POST {path} HTTP/1.1\r\nHost: {}\r\nAuthorization: Bearer debugger-token-0123456789\r\nContent-Type: application/json\r\nContent-Length: 11\r\nConnection: close\r\n\r\n{{\"on\":true}}",
+    let refused = http(
+        &server,
+        &format!(
+            "POST /api/recording HTTP/1.1\r\nHost: {}\r\nAuthorization: Bearer debugger-token-0123456789\r\nContent-Type: application/json\r\nContent-Length: 11\r\nConnection: close\r\n\r\n{{\"on\":true}}",
             server.addr()
-        )
-        .expect("request");
-        let mut response = String::new();
-        stream.read_to_string(&mut response).expect("response");
-        response
-    };
-    let refused = post("/api/recording");
+        ),
+    );
     assert!(refused.starts_with("HTTP/1.1 409"), "{refused}");
     let body: Value = serde_json::from_str(refused.split("\r\n\r\n").nth(1).unwrap()).unwrap();
     assert_eq!(

@@ -480,17 +480,9 @@ mod tests {
             if start_watchdog { 0x6001 } else { 0xBF00 }, // STR r1, [r0] (or NOP)
             0xDE00, // UDF: a UsageFault, escalated to HardFault
         ];
-        let mut image = vec![0u8; 0x60];
         let undefined = FLASH.start + 0x40 + 14;
-        for (i, word) in [SP, FLASH.start + 0x41, 0, undefined | 1]
-            .iter()
-            .enumerate()
-        {
-            image[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
-        }
-        for (i, halfword) in code.iter().enumerate() {
-            image[0x40 + 2 * i..0x42 + 2 * i].copy_from_slice(&halfword.to_le_bytes());
-        }
+        let image =
+            crate::programming::bare_program(&[SP, FLASH.start + 0x41, 0, undefined | 1], &code);
         let mut flash = SimFlash::new(1);
         flash.program(FLASH.start, &image).unwrap();
         Mcu::power_on(flash, [1, 2, 3]).unwrap()

@@ -246,6 +246,29 @@ impl FlashContents {
     }
 }
 
+/// Where [`bare_program`] puts its code, from the start of flash: past the vector table's
+/// first 16 entries (the core's exceptions).
+pub const BARE_CODE_OFFSET: u32 = 0x40;
+
+/// The image of a bare program for the start of flash, without an ELF file (the core's
+/// tests and examples): `vectors` (the initial SP, then the reset vector and the others,
+/// Thumb bit set) and `code`, Thumb halfwords from [`BARE_CODE_OFFSET`].
+pub fn bare_program(vectors: &[u32], code: &[u16]) -> Vec<u8> {
+    let start = BARE_CODE_OFFSET as usize;
+    // Whole double words, as the flash is programmed.
+    let len = (start + 2 * code.len())
+        .max(4 * vectors.len())
+        .next_multiple_of(8);
+    let mut image = vec![0u8; len];
+    for (i, word) in vectors.iter().enumerate() {
+        image[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
+    }
+    for (i, halfword) in code.iter().enumerate() {
+        image[start + 2 * i..start + 2 * i + 2].copy_from_slice(&halfword.to_le_bytes());
+    }
+    image
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

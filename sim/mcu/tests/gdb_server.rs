@@ -11,6 +11,7 @@ use autoplug_flash::sim::SimFlash;
 use autoplug_mcu::gdb::{GdbServer, GdbStatus};
 use autoplug_mcu::map::FLASH;
 use autoplug_mcu::mcu::Mcu;
+use autoplug_mcu::programming::bare_program;
 
 const COUNTER: u32 = 0x2000_0000;
 /// The loop's store.
@@ -27,15 +28,13 @@ fn counting() -> Mcu {
         0xE7FB, // B 0x48
         0xBF00,
     ];
-    let mut image = vec![0u8; 0x60];
-    for (i, word) in [0x2002_0000u32, FLASH.start + 0x41].iter().enumerate() {
-        image[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
-    }
-    for (i, halfword) in code.iter().enumerate() {
-        image[0x40 + 2 * i..0x42 + 2 * i].copy_from_slice(&halfword.to_le_bytes());
-    }
+    powered(&bare_program(&[0x2002_0000, FLASH.start + 0x41], &code))
+}
+
+/// An MCU with `image` at the start of its flash, powered on.
+fn powered(image: &[u8]) -> Mcu {
     let mut flash = SimFlash::new(1);
-    flash.program(FLASH.start, &image).unwrap();
+    flash.program(FLASH.start, image).unwrap();
     Mcu::power_on(flash, [1, 2, 3]).unwrap()
 }
 
@@ -533,19 +532,10 @@ fn locking_up() -> Mcu {
         0xDE00, // 0x40: UDF, a UsageFault escalated to HardFault
         0xDE00, // 0x42: the handler: UDF again, a fault it cannot take
     ];
-    let mut image = vec![0u8; 0x60];
-    for (i, word) in [0x2002_0000u32, FLASH.start + 0x41, 0, FLASH.start + 0x43]
-        .iter()
-        .enumerate()
-    {
-        image[4 * i..4 * i + 4].copy_from_slice(&word.to_le_bytes());
-    }
-    for (i, halfword) in code.iter().enumerate() {
-        image[0x40 + 2 * i..0x42 + 2 * i].copy_from_slice(&halfword.to_le_bytes());
-    }
-    let mut flash = SimFlash::new(1);
-    flash.program(FLASH.start, &image).unwrap();
-    Mcu::power_on(flash, [1, 2, 3]).unwrap()
+    powered(&bare_program(
+        &[0x2002_0000, FLASH.start + 0x41, 0, FLASH.start + 0x43],
+        &code,
+    ))
 }
 
 #[test]
