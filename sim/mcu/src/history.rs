@@ -498,6 +498,8 @@ impl Mcu {
             hits: Arc::clone(&hits),
             after,
         }));
+        // The past's log was read when it happened: a replay's halts read nothing.
+        let on_halt = self.on_debug_halt.take();
         let saved_control = self.cpu.debug.take();
         let watchpoints = std::mem::take(&mut self.debug.watchpoints);
         if with_hits {
@@ -533,6 +535,7 @@ impl Mcu {
         self.cpu.debug = saved_control;
         self.debug.watchpoints = watchpoints;
         self.debugger = debugger;
+        self.on_debug_halt = on_halt;
         self.history = Some(history);
         if let Err(stop) = result {
             return Err(ReplayError::Diverged(format!("the replay stopped: {stop}")));

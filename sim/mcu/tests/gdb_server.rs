@@ -43,6 +43,8 @@ fn powered(image: &[u8]) -> Mcu {
 struct Running {
     address: SocketAddr,
     status: Arc<GdbStatus>,
+    /// Times the MCU's halt hook ran (what reads RTT at a halt).
+    halt_hooks: Arc<std::sync::atomic::AtomicUsize>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<(Mcu, u64)>>,
 }
@@ -53,6 +55,11 @@ impl Running {
         let server = GdbServer::bind("test-ecu", "127.0.0.1:0".parse().unwrap()).unwrap();
         let (address, status) = (server.local_addr(), server.status());
         mcu.debugger = Some(Box::new(server));
+        let halt_hooks = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let counting_hooks = Arc::clone(&halt_hooks);
+        mcu.on_debug_halt = Some(Box::new(move |_| {
+            counting_hooks.fetch_add(1, Ordering::Relaxed);
+        }));
         let stop = Arc::new(AtomicBool::new(false));
         let stopping = Arc::clone(&stop);
         let thread = std::thread::spawn(move || {
@@ -66,6 +73,7 @@ impl Running {
         Running {
             address,
             status,
+            halt_hooks,
             stop,
             thread: Some(thread),
         }
@@ -388,6 +396,10 @@ fn execution_runs_backwards_to_the_last_write_and_forwards_to_the_present() {
     assert!(gdb.stop_reply().contains("watch:"));
     let present = gdb.counter();
     assert_eq!(gdb.register(15), STORE_PC + 2);
+    // The halt hook ran at the real halts; replays of the past must not run it (the
+    // past's log was read when it happened).
+    let hooks = running.halt_hooks.load(Ordering::Relaxed);
+    assert!(hooks >= 2, "{hooks}");
 
     // One instruction back: before the store.
     let stop = gdb.ask("bs");
@@ -418,6 +430,11 @@ fn execution_runs_backwards_to_the_last_write_and_forwards_to_the_present() {
     // Far back: the history reaches its beginning and says so.
     let stop = gdb.ask("bc");
     assert!(stop.contains("replaylog:begin"), "{stop}");
+    assert_eq!(
+        running.halt_hooks.load(Ordering::Relaxed),
+        hooks,
+        "no halt hook in the replays"
+    );
     assert!(
         gdb.counter() < present - 1000,
         "{} of {present}",
