@@ -369,8 +369,8 @@ pub enum TripsCommand {
 /// `log` subcommands.
 #[derive(Debug, Subcommand)]
 pub enum LogCommand {
-    /// Convert a log (candump .log, Vector .asc or .blf) to Vector ASC, candump, or MCAP with
-    /// the signals decoded.
+    /// Convert a log (candump .log, Vector .asc or .blf) to Vector ASC, candump, Vector BLF,
+    /// or MCAP with the signals decoded.
     Export(ExportArgs),
 }
 
@@ -398,6 +398,8 @@ pub enum ExportFormat {
     Asc,
     /// candump .log (can-utils, python-can, cantools).
     Candump,
+    /// Vector BLF, zlib-compressed (CANalyzer, CANoe, python-can).
+    Blf,
     /// MCAP with every signal decoded (Foxglove, Lichtblick, PlotJuggler).
     Mcap,
 }

@@ -2,6 +2,7 @@
 //!
 //! ```text
 //! cargo run -p autoplug-logs --example convert -- IN OUT.asc
+//! cargo run -p autoplug-logs --example convert -- IN OUT.blf
 //! cargo run -p autoplug-logs --example convert -- [--direction] IN OUT.log
 //! cargo run -p autoplug-logs --example convert -- --json IN
 //! ```
@@ -18,11 +19,11 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 use std::process::ExitCode;
 
-use autoplug_logs::write::{export_asc, export_candump, ExportError};
+use autoplug_logs::write::{export_asc, export_blf, export_candump, ExportError};
 use autoplug_logs::{Direction, FrameKind, LogFormat};
 
 fn usage() -> ExitCode {
-    eprintln!("usage: convert [--direction] IN OUT.asc|OUT.log\n       convert --json IN");
+    eprintln!("usage: convert [--direction] IN OUT.asc|OUT.blf|OUT.log\n       convert --json IN");
     ExitCode::from(2)
 }
 
@@ -73,13 +74,13 @@ fn json(input: &Path) -> Result<(), String> {
 fn convert(input: &Path, output: &Path, direction: bool) -> Result<(), String> {
     let reader = autoplug_logs::open(input).map_err(|e| e.to_string())?;
     let format = LogFormat::from_extension(output)
-        .ok_or_else(|| format!("{}: name it .asc or .log", output.display()))?;
+        .ok_or_else(|| format!("{}: name it .asc, .blf or .log", output.display()))?;
     let out =
         BufWriter::new(File::create(output).map_err(|e| format!("{}: {e}", output.display()))?);
     let summary = match format {
         LogFormat::Asc => export_asc(reader, out),
         LogFormat::Candump => export_candump(reader, out, direction),
-        LogFormat::Blf => return Err("BLF is not written: convert to .asc".into()),
+        LogFormat::Blf => export_blf(reader, out),
     }
     .map_err(|ExportError::Write(e)| format!("{}: {e}", output.display()))?;
     eprint!("{} frames written to {}", summary.frames, output.display());

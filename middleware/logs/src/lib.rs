@@ -7,6 +7,7 @@
 //! | [`frame`] | [`LogFrame`]: a classic CAN frame with its time, channel, kind and direction |
 //! | [`read`] | streaming readers of candump `.log`, Vector `.asc` and `.blf`; [`open`] picks one from the name or the first bytes |
 //! | [`write`](mod@write) | candump and ASC writers; [`export_asc`] converts any log |
+//! | [`blf_write`] | the BLF writer ([`export_blf`] converts any log) |
 //! | [`record`] | [`Recorder`]: live traffic to rotating candump files, flushed every 100 ms |
 //!
 //! Readers never load a whole file and never panic on bad input: a malformed line is an
@@ -27,6 +28,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod blf_write;
 pub mod frame;
 pub mod mcap_export;
 pub mod read;
@@ -34,9 +36,10 @@ pub mod record;
 mod time;
 pub mod write;
 
+pub use blf_write::BlfWriter;
 pub use frame::{Direction, FrameError, FrameKind, LogFrame};
 pub use mcap_export::{export_mcap, McapSummary};
 pub use read::{open, LogError, LogFormat, LogReader, OpenError, Place};
 pub use record::{RecordError, RecordSummary, Recorder, RotatePolicy};
 pub use time::Utc;
-pub use write::{export_asc, AscWriter, CandumpWriter};
+pub use write::{export_asc, export_blf, AscWriter, CandumpWriter};

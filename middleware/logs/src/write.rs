@@ -2,8 +2,7 @@
 //! Vector ASC (what engineers open in CANoe, CANalyzer or python-can), plus conversion of
 //! any log read by [`crate::read`].
 //!
-//! BLF is not written: ASC carries the same frames and every tool that reads BLF reads
-//! ASC.
+//! BLF is written by [`crate::blf_write`]; [`export_blf`] converts any log to it.
 
 use std::fmt;
 use std::io::{self, Write};
@@ -285,6 +284,20 @@ where
     W: Write,
 {
     let mut writer = AscWriter::new(out);
+    let summary = export(frames, |f| writer.write(f))?;
+    writer.finish().map_err(ExportError::Write)?;
+    Ok(summary)
+}
+
+/// Converts a log to BLF (the output seekable: the file header is completed last); as
+/// [`export_asc`] otherwise. A frame more than a second before the first (BLF counts time
+/// up from the measurement start) stops the conversion with its error.
+pub fn export_blf<I, W>(frames: I, out: W) -> Result<ExportSummary, ExportError>
+where
+    I: IntoIterator<Item = Result<LogFrame, LogError>>,
+    W: Write + std::io::Seek,
+{
+    let mut writer = crate::blf_write::BlfWriter::new(out).map_err(ExportError::Write)?;
     let summary = export(frames, |f| writer.write(f))?;
     writer.finish().map_err(ExportError::Write)?;
     Ok(summary)

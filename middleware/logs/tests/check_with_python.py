@@ -20,7 +20,10 @@ It builds the `convert` example of autoplug-logs, then:
    and with python-can's readers, and converts the BLF to ASC for python-can's ASCReader;
 4. writes 6000 frames with python-can's BLFWriter and cuts the file's last 200 bytes, as a
    logger that lost power leaves it: the Rust reader must give the frames python-can reads,
-   then one fatal error saying the file is truncated.
+   then one fatal error saying the file is truncated;
+5. converts step 1's log, repeated to fill several log containers, with the Rust BLF
+   writer and reads it with python-can's BLFReader: every frame the Rust reader takes from
+   the candump log, to the microsecond.
 
 Exits 1 on any disagreement, listing each.
 """
@@ -284,6 +287,36 @@ def main():
 
         # 4. A BLF cut short.
         truncated_blf(convert, tmp)
+
+        # 5. The Rust BLF writer, read by python-can: step 1's frames, and enough more
+        # (the same, 40 times, a second apart) to fill several log containers.
+        big = tmp / "big.log"
+        writer = can.CanutilsLogWriter(big)
+        span = messages[-1].timestamp - messages[0].timestamp + 1
+        many = []
+        for k in range(40):
+            for m in messages:
+                copy = can.Message(timestamp=m.timestamp + k * span, arbitration_id=m.arbitration_id,
+                                   is_extended_id=m.is_extended_id, is_remote_frame=m.is_remote_frame,
+                                   is_error_frame=m.is_error_frame, dlc=m.dlc, data=m.data,
+                                   is_rx=m.is_rx, channel=m.channel)
+                writer.on_message_received(copy)
+                many.append(copy)
+        writer.stop()
+        blf_out = tmp / "out.blf"
+        rust_convert(convert, big, blf_out)
+        # What the Rust reader takes from the candump log (step 1 holds it to python-can).
+        want = rust_items(convert, big)
+        check("the repeated log is read whole", len(want) == len(many), f"{len(want)} of {len(many)}")
+        python = [from_python(m, m.channel) for m in can.BLFReader(blf_out)]
+        compare("python-can BLFReader reads rust's out.blf", python, want)
+        raw, at, containers = blf_out.read_bytes(), 144, 0
+        while at + 16 <= len(raw) and raw[at:at + 4] == b"LOBJ":
+            size = int.from_bytes(raw[at + 8:at + 12], "little")
+            containers += int.from_bytes(raw[at + 12:at + 16], "little") == 10
+            at += size + size % 4
+        check("rust's out.blf is log containers to its end, several of them",
+              at == len(raw) and containers >= 2, f"{containers} containers, {at} of {len(raw)} bytes")
 
     if failures:
         print(f"\n{len(failures)} of {checks} checks FAILED")

@@ -217,6 +217,30 @@ proptest! {
     }
 
     #[test]
+    fn blf_round_trip(mut frames in proptest::collection::vec(frame_strategy(), 0..40)) {
+        // BLF counts time up from the measurement start: a log in time order.
+        frames.sort_by_key(|f| f.t_us);
+        let mut w = autoplug_logs::BlfWriter::new(std::io::Cursor::new(Vec::new())).unwrap();
+        for f in &frames {
+            w.write(f).unwrap();
+        }
+        let bytes = w.finish().unwrap().into_inner();
+        let got: Vec<LogFrame> = autoplug_logs::read::BlfReader::new(&bytes[..])
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect();
+        prop_assert_eq!(got.len(), frames.len());
+        for (g, f) in got.iter().zip(&frames) {
+            if f.kind == FrameKind::Error {
+                // CAN_ERROR_EXT keeps no direction.
+                prop_assert_eq!(*g, f.with_direction(Direction::Rx));
+            } else {
+                prop_assert_eq!(g, f);
+            }
+        }
+    }
+
+    #[test]
     fn asc_round_trip(frames in proptest::collection::vec(frame_strategy(), 0..40)) {
         let mut w = AscWriter::new(Vec::new());
         for f in &frames {

@@ -1,4 +1,4 @@
-//! `autoplug log export`: a log converted to ASC, candump or MCAP.
+//! `autoplug log export`: a log converted to ASC, candump, BLF or MCAP.
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -31,6 +31,7 @@ pub(crate) fn export(args: ExportArgs, out: &mut dyn Write) -> Result<(), CliErr
     let result = match format {
         ExportFormat::Asc => autoplug_logs::export_asc(&mut reader, writer),
         ExportFormat::Candump => autoplug_logs::write::export_candump(&mut reader, writer, false),
+        ExportFormat::Blf => autoplug_logs::export_blf(&mut reader, writer),
         ExportFormat::Mcap => autoplug_logs::export_mcap(&mut reader, writer).map(|s| {
             decoded = Some((s.decoded, s.undecodable));
             s.export
