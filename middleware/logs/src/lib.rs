@@ -8,6 +8,7 @@
 //! | [`read`] | streaming readers of candump `.log`, Vector `.asc` and `.blf`; [`open`] picks one from the name or the first bytes |
 //! | [`write`](mod@write) | candump and ASC writers; [`export_asc`] converts any log |
 //! | [`blf_write`] | the BLF writer ([`export_blf`] converts any log) |
+//! | [`mdf4`] | ASAM MDF 4: its blocks, read and checked (the reader of its bus logging comes on them) |
 //! | [`record`] | [`Recorder`]: live traffic to rotating candump files, flushed every 100 ms |
 //!
 //! Readers never load a whole file and never panic on bad input: a malformed line is an
@@ -31,6 +32,7 @@
 pub mod blf_write;
 pub mod frame;
 pub mod mcap_export;
+pub mod mdf4;
 pub mod read;
 pub mod record;
 mod time;

@@ -1,5 +1,6 @@
 //! The readers against files python-can 4.6 wrote (tests/data/make_fixtures.py): the same
-//! eight messages as candump, ASC and three kinds of BLF.
+//! eight messages as candump, ASC and three kinds of BLF; and the MDF block layer on its
+//! MF4.
 
 use std::path::PathBuf;
 
@@ -122,4 +123,51 @@ fn truncated_and_corrupted_blf_give_a_clear_error() {
         let errors: Vec<LogError> = reader.filter_map(|f| f.err()).collect();
         assert!(errors.iter().filter(|e| e.fatal).count() <= 1);
     }
+}
+
+/// The block layer of the MDF reader on python-can's MF4 (asammdf writes it): the header,
+/// its data groups (data, error and remote frames, one each), and the bus-logging
+/// channels of the first, composed under `CAN_DataFrame`, named as ASAM's bus-logging
+/// standard names them.
+#[test]
+fn python_can_mf4_blocks() {
+    use autoplug_logs::mdf4::blocks::{Block, MdfBlocks};
+    let file = std::fs::File::open(data("python-can.mf4")).unwrap();
+    let (mut blocks, id) = MdfBlocks::open(file).unwrap();
+    assert_eq!((id.version, id.unfinalized), (410, None));
+    let hd = blocks.block(64, &[b"HD"]).unwrap();
+    let groups = blocks.chain(hd.link(0), 0, b"DG").unwrap();
+    assert_eq!(groups.len(), 3);
+    for dg in &groups {
+        assert_eq!(blocks.chain(dg.link(1), 0, b"CG").unwrap().len(), 1);
+    }
+    let cg = blocks.block(groups[0].link(1), &[b"CG"]).unwrap();
+    let channels = blocks.chain(cg.link(1), 0, b"CN").unwrap();
+    let composed = blocks.chain(channels[1].link(1), 0, b"CN").unwrap();
+    let mut names = |cns: &[Block]| -> Vec<String> {
+        cns.iter()
+            .map(|cn| {
+                let tx = blocks.block(cn.link(2), &[b"TX"]).unwrap();
+                String::from_utf8_lossy(&tx.data)
+                    .trim_end_matches('\0')
+                    .to_string()
+            })
+            .collect()
+    };
+    assert_eq!(names(&channels), ["time", "CAN_DataFrame"]);
+    assert_eq!(
+        names(&composed),
+        [
+            "CAN_DataFrame.BusChannel",
+            "CAN_DataFrame.ID",
+            "CAN_DataFrame.IDE",
+            "CAN_DataFrame.DLC",
+            "CAN_DataFrame.DataLength",
+            "CAN_DataFrame.DataBytes",
+            "CAN_DataFrame.Dir",
+            "CAN_DataFrame.EDL",
+            "CAN_DataFrame.BRS",
+            "CAN_DataFrame.ESI"
+        ]
+    );
 }

@@ -9,6 +9,8 @@ checked against files written by another implementation:
   python-can.blf          can.BLFWriter, zlib-compressed containers
   python-can-stored.blf   can.BLFWriter, compression_level=0 (stored containers)
   python-can-split.blf    can.BLFWriter, 64-byte containers: objects cut across containers
+  python-can.mf4          can.MF4Writer (asammdf underneath: MDF 4.10 bus logging, a
+                          compressed data block), written only where asammdf is installed
 
 Run from anywhere: python3 middleware/logs/tests/data/make_fixtures.py (python-can 4.x).
 The files are committed; rerun only when MESSAGES changes, then update tests/fixtures.rs.
@@ -61,8 +63,14 @@ def main():
     write(can.BLFWriter(HERE / "python-can.blf"))
     write(can.BLFWriter(HERE / "python-can-stored.blf", compression_level=0))
     write(can.BLFWriter(HERE / "python-can-split.blf", max_container_size=64))
-    for name in ["python-can.log", "python-can.asc", "python-can.blf",
-                 "python-can-stored.blf", "python-can-split.blf"]:
+    names = ["python-can.log", "python-can.asc", "python-can.blf",
+             "python-can-stored.blf", "python-can-split.blf"]
+    try:
+        write(can.MF4Writer(HERE / "python-can.mf4"))
+        names.append("python-can.mf4")
+    except ImportError as e:  # python-can's MF4Writer needs asammdf
+        print(f"python-can.mf4 not written: {e}")
+    for name in names:
         print(f"{name}: {(HERE / name).stat().st_size} bytes")
 
 

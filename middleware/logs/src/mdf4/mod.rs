@@ -1,0 +1,9 @@
+//! ASAM MDF 4 (`.mf4`), the measurement files CANape, CANalyzer, INCA, Vector's and CSS's
+//! loggers and asammdf write. Our own code rather than a crate: the Rust MDF crates are
+//! young (2026-11: `mf4-rs`, `mdf4-rs`), and a log reader here must stream block by block
+//! in bounded memory, name every damage with its block and offset, and keep what precedes
+//! it. Built in layers:
+//!
+//! - [`blocks`]: the identification block and any block by its link, checked (inside the
+//!   file, a possible length, the expected type, no loop in a chain).
+pub mod blocks;
