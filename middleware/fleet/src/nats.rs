@@ -328,15 +328,17 @@ impl WorkQueue {
         // The server wants a pull's expiry of 1 ms at least; one that waits for the first
         // report ends when it came or when `wait` is over.
         let wait = wait.max(Duration::from_millis(10));
-        let first = self.runtime.block_on(async {
-            let batch = consumer
-                .batch()
-                .max_messages(1)
-                .expires(wait)
-                .messages()
-                .await;
-            collect(batch).await
-        });
+        let first = self
+            .runtime
+            .block_on(answered_within(wait + PULL_GRACE, async {
+                let batch = consumer
+                    .batch()
+                    .max_messages(1)
+                    .expires(wait)
+                    .messages()
+                    .await;
+                collect(batch).await
+            }));
         let mut messages = match first {
             Ok(messages) => messages,
             Err(e) => {
@@ -348,10 +350,10 @@ impl WorkQueue {
         if messages.is_empty() || max <= 1 {
             return messages;
         }
-        let rest = self.runtime.block_on(async {
+        let rest = self.runtime.block_on(answered_within(PULL_GRACE, async {
             let batch = consumer.fetch().max_messages(max - 1).messages().await;
             collect(batch).await
-        });
+        }));
         match rest {
             Ok(more) => messages.extend(more),
             // What the first pull took is returned; the rest stays in the stream.
@@ -405,6 +407,25 @@ impl WorkQueue {
 
 /// The deliveries of one pull, as messages; a pull that ends with an error keeps the
 /// deliveries before it.
+/// How long past its expiry a pull may go unanswered before it is given up. The server
+/// ends a pull at its expiry; a pull in flight when its node went away is never ended (the
+/// client reconnects elsewhere, the request is lost), and the service would wait on it
+/// for ever (seen: a cluster test hung with a node killed mid-stream).
+const PULL_GRACE: Duration = Duration::from_secs(5);
+
+/// `pull`'s result, or an error once `limit` has passed without one.
+async fn answered_within(
+    limit: Duration,
+    pull: impl std::future::Future<Output = Result<Vec<Message>, String>>,
+) -> Result<Vec<Message>, String> {
+    tokio::time::timeout(limit, pull).await.unwrap_or_else(|_| {
+        Err(format!(
+            "a pull of reports got no answer in {} s (its server gone?): pulling again",
+            limit.as_secs_f64()
+        ))
+    })
+}
+
 async fn collect<S, E1, E2>(batch: Result<S, E1>) -> Result<Vec<Message>, String>
 where
     S: futures_util::Stream<Item = Result<jetstream::Message, E2>> + Unpin,
