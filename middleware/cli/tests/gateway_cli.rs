@@ -247,6 +247,63 @@ fn dropped_frames_the_logger_reported_are_counted() {
     assert!(text.contains("5 frame(s) dropped by the logger"), "{text}");
 }
 
+/// CAN FD frames in a log of the (classic) AutoPlug bus: counted and left aside by the
+/// diagnostics, even on a catalogue identifier, and kept by every export.
+#[test]
+fn can_fd_frames_are_counted_apart_and_kept_by_exports() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = bus_log(dir.path(), "stop-100-dry");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut with_fd = String::new();
+    let mut fd = 0;
+    for (i, line) in text.lines().enumerate() {
+        with_fd.push_str(line);
+        with_fd.push('\n');
+        if i % 500 == 0 {
+            // The same time, VehicleSpeedMsg's identifier, 12 bytes with BRS.
+            let stamp = line.split(' ').next().unwrap();
+            with_fd.push_str(&format!("{stamp} can0 003##1{}\n", "A5".repeat(12)));
+            fd += 1;
+        }
+    }
+    let log = dir.path().join("fd.log");
+    std::fs::write(&log, &with_fd).unwrap();
+    let path = log.to_str().unwrap();
+    let output = autoplug(&["diagnose", "--json", path]);
+    assert_eq!(output.status.code(), Some(0), "{output:?}");
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(json["can_fd_frames"], fd);
+    assert_eq!(json["malformed_lines_skipped"], 0);
+    let replay = autoplug(&["replay", path]);
+    let summary = String::from_utf8_lossy(&replay.stdout);
+    assert!(
+        summary.contains(&format!("{fd} CAN FD (not for a classic bus)")),
+        "{summary}"
+    );
+    for (format, extension) in [("blf", "blf"), ("asc", "asc"), ("candump", "log")] {
+        let out = dir.path().join(format!("out.{extension}"));
+        let export = autoplug(&[
+            "log",
+            "export",
+            path,
+            "--format",
+            format,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(export.status.code(), Some(0), "{export:?}");
+        let frames: Vec<_> = autoplug_logs::open(&out)
+            .unwrap()
+            .map(|f| f.unwrap())
+            .filter(|f| f.is_fd())
+            .collect();
+        assert_eq!(frames.len(), fd, "{format}");
+        assert!(frames
+            .iter()
+            .all(|f| f.id == 0x003 && f.data() == [0xA5; 12] && f.fd().unwrap().brs));
+    }
+}
+
 /// Another vehicle's bus, which also uses identifier 0x00E (with values AutoPlug's ABS
 /// never sends): 5 s of it in candump form.
 fn someone_elses_car() -> String {

@@ -5,7 +5,8 @@
 //! Each data frame is the catalogue's, foreign, or neutral:
 //! - the catalogue's: a catalogue message at the catalogue's length;
 //! - foreign: a standard identifier the catalogue does not know, a catalogue identifier at
-//!   another length, or an extended identifier (the AutoPlug bus uses 11-bit ones only);
+//!   another length, an extended identifier (the AutoPlug bus uses 11-bit ones only), or a
+//!   CAN FD frame (the AutoPlug bus is classic CAN);
 //! - neutral: diagnostic traffic, the catalogue's own and any tester's (the OBD-II and UDS
 //!   identifiers of ISO 15765-4, 0x7DF and 0x7E0 to 0x7EF: a scan tool talks to any car),
 //!   and remote and error frames.

@@ -183,6 +183,9 @@ pub struct BusCounters {
     pub remote_frames: u64,
     /// Frames with a 29-bit identifier (not part of the AutoPlug bus).
     pub extended_frames: u64,
+    /// CAN FD frames: a classic CAN bus such as AutoPlug's cannot carry them, so they are
+    /// counted and left aside.
+    pub fd_frames: u64,
     /// Diagnostic transport frames (UDS requests and responses, OBD-II).
     pub diagnostic_frames: u64,
     /// Standard frames whose identifier is not in the catalogue.
@@ -272,7 +275,7 @@ pub enum Update {
     Diagnostic,
     /// An error frame.
     Error,
-    /// Anything else (unknown, extended or remote): counted.
+    /// Anything else (unknown, extended, remote or CAN FD): counted.
     Other,
 }
 
@@ -364,6 +367,10 @@ impl CarState {
                 return Update::Other;
             }
             FrameKind::Data => {}
+        }
+        if frame.is_fd() {
+            self.counters.fd_frames += 1;
+            return Update::Other;
         }
         if frame.extended {
             self.counters.extended_frames += 1;

@@ -151,6 +151,30 @@ fn wrong_lengths_unknown_ids_and_diagnostic_frames_are_counted_not_fatal() {
     assert_eq!(state.signal("Vehicle.Speed").unwrap().updated_us, None);
 }
 
+/// A CAN FD frame carrying a catalogue identifier is still not the catalogue's message: a
+/// classic bus cannot carry it. Counted apart, no signal touched.
+#[test]
+fn can_fd_frames_are_counted_and_left_aside() {
+    let mut state = CarState::new();
+    let fd = LogFrame::new_fd(
+        0,
+        0,
+        u32::from(VehicleSpeedMsg::ID),
+        false,
+        &[100],
+        Default::default(),
+    )
+    .unwrap();
+    assert_eq!(state.update(&fd), Update::Other);
+    assert!(matches!(
+        state.update(&speed(1, 50.0)),
+        Update::Message { valid: true, .. }
+    ));
+    let c = state.counters();
+    assert_eq!((c.frames, c.fd_frames, c.unknown_frames), (2, 1, 0));
+    assert_eq!(state.stats_of(VehicleSpeedMsg::ID).unwrap().count, 1);
+}
+
 #[test]
 fn unknown_identifiers_are_listed_up_to_a_bound() {
     let mut state = CarState::new();

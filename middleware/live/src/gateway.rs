@@ -288,6 +288,8 @@ struct JsonReport<'a> {
     frames: u64,
     malformed_lines_skipped: u64,
     frames_dropped_by_logger: u64,
+    /// CAN FD frames, which the classic bus's diagnostics leave aside.
+    can_fd_frames: u64,
     /// Why the log could not be read to its end; the report covers what came before.
     incomplete: Option<String>,
     vehicle: &'a Recognition,
@@ -326,6 +328,7 @@ pub fn verdict_json(path: &Path, run: &LogRun, judged: bool) -> String {
         frames: run.pipeline.state().counters().frames,
         malformed_lines_skipped: run.pipeline.malformed(),
         frames_dropped_by_logger: run.pipeline.dropped_by_logger(),
+        can_fd_frames: run.pipeline.state().counters().fd_frames,
         incomplete: run.pipeline.incomplete().map(ToString::to_string),
         vehicle: &run.recognition,
         judged,
@@ -347,7 +350,7 @@ pub fn bus_summary(run: &LogRun, out: &mut dyn Write) -> std::io::Result<()> {
     let c = state.counters();
     writeln!(
         out,
-        "{} frames over {:.1} s: {} diagnostic, {} unknown identifier(s) in {} frame(s), {} extended, {} remote, {} error frames, {} out of time order, {} malformed line(s) skipped, {} frame(s) dropped by the logger",
+        "{} frames over {:.1} s: {} diagnostic, {} unknown identifier(s) in {} frame(s), {} extended, {} CAN FD (not for a classic bus), {} remote, {} error frames, {} out of time order, {} malformed line(s) skipped, {} frame(s) dropped by the logger",
         c.frames,
         state.now_us() as f64 * 1e-6
             - state
@@ -360,6 +363,7 @@ pub fn bus_summary(run: &LogRun, out: &mut dyn Write) -> std::io::Result<()> {
         c.unknown_ids.len(),
         c.unknown_frames,
         c.extended_frames,
+        c.fd_frames,
         c.remote_frames,
         c.error_frames,
         c.time_backwards,

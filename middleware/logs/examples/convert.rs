@@ -9,7 +9,7 @@
 //!
 //! `--direction` appends python-can's ` R` / ` T` to candump lines. `--json` prints one
 //! object per frame (`{"t_us":..,"channel":..,"id":..,"extended":..,"kind":"data",
-//! "direction":"rx","len":..,"data":"0A14"}`) or error (`{"error":"..","line":..,
+//! "direction":"rx","len":..,"data":"0A14","fd":false,"brs":false,"esi":false}`) or error (`{"error":"..","line":..,
 //! "fatal":..}`), which tests/check_with_python.py compares with python-can and cantools.
 //! Malformed lines are skipped and counted; the exit status is 1 on a fatal error (the
 //! frames before it are written all the same).
@@ -45,13 +45,17 @@ fn json(input: &Path) -> Result<(), String> {
                     Direction::Rx => "rx",
                     Direction::Tx => "tx",
                 };
+                let fd = f.fd();
                 format!(
-                    "{{\"t_us\":{},\"channel\":{},\"id\":{},\"extended\":{},\"kind\":\"{kind}\",\"direction\":\"{direction}\",\"len\":{},\"data\":\"{data}\"}}",
+                    "{{\"t_us\":{},\"channel\":{},\"id\":{},\"extended\":{},\"kind\":\"{kind}\",\"direction\":\"{direction}\",\"len\":{},\"data\":\"{data}\",\"fd\":{},\"brs\":{},\"esi\":{}}}",
                     f.t_us,
                     f.channel,
                     f.id,
                     f.extended,
-                    f.len()
+                    f.len(),
+                    fd.is_some(),
+                    fd.is_some_and(|x| x.brs),
+                    fd.is_some_and(|x| x.esi)
                 )
             }
             Err(e) => {

@@ -5,7 +5,7 @@
 //! `finish` completes (sizes, object count, the measurement's start and end: the output
 //! must be seekable), then LOG_CONTAINER objects of about 128 KiB each, zlib-compressed,
 //! holding one object a frame: CAN_MESSAGE2 for data and remote frames, CAN_ERROR_EXT for
-//! error frames. Every object has a version 1 header with its time in nanoseconds since
+//! error frames, CAN_FD_MESSAGE_64 for CAN FD frames. Every object has a version 1 header with its time in nanoseconds since
 //! the measurement start, so a frame's microseconds come back exactly.
 //!
 //! The measurement start: for a log in Unix time (anything after 2000), a whole second
@@ -18,7 +18,7 @@ use std::io::{self, Seek, SeekFrom, Write};
 use flate2::write::ZlibEncoder;
 use flate2::Compression;
 
-use crate::frame::{Direction, FrameKind, LogFrame};
+use crate::frame::{Direction, FdFlags, FrameKind, LogFrame};
 use crate::time::Utc;
 
 /// The file header's size, as Vector's tools and python-can write it.
@@ -33,6 +33,12 @@ const OBJECT_HEADER: usize = 32;
 const LOG_CONTAINER: u32 = 10;
 const CAN_ERROR_EXT: u32 = 73;
 const CAN_MESSAGE2: u32 = 86;
+const CAN_FD_MESSAGE: u32 = 100;
+const CAN_FD_MESSAGE_64: u32 = 101;
+/// CAN_FD_MESSAGE_64's flags: a CAN FD frame (EDL), bit rate switch, error state indicator.
+const FD_EDL: u32 = 0x1000;
+const FD_BRS: u32 = 0x2000;
+const FD_ESI: u32 = 0x4000;
 /// The object header's flag: its timestamp counts nanoseconds.
 const TIME_ONE_NANS: u32 = 2;
 const EXTENDED_FLAG: u32 = 0x8000_0000;
@@ -100,6 +106,53 @@ impl<W: Write + Seek> BlfWriter<W> {
         let channel = u16::from(frame.channel) + 1;
         let t_ns = since_start.saturating_mul(1000);
         let id = frame.id | if frame.extended { EXTENDED_FLAG } else { 0 };
+        if let Some(fd) = frame.fd() {
+            self.fd_object(frame, fd, channel, id, t_ns);
+        } else {
+            self.classic_object(frame, channel, id, t_ns);
+        }
+        if self.pending.len() >= CONTAINER_BYTES {
+            self.flush_container()?;
+        }
+        Ok(())
+    }
+
+    /// A CAN FD frame: CAN_FD_MESSAGE_64 as CANoe writes it, or CAN_FD_MESSAGE (whose
+    /// channel field is wider) on channel 256.
+    fn fd_object(&mut self, frame: &LogFrame, fd: FdFlags, channel: u16, id: u32, t_ns: u64) {
+        let tx = frame.direction == Direction::Tx;
+        if let Ok(channel) = u8::try_from(channel) {
+            // channel u8, DLC u8, valid bytes u8, tx count u8, identifier u32, frame
+            // length (ns) u32, flags u32, 4 × u32 bit timing, bit count u16, direction u8,
+            // extended data offset u8, CRC u32, data (padded to 4 bytes).
+            let mut body = [0u8; 40 + 64];
+            body[0] = channel;
+            body[1] = frame.dlc();
+            body[2] = frame.len() as u8;
+            body[4..8].copy_from_slice(&id.to_le_bytes());
+            let flags = FD_EDL | if fd.brs { FD_BRS } else { 0 } | if fd.esi { FD_ESI } else { 0 };
+            body[12..16].copy_from_slice(&flags.to_le_bytes());
+            body[34] = u8::from(tx);
+            body[40..40 + frame.len()].copy_from_slice(frame.data());
+            let size = 40 + frame.len().next_multiple_of(4);
+            self.object(CAN_FD_MESSAGE_64, t_ns, &body[..size]);
+        } else {
+            // channel u16, flags u8, DLC u8, identifier u32, frame length u32, bit count
+            // u8, FD flags u8 (EDL, BRS, ESI), valid bytes u8, reserved[5], data[64].
+            let mut body = [0u8; 20 + 64];
+            body[0..2].copy_from_slice(&channel.to_le_bytes());
+            body[2] = if tx { TX_FLAG } else { 0 };
+            body[3] = frame.dlc();
+            body[4..8].copy_from_slice(&id.to_le_bytes());
+            body[13] = 0x01 | u8::from(fd.brs) << 1 | u8::from(fd.esi) << 2;
+            body[14] = frame.len() as u8;
+            body[20..20 + frame.len()].copy_from_slice(frame.data());
+            self.object(CAN_FD_MESSAGE, t_ns, &body);
+        }
+    }
+
+    /// A classic frame: CAN_MESSAGE2, or CAN_ERROR_EXT for an error frame.
+    fn classic_object(&mut self, frame: &LogFrame, channel: u16, id: u32, t_ns: u64) {
         let mut data = [0u8; 8];
         data[..frame.data().len()].copy_from_slice(frame.data());
         match frame.kind {
@@ -133,10 +186,6 @@ impl<W: Write + Seek> BlfWriter<W> {
                 self.object(CAN_ERROR_EXT, t_ns, &body);
             }
         }
-        if self.pending.len() >= CONTAINER_BYTES {
-            self.flush_container()?;
-        }
-        Ok(())
     }
 
     /// Appends one inner object (its size a multiple of 4: no padding).
@@ -244,7 +293,16 @@ mod tests {
             remote,
             LogFrame::new(t0 + 999_999, 2, 0, false, FrameKind::Error, &[]).unwrap(),
             LogFrame::new(t0 + 1_000_000, 0, 0x7FF, false, FrameKind::Data, &[]).unwrap(),
+            fd(t0 + 1_000_001, 0, &[0xA5; 12], true, false).with_direction(Direction::Tx),
+            fd(t0 + 1_000_002, 1, &[0x5A; 64], false, true),
+            fd(t0 + 1_000_003, 0, &[1, 2, 3], false, false),
+            // Channel 256: CAN_FD_MESSAGE, whose channel field is 16 bits.
+            fd(t0 + 1_000_004, 255, &[9; 20], true, true).with_direction(Direction::Tx),
         ]
+    }
+
+    fn fd(t_us: u64, channel: u8, data: &[u8], brs: bool, esi: bool) -> LogFrame {
+        LogFrame::new_fd(t_us, channel, 0x1AB, false, data, FdFlags { brs, esi }).unwrap()
     }
 
     fn round_trip(written: &[LogFrame]) -> (Vec<LogFrame>, Option<u64>, u32) {

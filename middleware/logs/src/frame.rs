@@ -28,11 +28,22 @@ pub enum FrameKind {
     Error,
 }
 
-/// A classic CAN frame with its time, channel and direction, as a log file holds it.
+/// The bits a CAN FD frame carries beyond a classic one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct FdFlags {
+    /// Bit rate switch: the data phase went at the faster data bit rate.
+    pub brs: bool,
+    /// Error state indicator: the sender was error passive.
+    pub esi: bool,
+}
+
+/// A CAN frame (classic or CAN FD) with its time, channel and direction, as a log file
+/// holds it.
 ///
-/// The length and data are private so that `len <= 8` always holds and [`LogFrame::data`]
-/// never panics; build frames with [`LogFrame::new`], [`LogFrame::from_can`] or
-/// [`LogFrame::remote`].
+/// The length, data and FD flags are private so that the length always suits the frame
+/// (at most 8 bytes classic; 0 to 8, 12, 16, 20, 24, 32, 48 or 64 bytes CAN FD) and
+/// [`LogFrame::data`] never panics; build frames with [`LogFrame::new`],
+/// [`LogFrame::new_fd`], [`LogFrame::from_can`] or [`LogFrame::remote`].
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
 pub struct LogFrame {
     /// Time in microseconds, as the file gives it: Unix time for candump and BLF logs
@@ -52,7 +63,8 @@ pub struct LogFrame {
     /// Received or transmitted.
     pub direction: Direction,
     len: u8,
-    data: [u8; 8],
+    fd: Option<FdFlags>,
+    data: [u8; 64],
 }
 
 /// Why a frame could not be built.
@@ -67,6 +79,11 @@ pub enum FrameError {
     },
     /// More than 8 data bytes (or a DLC above 8 for a remote frame).
     TooLong {
+        /// The length given.
+        len: usize,
+    },
+    /// A CAN FD frame whose length is not one a CAN FD DLC can say.
+    NotFdLength {
         /// The length given.
         len: usize,
     },
@@ -85,6 +102,10 @@ impl fmt::Display for FrameError {
             FrameError::TooLong { len } => {
                 write!(f, "{len} data bytes: a classic CAN frame carries at most 8")
             }
+            FrameError::NotFdLength { len } => write!(
+                f,
+                "{len} data bytes: a CAN FD frame carries 0 to 8, 12, 16, 20, 24, 32, 48 or 64"
+            ),
         }
     }
 }
@@ -95,6 +116,28 @@ impl std::error::Error for FrameError {}
 pub const MAX_STANDARD_ID: u32 = 0x7FF;
 /// Largest extended identifier.
 pub const MAX_EXTENDED_ID: u32 = 0x1FFF_FFFF;
+
+/// Data length of each CAN FD DLC (ISO 11898-1:2015, table 5).
+const FD_LENGTHS: [u8; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64];
+
+/// The data length a DLC stands for: itself up to 8; for CAN FD 9 to 15 stand for 12 to 64
+/// bytes, for classic CAN they mean 8.
+pub fn dlc_to_len(dlc: u8, fd: bool) -> usize {
+    let dlc = usize::from(dlc.min(15));
+    if fd {
+        usize::from(FD_LENGTHS[dlc])
+    } else {
+        dlc.min(8)
+    }
+}
+
+/// The DLC that says `len` bytes, if there is one (0 to 8; 12 to 64 in CAN FD's steps).
+pub fn len_to_dlc(len: usize) -> Option<u8> {
+    FD_LENGTHS
+        .iter()
+        .position(|&l| usize::from(l) == len)
+        .map(|dlc| dlc as u8)
+}
 
 impl LogFrame {
     /// A frame, checked: the identifier fits 11 bits (29 if `extended` or for an error
@@ -121,7 +164,7 @@ impl LogFrame {
         if data.len() > 8 {
             return Err(FrameError::TooLong { len: data.len() });
         }
-        let mut bytes = [0u8; 8];
+        let mut bytes = [0u8; 64];
         if kind != FrameKind::Remote {
             bytes[..data.len()].copy_from_slice(data);
         }
@@ -133,6 +176,43 @@ impl LogFrame {
             kind,
             direction: Direction::Rx,
             len: data.len() as u8,
+            fd: None,
+            data: bytes,
+        })
+    }
+
+    /// A CAN FD data frame, checked: the identifier fits 11 bits (29 if `extended`) and
+    /// the length is one a CAN FD DLC says (0 to 8, 12, 16, 20, 24, 32, 48 or 64).
+    pub fn new_fd(
+        t_us: u64,
+        channel: u8,
+        id: u32,
+        extended: bool,
+        data: &[u8],
+        flags: FdFlags,
+    ) -> Result<Self, FrameError> {
+        if len_to_dlc(data.len()).is_none() {
+            return Err(FrameError::NotFdLength { len: data.len() });
+        }
+        let max = if extended {
+            MAX_EXTENDED_ID
+        } else {
+            MAX_STANDARD_ID
+        };
+        if id > max {
+            return Err(FrameError::IdTooLarge { id, extended });
+        }
+        let mut bytes = [0u8; 64];
+        bytes[..data.len()].copy_from_slice(data);
+        Ok(Self {
+            t_us,
+            channel,
+            id,
+            extended,
+            kind: FrameKind::Data,
+            direction: Direction::Rx,
+            len: data.len() as u8,
+            fd: Some(flags),
             data: bytes,
         })
     }
@@ -162,7 +242,7 @@ impl LogFrame {
 
     /// The frame of the AutoPlug bus (standard identifier, data), received.
     pub fn from_can(t_us: u64, channel: u8, frame: &autoplug_can::Frame) -> Self {
-        let mut data = [0u8; 8];
+        let mut data = [0u8; 64];
         data[..frame.len()].copy_from_slice(frame.data());
         Self {
             t_us,
@@ -172,6 +252,7 @@ impl LogFrame {
             kind: FrameKind::Data,
             direction: Direction::Rx,
             len: frame.len() as u8,
+            fd: None,
             data,
         }
     }
@@ -201,10 +282,26 @@ impl LogFrame {
         self.len == 0
     }
 
-    /// The frame as the generated codec takes it: `Some` only for a data frame with a
-    /// standard identifier (the AutoPlug bus uses no other).
+    /// The CAN FD bits, `None` for a classic frame.
+    pub fn fd(&self) -> Option<FdFlags> {
+        self.fd
+    }
+
+    /// Whether it is a CAN FD frame (which a classic CAN bus cannot carry).
+    pub fn is_fd(&self) -> bool {
+        self.fd.is_some()
+    }
+
+    /// The DLC on the wire: the length itself up to 8, CAN FD's code above.
+    pub fn dlc(&self) -> u8 {
+        // Every length a frame can hold has a DLC (the constructors see to it).
+        len_to_dlc(self.len()).unwrap_or(15)
+    }
+
+    /// The frame as the generated codec takes it: `Some` only for a classic data frame
+    /// with a standard identifier (the AutoPlug bus uses no other).
     pub fn as_can_frame(&self) -> Option<autoplug_can::Frame> {
-        if self.kind != FrameKind::Data || self.extended {
+        if self.kind != FrameKind::Data || self.extended || self.fd.is_some() {
             return None;
         }
         autoplug_can::Frame::new(self.id, self.data()).ok()
@@ -226,6 +323,9 @@ impl fmt::Debug for LogFrame {
             write!(f, "{:08X}x#", self.id)?;
         } else {
             write!(f, "{:03X}#", self.id)?;
+        }
+        if let Some(flags) = self.fd {
+            write!(f, "#{:X}", u8::from(flags.brs) | u8::from(flags.esi) << 1)?;
         }
         match self.kind {
             FrameKind::Remote => write!(f, "R{}", self.len),
@@ -264,6 +364,50 @@ mod tests {
             Err(FrameError::TooLong { len: 9 })
         );
         assert!(LogFrame::remote(0, 0, 1, false, 9).is_err());
+    }
+
+    #[test]
+    fn fd_frames_take_fd_lengths_only() {
+        let brs = FdFlags {
+            brs: true,
+            esi: false,
+        };
+        let f = LogFrame::new_fd(1, 0, 0x123, false, &[7; 12], brs).unwrap();
+        assert_eq!(
+            (f.len(), f.dlc(), f.fd(), f.is_fd()),
+            (12, 9, Some(brs), true)
+        );
+        assert_eq!(f.data(), &[7; 12]);
+        assert_eq!(f.as_can_frame(), None, "a classic bus cannot carry it");
+        assert_eq!(
+            format!("{f:?}"),
+            "0.000001 ch0 Rx 123##1070707070707070707070707"
+        );
+        assert_eq!(
+            LogFrame::new_fd(0, 0, 1, false, &[0; 9], brs),
+            Err(FrameError::NotFdLength { len: 9 })
+        );
+        assert_eq!(
+            LogFrame::new_fd(0, 0, 1, false, &[0; 65], brs)
+                .unwrap_err()
+                .to_string(),
+            "65 data bytes: a CAN FD frame carries 0 to 8, 12, 16, 20, 24, 32, 48 or 64"
+        );
+        assert!(LogFrame::new_fd(0, 0, 0x800, false, &[], brs).is_err());
+        assert!(LogFrame::new_fd(0, 0, 0x1FFF_FFFF, true, &[0; 64], brs).is_ok());
+        let classic = LogFrame::new(0, 0, 1, false, FrameKind::Data, &[1, 2]).unwrap();
+        assert_eq!((classic.fd(), classic.dlc()), (None, 2));
+    }
+
+    #[test]
+    fn dlcs_and_lengths_convert_both_ways() {
+        for dlc in 0..=15u8 {
+            assert_eq!(len_to_dlc(dlc_to_len(dlc, true)), Some(dlc));
+        }
+        assert_eq!(dlc_to_len(13, false), 8);
+        assert_eq!(dlc_to_len(13, true), 32);
+        assert_eq!(len_to_dlc(9), None);
+        assert_eq!(len_to_dlc(65), None);
     }
 
     #[test]

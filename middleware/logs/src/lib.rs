@@ -4,7 +4,7 @@
 //!
 //! | module | what |
 //! | --- | --- |
-//! | [`frame`] | [`LogFrame`]: a classic CAN frame with its time, channel, kind and direction |
+//! | [`frame`] | [`LogFrame`]: a CAN or CAN FD frame with its time, channel, kind and direction |
 //! | [`read`] | streaming readers of candump `.log`, Vector `.asc` and `.blf`; [`open`] picks one from the name or the first bytes |
 //! | [`write`](mod@write) | candump and ASC writers; [`export_asc`] converts any log |
 //! | [`blf_write`] | the BLF writer ([`export_blf`] converts any log) |
@@ -14,8 +14,8 @@
 //! Readers never load a whole file and never panic on bad input: a malformed line is an
 //! error naming its line number, and reading goes on with the next, so the caller chooses
 //! to stop (strict) or skip and count (lenient). Timestamps are integer microseconds as
-//! the file gives them. CAN FD frames are reported as errors: the AutoPlug bus is classic
-//! CAN.
+//! the file gives them. CAN FD frames are read and written in every format; the gateway,
+//! whose bus is classic CAN, counts them and leaves them aside.
 //!
 //! ```
 //! use autoplug_logs::{read::CandumpReader, FrameKind};
@@ -39,7 +39,7 @@ mod time;
 pub mod write;
 
 pub use blf_write::BlfWriter;
-pub use frame::{Direction, FrameError, FrameKind, LogFrame};
+pub use frame::{dlc_to_len, len_to_dlc, Direction, FdFlags, FrameError, FrameKind, LogFrame};
 pub use mcap_export::{export_mcap, McapSummary};
 pub use read::{open, LogError, LogFormat, LogReader, OpenError, Place};
 pub use record::{RecordError, RecordSummary, Recorder, RotatePolicy};

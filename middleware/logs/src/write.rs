@@ -14,7 +14,8 @@ use crate::time::Utc;
 
 /// Appends one candump line to `line`: `(secs.micros) canN ID#DATA`, 3 upper-case hex
 /// digits for a standard identifier and 8 for an extended one or an error frame (with
-/// `CAN_ERR_FLAG`), `ID#R` / `ID#R4` for a remote frame; with `direction`, python-can's
+/// `CAN_ERR_FLAG`), `ID#R` / `ID#R4` for a remote frame, `ID##F…` for CAN FD (F: the
+/// flags digit, 1 BRS, 2 ESI); with `direction`, python-can's
 /// ` R` / ` T` after it. Ends with `\n`.
 pub fn format_candump(line: &mut Vec<u8>, frame: &LogFrame, direction: bool) {
     // Digits pushed by hand rather than through `write!`: a recording or a virtual car's
@@ -32,6 +33,10 @@ pub fn format_candump(line: &mut Vec<u8>, frame: &LogFrame, direction: bool) {
         (_, false) => push_hex(line, frame.id, 3),
     }
     line.push(b'#');
+    if let Some(flags) = frame.fd() {
+        line.push(b'#');
+        push_hex(line, u32::from(flags.brs) | u32::from(flags.esi) << 1, 1);
+    }
     if frame.kind == FrameKind::Remote {
         line.push(b'R');
         if !frame.is_empty() {
@@ -193,6 +198,25 @@ impl<W: Write> AscWriter<W> {
             Direction::Rx => "Rx",
             Direction::Tx => "Tx",
         };
+        if let Some(flags) = frame.fd() {
+            // As CANoe and python-can lay it out: BRS, ESI, DLC (hex), length, data, then
+            // duration, bit count, flags, CRC and bit timings, which a log file does not
+            // know (0) but for the flags: 0x1000 FDF, 0x2000 BRS, 0x4000 ESI.
+            write!(
+                self.out,
+                "{time:>11} CANFD {channel:>3} {direction:<4} {id:>9} {:>32} {} {} {:x} {:>2}",
+                "",
+                u8::from(flags.brs),
+                u8::from(flags.esi),
+                frame.dlc(),
+                frame.len()
+            )?;
+            for b in frame.data() {
+                write!(self.out, " {b:02X}")?;
+            }
+            let bits = 0x1000 | u32::from(flags.brs) << 13 | u32::from(flags.esi) << 14;
+            return writeln!(self.out, " {:>8} {:>4} {bits:>8X} {:>8} 0 0 0 0", 0, 0, 0);
+        }
         write!(self.out, "{time:>11} {channel}  {id:<15} {direction:<4} ")?;
         if frame.kind == FrameKind::Remote {
             return writeln!(self.out, "r {:x}", frame.len());
@@ -323,6 +347,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frame::FdFlags;
     use crate::read::{AscReader, CandumpReader};
 
     fn sample() -> Vec<LogFrame> {
@@ -360,6 +385,31 @@ mod tests {
                 &[0, 4, 0, 0, 0, 0, 0, 0],
             )
             .unwrap(),
+            LogFrame::new_fd(
+                t0 + 4_000_000,
+                1,
+                0x123,
+                false,
+                &[0x11; 12],
+                FdFlags {
+                    brs: true,
+                    esi: false,
+                },
+            )
+            .unwrap(),
+            LogFrame::new_fd(
+                t0 + 4_000_001,
+                0,
+                0x1ABC_DEF0,
+                true,
+                &core::array::from_fn::<u8, 64, _>(|i| i as u8),
+                FdFlags {
+                    brs: false,
+                    esi: true,
+                },
+            )
+            .unwrap()
+            .with_direction(Direction::Tx),
         ]
     }
 
@@ -382,7 +432,9 @@ mod tests {
              (1700000002.000000) can0 123#R4\n\
              (1700000002.000001) can0 00001234#R\n\
              (1700000003.000000) can0 20000080#\n\
-             (1700000003.000001) can0 20000004#0004000000000000\n"
+             (1700000003.000001) can0 20000004#0004000000000000\n\
+             (1700000004.000000) can1 123##1111111111111111111111111\n\
+             (1700000004.000001) can0 1ABCDEF0##2000102030405060708090A0B0C0D0E0F101112131415161718191A1B1C1D1E1F202122232425262728292A2B2C2D2E2F303132333435363738393A3B3C3D3E3F\n"
         );
     }
 
@@ -398,6 +450,7 @@ mod tests {
             let mut expected = sample();
             if !direction {
                 expected[2].direction = Direction::Rx;
+                expected[8].direction = Direction::Rx;
             }
             // Interfaces are numbered in order of appearance: can0 then can1.
             assert_eq!(back, expected);
@@ -413,7 +466,7 @@ mod tests {
         let text = String::from_utf8(w.finish().unwrap()).unwrap();
         assert_eq!(
             text,
-            "date Tue Nov 14 22:13:20.000 2023\n\
+            format!("date Tue Nov 14 22:13:20.000 2023\n\
              base hex  timestamps absolute\n\
              internal events logged\n\
              Begin Triggerblock Tue Nov 14 22:13:20.000 2023\n\
@@ -425,8 +478,11 @@ mod tests {
              \x20  2.000001 1  1234x           Rx   r 0\n\
              \x20  3.000000 1  ErrorFrame\n\
              \x20  3.000001 1  ErrorFrame\n\
-             End TriggerBlock\n"
-        );
+             \x20  4.000000 CANFD   2 Rx         123                                  1 0 9 12 11 11 11 11 11 11 11 11 11 11 11 11        0    0     3000        0 0 0 0 0\n\
+             \x20  4.000001 CANFD   1 Tx   1ABCDEF0x                                  0 1 f 64 {}        0    0     5000        0 0 0 0 0\n\
+             End TriggerBlock\n",
+            (0..64).map(|b| format!("{b:02X}")).collect::<Vec<_>>().join(" ")
+        ));
         let back: Vec<LogFrame> = AscReader::new(text.as_bytes())
             .map(|f| f.unwrap())
             .collect();
@@ -440,12 +496,12 @@ mod tests {
             if s.kind != FrameKind::Error {
                 // ASC keeps neither the error class nor the error details.
                 assert_eq!(
-                    (b.id, b.extended, b.len(), b.data()),
-                    (s.id, s.extended, s.len(), s.data())
+                    (b.id, b.extended, b.len(), b.data(), b.fd()),
+                    (s.id, s.extended, s.len(), s.data(), s.fd())
                 );
             }
         }
-        assert_eq!(back.len(), 7);
+        assert_eq!(back.len(), 9);
     }
 
     #[test]

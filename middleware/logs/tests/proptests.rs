@@ -4,7 +4,8 @@ use std::io::Cursor;
 
 use autoplug_logs::read::{AscReader, CandumpReader};
 use autoplug_logs::{
-    AscWriter, CandumpWriter, Direction, FrameKind, LogError, LogFormat, LogFrame, LogReader,
+    AscWriter, CandumpWriter, Direction, FdFlags, FrameKind, LogError, LogFormat, LogFrame,
+    LogReader,
 };
 use proptest::prelude::*;
 
@@ -59,35 +60,54 @@ fn frame_strategy() -> impl Strategy<Value = LogFrame> {
         0u64..4_000_000_000_000_000,
         0u8..4,
         any::<bool>(),
-        0u8..3,
+        0u8..4,
         any::<bool>(),
-        proptest::collection::vec(any::<u8>(), 0..=8),
+        proptest::collection::vec(any::<u8>(), 0..=64),
         any::<u32>(),
+        0u8..4,
     )
-        .prop_map(|(t_us, channel, extended, kind, tx, data, id)| {
-            let id = if extended {
-                id & 0x1FFF_FFFF
-            } else {
-                id & 0x7FF
-            };
-            let frame = match kind {
-                0 => LogFrame::new(t_us, channel, id, extended, FrameKind::Data, &data),
-                1 => LogFrame::remote(t_us, channel, id, extended, data.len() as u8),
-                _ => LogFrame::new(
-                    t_us,
-                    channel,
-                    id & 0x1FFF_FFFF,
-                    false,
-                    FrameKind::Error,
-                    &data,
-                ),
-            }
-            .unwrap();
-            frame.with_direction(if tx { Direction::Tx } else { Direction::Rx })
-        })
+        .prop_map(
+            |(t_us, channel, extended, kind, tx, mut data, id, fd_bits)| {
+                let id = if extended {
+                    id & 0x1FFF_FFFF
+                } else {
+                    id & 0x7FF
+                };
+                if kind != 3 {
+                    data.truncate(8);
+                }
+                let frame = match kind {
+                    3 => {
+                        // CAN FD: cut to the nearest length a DLC can say.
+                        let len = (0..=data.len())
+                            .rev()
+                            .find(|&n| autoplug_logs::len_to_dlc(n).is_some())
+                            .unwrap_or(0);
+                        let flags = FdFlags {
+                            brs: fd_bits & 1 != 0,
+                            esi: fd_bits & 2 != 0,
+                        };
+                        LogFrame::new_fd(t_us, channel, id, extended, &data[..len], flags)
+                    }
+                    0 => LogFrame::new(t_us, channel, id, extended, FrameKind::Data, &data),
+                    1 => LogFrame::remote(t_us, channel, id, extended, data.len() as u8),
+                    _ => LogFrame::new(
+                        t_us,
+                        channel,
+                        id & 0x1FFF_FFFF,
+                        false,
+                        FrameKind::Error,
+                        &data,
+                    ),
+                }
+                .unwrap();
+                frame.with_direction(if tx { Direction::Tx } else { Direction::Rx })
+            },
+        )
 }
 
-/// A BLF file of these frames written by hand (v1 headers, nanoseconds, one container).
+/// A BLF file of these frames written by hand (v1 headers, nanoseconds, one container):
+/// CAN_MESSAGE for classic frames, CAN_FD_MESSAGE (as python-can writes them) for CAN FD.
 fn blf_of(frames: &[LogFrame], zlib: bool) -> Vec<u8> {
     use std::io::Write;
     let mut inner = Vec::new();
@@ -98,17 +118,30 @@ fn blf_of(frames: &[LogFrame], zlib: bool) -> Vec<u8> {
             u8::from(f.direction == Direction::Tx)
                 | if f.kind == FrameKind::Remote { 0x80 } else { 0 },
         );
-        body.push(f.len() as u8);
+        body.push(f.dlc());
         body.extend_from_slice(&(f.id | if f.extended { 0x8000_0000 } else { 0 }).to_le_bytes());
-        let mut data = [0u8; 8];
-        data[..f.data().len()].copy_from_slice(f.data());
-        body.extend_from_slice(&data);
+        let kind = if let Some(fd) = f.fd() {
+            // frame length u32, bit count u8, FD flags u8, valid bytes u8, reserved[5]
+            body.extend_from_slice(&[0; 5]);
+            body.push(1 | u8::from(fd.brs) << 1 | u8::from(fd.esi) << 2);
+            body.push(f.len() as u8);
+            body.extend_from_slice(&[0; 5]);
+            let mut data = [0u8; 64];
+            data[..f.len()].copy_from_slice(f.data());
+            body.extend_from_slice(&data);
+            100u32
+        } else {
+            let mut data = [0u8; 8];
+            data[..f.data().len()].copy_from_slice(f.data());
+            body.extend_from_slice(&data);
+            1
+        };
         let size = 32 + body.len();
         inner.extend_from_slice(b"LOBJ");
         inner.extend_from_slice(&32u16.to_le_bytes());
         inner.extend_from_slice(&1u16.to_le_bytes());
         inner.extend_from_slice(&(size as u32).to_le_bytes());
-        inner.extend_from_slice(&1u32.to_le_bytes());
+        inner.extend_from_slice(&kind.to_le_bytes());
         inner.extend_from_slice(&2u32.to_le_bytes());
         inner.extend_from_slice(&[0; 4]);
         inner.extend_from_slice(&(f.t_us * 1000).to_le_bytes());
@@ -254,7 +287,7 @@ proptest! {
             prop_assert_eq!(g.t_us, f.t_us.saturating_sub(t0));
             prop_assert_eq!((g.channel, g.kind), (f.channel, f.kind));
             if f.kind != FrameKind::Error {
-                prop_assert_eq!((g.id, g.extended, g.direction, g.len(), g.data()), (f.id, f.extended, f.direction, f.len(), f.data()));
+                prop_assert_eq!((g.id, g.extended, g.direction, g.len(), g.data(), g.fd()), (f.id, f.extended, f.direction, f.len(), f.data(), f.fd()));
             }
         }
     }

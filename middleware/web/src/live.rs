@@ -503,8 +503,9 @@ impl Publisher {
 }
 
 /// The bits `frame` takes on the wire, intermission included: exact for a standard data
-/// frame (its stuff bits counted from its real bit sequence); a remote, 29-bit or error
-/// frame, which the AutoPlug bus does not send, at its length without stuff bits.
+/// frame (its stuff bits counted from its real bit sequence); a remote, 29-bit, error or
+/// CAN FD frame, which the AutoPlug bus does not send, at its length without stuff bits
+/// (CAN FD's all at the nominal rate: a log does not say how fast its data phase went).
 fn wire_bits(frame: &autoplug_logs::LogFrame) -> u64 {
     use autoplug_logs::FrameKind;
     if let Some(can) = frame.as_can_frame() {

@@ -102,7 +102,7 @@ impl Trace {
 
 /// A frame of the trace as a JSON array: `[seq, t, id, flags, dlc, data, name, sender]`:
 /// bus time in s, flags a string of `x` (29-bit identifier), `r` (remote), `e` (error),
-/// `t` (sent by the gateway itself), data in hex, and the name and sender the DBC gives
+/// `f` (CAN FD), `t` (sent by the gateway itself), data in hex, and the name and sender the DBC gives
 /// the identifier (for the diagnostic identifiers: the UDS request or response and the
 /// node; empty when unknown).
 fn frame_json(entry: &Entry) -> String {
@@ -116,11 +116,15 @@ fn frame_json(entry: &Entry) -> String {
         FrameKind::Remote => flags.push('r'),
         FrameKind::Error => flags.push('e'),
     }
+    if f.is_fd() {
+        flags.push('f');
+    }
     if f.direction == Direction::Tx {
         flags.push('t');
     }
     let data: String = f.data().iter().map(|b| format!("{b:02X}")).collect();
-    let (name, sender) = if f.extended || f.kind == FrameKind::Error {
+    // A CAN FD frame is not the catalogue's message whatever its identifier.
+    let (name, sender) = if f.extended || f.kind == FrameKind::Error || f.is_fd() {
         (String::new(), String::new())
     } else {
         describe(f.id)
@@ -216,6 +220,17 @@ mod tests {
         // A number from the future (a page kept over a restart) gets nothing, and no panic.
         let ahead = trace.after(u64::MAX, 10);
         assert!(ahead.frames.is_empty());
+    }
+
+    #[test]
+    fn can_fd_frames_are_flagged_and_not_named_as_the_catalogue() {
+        let trace = Trace::new();
+        let id = u32::from(VehicleSpeedMsg::ID);
+        let fd = LogFrame::new_fd(5, 0, id, false, &[0xAB; 16], Default::default()).unwrap();
+        trace.push(&fd);
+        let f = parse(&trace.after(0, 1).frames[0]);
+        assert_eq!((&f[3], &f[4], &f[6]), (&"f".into(), &16.into(), &"".into()));
+        assert_eq!(f[5].as_str().unwrap(), "AB".repeat(16));
     }
 
     #[test]

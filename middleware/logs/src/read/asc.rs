@@ -23,8 +23,9 @@
 //! of measurement, global markers, J1939 and the like) are skipped. A `CANFD` event whose
 //! flags have the FDF bit (0x1000) clear holds a classic frame (CANoe logs classic frames
 //! on a CAN FD channel so, and can-utils' `log2asc -f` writes every frame so) and is read
-//! as one, remote when the flags have 0x10; real CAN FD frames and `CANXL` events are
-//! errors a lenient caller can skip.
+//! as one, remote when the flags have 0x10; with FDF set it is a CAN FD frame (BRS and ESI
+//! from their columns or the flags 0x2000 and 0x4000). `CANXL` events are errors a lenient
+//! caller can skip.
 //!
 //! ```text
 //!    0.100000 CANFD   1 Rx        123  EngineData  0 0 8  8 01 02 03 04 05 06 07 08   130000  130        0 0 0 0 0 0
@@ -37,13 +38,17 @@ use std::io::BufRead;
 
 use super::lines::{Line, Lines};
 use super::LogError;
-use crate::frame::{Direction, FrameKind, LogFrame};
+use crate::frame::{dlc_to_len, Direction, FdFlags, FrameKind, LogFrame};
 use crate::time::parse_seconds;
 
 /// The FDF (EDL) bit of a `CANFD` event's flags: the frame is CAN FD.
 const ASC_FDF: u32 = 0x1000;
 /// The remote-frame bit of a `CANFD` event's flags.
 const ASC_RTR: u32 = 0x10;
+/// The bit rate switch bit of a `CANFD` event's flags.
+const ASC_BRS: u32 = 0x2000;
+/// The error state indicator bit of a `CANFD` event's flags.
+const ASC_ESI: u32 = 0x4000;
 
 /// A frame's channel, 1-based in the file, 0-based in [`LogFrame`].
 fn channel(text: &str) -> Result<u8, String> {
@@ -149,7 +154,7 @@ impl State {
         }
         if channel_text.eq_ignore_ascii_case("CANXL") {
             return Err(err(
-                "CAN XL frame (CANXL event) is not supported: classic CAN only".into(),
+                "CAN XL frame (CANXL event) is not supported: CAN and CAN FD only".into(),
             ));
         }
         if !channel_text.bytes().all(|b| b.is_ascii_digit()) {
@@ -217,8 +222,8 @@ impl State {
         Ok(Some(frame.with_direction(direction)))
     }
 
-    /// The rest of a `CANFD` line (see the [module](self) for its layout): a classic frame
-    /// when its FDF flag is clear, else refused.
+    /// The rest of a `CANFD` line (see the [module](self) for its layout): a CAN FD frame
+    /// when its FDF flag is set, else a classic one.
     fn canfd<'a>(
         &self,
         mut tokens: impl Iterator<Item = &'a str> + Clone,
@@ -254,11 +259,11 @@ impl State {
         }
         let (id, extended) = self.identifier(id_text)?;
         // BRS is 0 or 1; anything else there is the frame's symbolic name, BRS after it.
-        let brs = next("BRS flag")?;
+        let mut brs = next("BRS flag")?;
         if brs != "0" && brs != "1" {
-            next("BRS flag")?;
+            brs = next("BRS flag")?;
         }
-        next("ESI flag")?;
+        let esi = next("ESI flag")?;
         let dlc_text = next("DLC")?;
         let dlc = self
             .number(dlc_text)
@@ -287,28 +292,36 @@ impl State {
         let flags_text = after_data("flags")?;
         let flags = u32::from_str_radix(flags_text, 16)
             .map_err(|_| format!("flags \"{flags_text}\" are not hexadecimal"))?;
-        if flags & ASC_FDF != 0 {
+        let fd = flags & ASC_FDF != 0;
+        if fd && dlc_to_len(dlc as u8, true) != length {
             return Err(format!(
-                "CAN FD frame (CANFD event, identifier 0x{id:X}) is not supported: classic CAN only"
+                "DLC {dlc:X} says {} data bytes, the data length {length}",
+                dlc_to_len(dlc as u8, true)
             ));
         }
-        if length > 8 {
+        if !fd && length > 8 {
             return Err(format!(
                 "{length} data bytes in a classic frame (FDF flag clear): at most 8"
             ));
         }
         let channel = channel(channel_text)?;
-        let frame = if flags & ASC_RTR != 0 {
+        let mut data = [0u8; 64];
+        for (byte, text) in data.iter_mut().zip(data_tokens).take(length) {
+            *byte = self
+                .number(text)
+                .and_then(|v| u8::try_from(v).ok())
+                .ok_or_else(|| format!("data byte \"{text}\" is not {}", self.base()))?;
+        }
+        let frame = if fd {
+            let flags = FdFlags {
+                brs: brs == "1" || flags & ASC_BRS != 0,
+                esi: esi == "1" || flags & ASC_ESI != 0,
+            };
+            LogFrame::new_fd(t_us, channel, id, extended, &data[..length], flags)
+        } else if flags & ASC_RTR != 0 {
             // A classic DLC of 9 to 15 still means 8 bytes.
             LogFrame::remote(t_us, channel, id, extended, dlc.min(8) as u8)
         } else {
-            let mut data = [0u8; 8];
-            for (byte, text) in data.iter_mut().zip(data_tokens).take(length) {
-                *byte = self
-                    .number(text)
-                    .and_then(|v| u8::try_from(v).ok())
-                    .ok_or_else(|| format!("data byte \"{text}\" is not {}", self.base()))?;
-            }
             LogFrame::new(
                 t_us,
                 channel,
@@ -464,9 +477,8 @@ mod tests {
         );
         let got = read(&text);
         assert_eq!(got.len(), 2);
-        let e = got[0].as_ref().unwrap_err();
-        assert_eq!(e.line, 9);
-        assert!(e.message.contains("CAN FD frame") && e.message.contains("not supported"));
+        let fd = got[0].as_ref().unwrap();
+        assert_eq!((fd.id, fd.len(), fd.is_fd()), (0x123, 8, true));
         assert_eq!(got[1].as_ref().unwrap().data(), &[0xAA]);
     }
 
@@ -502,17 +514,45 @@ mod tests {
         );
         let f = got[2].as_ref().unwrap();
         assert_eq!((f.kind, f.id, f.len()), (FrameKind::Remote, 0x7FF, 4));
-        let e = got[3].as_ref().unwrap_err();
-        assert_eq!(e.line, 10);
-        assert_eq!(
-            e.message,
-            "CAN FD frame (CANFD event, identifier 0x100) is not supported: classic CAN only"
-        );
+        // FDF set (0x1000): CAN FD, here with BRS (its column and 0x2000).
+        let f = got[3].as_ref().unwrap();
+        let brs = FdFlags {
+            brs: true,
+            esi: false,
+        };
+        assert_eq!((f.id, f.len(), f.dlc(), f.fd()), (0x100, 12, 9, Some(brs)));
+        assert_eq!(f.data()[11], 0x0B);
         let f = got[4].as_ref().unwrap();
         assert_eq!((f.kind, f.id, f.len()), (FrameKind::Data, 0x020, 0));
-        let e = got[5].as_ref().unwrap_err();
-        assert_eq!((e.line, e.fatal), (12, false));
-        assert!(e.message.contains("identifier 0x101"), "{e}");
+        let f = got[5].as_ref().unwrap();
+        assert_eq!(
+            (f.id, f.len(), f.fd()),
+            (0x101, 8, Some(FdFlags::default()))
+        );
+    }
+
+    #[test]
+    fn canfd_frames_as_python_can_writes_them() {
+        // python-can 4.6's ASCWriter: ESI and BRS in their columns and in the flags.
+        let text = format!(
+            "{HEADER}                0.100000 CANFD   1 Rx      1ABCDEF0x                                  0 1 f 64 {} 0    0     5000        0        0        0        0        0
+",
+            ["5A"; 64].join(" ")
+        );
+        let got = read(&text);
+        let f = got[0].as_ref().unwrap();
+        assert_eq!(
+            (f.id, f.extended, f.len(), f.fd()),
+            (
+                0x1ABC_DEF0,
+                true,
+                64,
+                Some(FdFlags {
+                    brs: false,
+                    esi: true
+                })
+            )
+        );
     }
 
     #[test]
@@ -535,6 +575,10 @@ mod tests {
                 "12 data bytes in a classic frame",
             ),
             ("1.0 CANFD 0 Rx 123 0 0 0 0 0 0 0 0", "channel \"0\""),
+            (
+                "1.0 CANFD 1 Rx 123 0 0 9 8 00 01 02 03 04 05 06 07 0 0 1000 0",
+                "DLC 9 says 12 data bytes, the data length 8",
+            ),
         ];
         for (line, expected) in cases {
             let got = read(&format!("{line}\n   2.0 1 002 Rx d 0\n"));
@@ -557,7 +601,7 @@ mod tests {
         assert_eq!((e.line, e.fatal), (7, false));
         assert_eq!(
             e.message,
-            "CAN XL frame (CANXL event) is not supported: classic CAN only"
+            "CAN XL frame (CANXL event) is not supported: CAN and CAN FD only"
         );
         assert_eq!(got[1].as_ref().unwrap().data(), &[0xAA]);
     }

@@ -25,8 +25,7 @@
 //!   and a 64-bit timestamp relative to the measurement start.
 //!
 //! Read: CAN_MESSAGE (1), CAN_MESSAGE2 (86), CAN_ERROR (2), CAN_ERROR_EXT (73), and
-//! classic frames in CAN_FD_MESSAGE (100) and CAN_FD_MESSAGE_64 (101); real CAN FD
-//! frames are per-object errors. Other objects (statistics, markers, other buses) are
+//! CAN_FD_MESSAGE (100) and CAN_FD_MESSAGE_64 (101), classic or CAN FD (EDL). Other objects (statistics, markers, other buses) are
 //! skipped. Errors name the object by its 1-based number among the inner objects
 //! (containers are not counted). A damaged structure (bad signature, truncated file,
 //! corrupt zlib data) ends the read with one fatal error: nothing after it can be
@@ -43,7 +42,7 @@ use std::io::{self, Read};
 use flate2::read::ZlibDecoder;
 
 use super::LogError;
-use crate::frame::{Direction, FrameKind, LogFrame, MAX_EXTENDED_ID};
+use crate::frame::{dlc_to_len, Direction, FdFlags, FrameKind, LogFrame, MAX_EXTENDED_ID};
 use crate::time::Utc;
 
 /// Size of the part of the file header this reader uses.
@@ -580,23 +579,37 @@ fn decode(
             if body.len() < 28 {
                 return short(28);
             }
-            if body[13] & 0x01 != 0 {
-                return fd_refused(name, u32_at(body, 4));
-            }
             let ch = match channel(u16_at(body, 0).into()) {
                 Ok(c) => c,
                 Err(bad) => return bad,
             };
             let flags = body[2];
-            classic(
-                t_us,
-                ch,
-                u32_at(body, 4),
-                flags & 0x80 != 0,
-                flags & 0x01 != 0,
-                body[3],
-                &body[20..28],
-            )
+            let fd_flags = body[13];
+            if fd_flags & 0x01 != 0 {
+                let valid = usize::from(body[14]).min(64);
+                fd(
+                    t_us,
+                    ch,
+                    u32_at(body, 4),
+                    flags & 0x01 != 0,
+                    body[3],
+                    &body[20..body.len().min(20 + valid)],
+                    FdFlags {
+                        brs: fd_flags & 0x02 != 0,
+                        esi: fd_flags & 0x04 != 0,
+                    },
+                )
+            } else {
+                classic(
+                    t_us,
+                    ch,
+                    u32_at(body, 4),
+                    flags & 0x80 != 0,
+                    flags & 0x01 != 0,
+                    body[3],
+                    &body[20..28],
+                )
+            }
         }
         CAN_FD_MESSAGE_64 => {
             // channel u8, dlc u8, valid bytes u8, tx count u8, id u32, frame length u32,
@@ -606,13 +619,28 @@ fn decode(
                 return short(40);
             }
             let flags = u32_at(body, 12);
-            if flags & 0x1000 != 0 {
-                return fd_refused(name, u32_at(body, 4));
-            }
             let ch = match channel(body[0].into()) {
                 Ok(c) => c,
                 Err(bad) => return bad,
             };
+            if flags & 0x1000 != 0 {
+                let valid = usize::from(body[2]).min(64);
+                return match fd(
+                    t_us,
+                    ch,
+                    u32_at(body, 4),
+                    body[34] != 0,
+                    body[1],
+                    &body[40..body.len().min(40 + valid)],
+                    FdFlags {
+                        brs: flags & 0x2000 != 0,
+                        esi: flags & 0x4000 != 0,
+                    },
+                ) {
+                    Ok(frame) => Parsed::Frame(frame),
+                    Err(e) => Parsed::Bad(format!("{name}: {e}")),
+                };
+            }
             // Bytes the object lacks are zero, as CANoe does (python-can issue 1905).
             let mut data = [0u8; 8];
             let present = &body[40..body.len().min(48)];
@@ -664,11 +692,25 @@ fn classic(
     Ok(frame.with_direction(if tx { Direction::Tx } else { Direction::Rx }))
 }
 
-fn fd_refused(name: &str, raw_id: u32) -> Parsed {
-    Parsed::Bad(format!(
-        "CAN FD frame (BLF {name}, identifier 0x{:X}) is not supported: classic CAN only",
-        raw_id & MAX_EXTENDED_ID
-    ))
+/// A CAN FD data frame from its raw fields: `dlc` says the length, `present` holds the
+/// bytes the object has (those it lacks are zero, as for classic frames).
+fn fd(
+    t_us: u64,
+    channel: u8,
+    raw_id: u32,
+    tx: bool,
+    dlc: u8,
+    present: &[u8],
+    flags: FdFlags,
+) -> Result<LogFrame, crate::frame::FrameError> {
+    let extended = raw_id & EXTENDED_FLAG != 0;
+    let id = raw_id & !EXTENDED_FLAG;
+    let len = dlc_to_len(dlc, true);
+    let mut data = [0u8; 64];
+    let kept = present.len().min(len);
+    data[..kept].copy_from_slice(&present[..kept]);
+    let frame = LogFrame::new_fd(t_us, channel, id, extended, &data[..len], flags)?;
+    Ok(frame.with_direction(if tx { Direction::Tx } else { Direction::Rx }))
 }
 
 impl<R: Read> Iterator for BlfReader<R> {
@@ -873,6 +915,52 @@ mod tests {
         assert_eq!(f, [5_000]);
     }
 
+    /// CAN_FD_MESSAGE_64 with EDL: the DLC says the length, the object holds the bytes it
+    /// names valid (missing ones are zero).
+    #[test]
+    fn fd_64_objects_are_read_with_their_flags() {
+        let fd64 = |dlc: u8, valid: u8, flags: u32, data: &[u8]| {
+            let mut body = vec![1, dlc, valid, 0];
+            body.extend_from_slice(&(0x1ABC_DEF0u32 | EXTENDED_FLAG).to_le_bytes());
+            body.extend_from_slice(&[0; 4]);
+            body.extend_from_slice(&flags.to_le_bytes());
+            body.extend_from_slice(&[0; 24]);
+            body.extend_from_slice(data);
+            body
+        };
+        let mut inner = Vec::new();
+        let bytes: Vec<u8> = (0..64).collect();
+        inner.extend(object(101, 1_000, &fd64(15, 64, 0x1000 | 0x4000, &bytes)));
+        inner.extend(object(
+            101,
+            2_000,
+            &fd64(10, 10, 0x1000 | 0x2000, &bytes[..10]),
+        ));
+        let mut file = header(START, 2);
+        file.extend(container(&inner, true));
+        let got = read(&file);
+        let f = got[0].as_ref().unwrap();
+        assert_eq!(
+            (f.id, f.extended, f.len(), f.data(), f.fd()),
+            (
+                0x1ABC_DEF0,
+                true,
+                64,
+                &bytes[..],
+                Some(FdFlags {
+                    brs: false,
+                    esi: true
+                })
+            )
+        );
+        let f = got[1].as_ref().unwrap();
+        assert_eq!(
+            (f.len(), &f.data()[..10], &f.data()[10..]),
+            (16, &bytes[..10], &[0u8; 6][..])
+        );
+        assert!(f.fd().unwrap().brs);
+    }
+
     #[test]
     fn errors_fd_frames_and_bad_objects() {
         let mut inner = Vec::new();
@@ -882,11 +970,11 @@ mod tests {
         err.extend_from_slice(&[0; 4]);
         err.extend_from_slice(&[0xE1, 0xE2, 0, 0, 0, 0, 0, 0]);
         inner.extend(object(73, 1_000, &err));
-        // CAN_FD_MESSAGE with EDL.
+        // CAN_FD_MESSAGE with EDL and BRS, 12 bytes (DLC 9).
         let mut fd = can_message(1, 0, 9, 0x100, &[]);
         fd.truncate(8);
-        fd.extend_from_slice(&[0, 0, 0, 0, 0, 0x01, 12, 0, 0, 0, 0, 0]);
-        fd.extend_from_slice(&[0; 64]);
+        fd.extend_from_slice(&[0, 0, 0, 0, 0, 0x03, 12, 0, 0, 0, 0, 0]);
+        fd.extend_from_slice(&[0x5A; 64]);
         inner.extend(object(100, 2_000, &fd));
         // CAN_FD_MESSAGE_64 carrying a classic frame (EDL clear), transmitted.
         let mut fd64 = vec![1, 2, 2, 0];
@@ -910,12 +998,17 @@ mod tests {
             (e.kind, e.id, e.data()),
             (FrameKind::Error, 0x55, &[0xE1, 0xE2][..])
         );
-        let fd = got[1].as_ref().unwrap_err();
-        assert_eq!(fd.line, 2);
-        assert!(!fd.is_fatal());
+        let fd = got[1].as_ref().unwrap();
         assert_eq!(
-            fd.to_string(),
-            "object 2: CAN FD frame (BLF CAN_FD_MESSAGE, identifier 0x100) is not supported: classic CAN only"
+            (fd.id, fd.data(), fd.fd()),
+            (
+                0x100,
+                &[0x5A; 12][..],
+                Some(FdFlags {
+                    brs: true,
+                    esi: false
+                })
+            )
         );
         let c = got[2].as_ref().unwrap();
         assert_eq!(

@@ -5,7 +5,8 @@
 //! - 3 hex digits of identifier: standard frame; 8: extended, or an error frame when the
 //!   `CAN_ERR_FLAG` bit (0x20000000) is set, as candump writes them.
 //! - `123#R` / `123#R4`: remote frame (with its DLC).
-//! - `123##1...`: CAN FD, refused (classic CAN only).
+//! - `123##1112233`: CAN FD; the digit after `##` holds its flags (0x1 BRS, 0x2 ESI;
+//!   can-utils' 0x4 FDF is implied), then up to 64 data bytes.
 //! - python-can appends ` R` (received) or ` T` (transmitted); plain candump says
 //!   nothing and the frame counts as received.
 //! - Data may hold `.` separators (`11.22.33`), and an 8-byte frame may carry candump's
@@ -18,7 +19,7 @@ use std::io::BufRead;
 
 use super::lines::{Line, Lines, RawLine};
 use super::LogError;
-use crate::frame::{Direction, FrameKind, LogFrame, MAX_EXTENDED_ID, MAX_STANDARD_ID};
+use crate::frame::{Direction, FdFlags, FrameKind, LogFrame, MAX_EXTENDED_ID, MAX_STANDARD_ID};
 use crate::time::parse_seconds;
 
 /// SocketCAN's error frame flag in a candump identifier.
@@ -75,11 +76,25 @@ pub fn parse_line(text: &str, line: u64) -> Result<CandumpLine<'_>, LogError> {
             "frame \"{body}\" has no '#' between identifier and data"
         ))
     })?;
-    if data_text.starts_with('#') {
-        return Err(err(format!(
-            "CAN FD frame \"{body}\" (\"##\") is not supported: classic CAN only"
-        )));
-    }
+    // CAN FD: "##", one hex digit of flags, the data.
+    let fd = match data_text.strip_prefix('#') {
+        None => None,
+        Some(rest) => {
+            let mut chars = rest.chars();
+            let flags = chars.next().and_then(|c| c.to_digit(16)).ok_or_else(|| {
+                err(format!(
+                    "CAN FD frame \"{body}\": \"##\" must be followed by a hex digit of flags"
+                ))
+            })?;
+            Some((
+                FdFlags {
+                    brs: flags & 1 != 0,
+                    esi: flags & 2 != 0,
+                },
+                chars.as_str(),
+            ))
+        }
+    };
     if id_text.is_empty() || !id_text.bytes().all(|b| b.is_ascii_hexdigit()) {
         return Err(err(format!("identifier \"{id_text}\" is not hexadecimal")));
     }
@@ -112,7 +127,13 @@ pub fn parse_line(text: &str, line: u64) -> Result<CandumpLine<'_>, LogError> {
             )))
         }
     };
-    let frame = if let Some(dlc_text) = data_text
+    let frame = if let Some((flags, fd_data)) = fd {
+        if kind == FrameKind::Error {
+            return Err(err("an error frame cannot be a CAN FD frame".into()));
+        }
+        let data = parse_data(fd_data, true).map_err(err)?;
+        LogFrame::new_fd(t_us, 0, id, extended, &data.bytes[..data.len], flags)
+    } else if let Some(dlc_text) = data_text
         .strip_prefix('R')
         .or_else(|| data_text.strip_prefix('r'))
     {
@@ -130,7 +151,7 @@ pub fn parse_line(text: &str, line: u64) -> Result<CandumpLine<'_>, LogError> {
         };
         LogFrame::remote(t_us, 0, id, extended, dlc)
     } else {
-        let data = parse_data(data_text).map_err(err)?;
+        let data = parse_data(data_text, false).map_err(err)?;
         LogFrame::new(t_us, 0, id, extended, kind, &data.bytes[..data.len])
     }
     .map_err(|e| err(e.to_string()))?;
@@ -224,20 +245,21 @@ fn dropcount(text: &str) -> Option<Result<u64, String>> {
 }
 
 struct Data {
-    bytes: [u8; 8],
+    bytes: [u8; 64],
     len: usize,
 }
 
 /// `2A366C2BBA`, `2A.36.6C`, `0102030405060708_9`.
-fn parse_data(text: &str) -> Result<Data, String> {
+fn parse_data(text: &str, fd: bool) -> Result<Data, String> {
     let (hex, raw_dlc) = match text.split_once('_') {
         Some((hex, dlc)) => (hex, Some(dlc)),
         None => (text, None),
     };
     let mut data = Data {
-        bytes: [0; 8],
+        bytes: [0; 64],
         len: 0,
     };
+    let max = if fd { 64 } else { 8 };
     let mut digits = hex.bytes().filter(|&b| b != b'.');
     while let Some(hi) = digits.next() {
         let Some(lo) = digits.next() else {
@@ -246,18 +268,21 @@ fn parse_data(text: &str) -> Result<Data, String> {
         let (Some(hi), Some(lo)) = (hex_value(hi), hex_value(lo)) else {
             return Err(format!("data \"{text}\" is not hexadecimal"));
         };
-        if data.len == 8 {
+        if data.len == max {
             let count = hex.bytes().filter(|&b| b != b'.').count() / 2;
-            return Err(format!(
-                "{count} data bytes: a classic CAN frame carries at most 8"
-            ));
+            return Err(if fd {
+                format!("{count} data bytes: a CAN FD frame carries at most 64")
+            } else {
+                format!("{count} data bytes: a classic CAN frame carries at most 8")
+            });
         }
         data.bytes[data.len] = hi << 4 | lo;
         data.len += 1;
     }
     if let Some(dlc) = raw_dlc {
         // candump's raw DLC 9..F of an 8-byte frame: nothing the frame keeps.
-        let ok = data.len == 8 && dlc.len() == 1 && dlc.bytes().all(|b| b.is_ascii_hexdigit());
+        let ok =
+            !fd && data.len == 8 && dlc.len() == 1 && dlc.bytes().all(|b| b.is_ascii_hexdigit());
         if !ok {
             return Err(format!(
                 "data \"{text}\": '_' must be followed by one hex digit after 8 bytes"
@@ -553,6 +578,50 @@ mod tests {
     }
 
     #[test]
+    fn fd_frames_keep_their_flags_and_64_bytes() {
+        let f = parse_line("(4.0) can0 123##1112233445566778899AABBCC", 1)
+            .unwrap()
+            .frame;
+        assert_eq!(
+            (f.id, f.len(), f.dlc(), f.fd()),
+            (
+                0x123,
+                12,
+                9,
+                Some(FdFlags {
+                    brs: true,
+                    esi: false
+                })
+            )
+        );
+        assert_eq!(f.data()[11], 0xCC);
+        let text = format!("(4.0) can1 1ABCDEF0##3{} T", "A5".repeat(64));
+        let f = parse_line(&text, 1).unwrap().frame;
+        assert_eq!(
+            (f.extended, f.len(), f.direction),
+            (true, 64, Direction::Tx)
+        );
+        assert_eq!(
+            f.fd(),
+            Some(FdFlags {
+                brs: true,
+                esi: true
+            })
+        );
+        // can-utils 2023 also writes the FDF bit (0x4); nothing else changes.
+        let f = parse_line("(4.0) can0 7FF##4", 1).unwrap().frame;
+        assert_eq!(
+            (f.len(), f.fd(), f.is_fd()),
+            (0, Some(FdFlags::default()), true)
+        );
+        let long = format!("(4.0) can0 123##0{}", "00".repeat(65));
+        assert_eq!(
+            parse_line(&long, 1).unwrap_err().message,
+            "65 data bytes: a CAN FD frame carries at most 64"
+        );
+    }
+
+    #[test]
     fn broken_lines_are_named() {
         let cases = [
             ("(1.0) can0 12345#00", "has 5 digits"),
@@ -562,9 +631,15 @@ mod tests {
                 "9 data bytes: a classic CAN frame carries at most 8",
             ),
             (
-                "(1.0) can0 123##100",
-                "CAN FD frame \"123##100\" (\"##\") is not supported",
+                "(1.0) can0 123##G00",
+                "\"##\" must be followed by a hex digit of flags",
             ),
+            ("(1.0) can0 123##", "a hex digit of flags"),
+            (
+                "(1.0) can0 123##1000102030405060708",
+                "9 data bytes: a CAN FD frame carries 0 to 8, 12",
+            ),
+            ("(1.0) can0 20000004##100", "cannot be a CAN FD frame"),
             ("(1.0) can0 123#R9", "remote frame length \"9\""),
             ("(1.0) can0 20000004#R", "cannot be a remote frame"),
             ("1.0 can0 123#00", "not in parentheses"),

@@ -39,7 +39,7 @@ MESSAGES = [
                 is_remote_frame=True, dlc=4, channel=0),
     # 5. error frame
     can.Message(timestamp=T0 + 0.2, is_error_frame=True, channel=0),
-    # 6. CAN FD: the readers report it as an error and go on
+    # 6. CAN FD, 12 bytes
     can.Message(timestamp=T0 + 0.3, arbitration_id=0x456, is_extended_id=False, is_fd=True,
                 data=list(range(12)), channel=0),
     # 7. a frame of the AutoPlug catalogue (VehicleSpeedMsg, 100 km/h)

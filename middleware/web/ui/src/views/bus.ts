@@ -276,7 +276,9 @@ export function busView(ctx: Ctx): View {
   function traceRow(f: TraceFrame): HTMLElement {
     const [seq, t, id, flags, dlc, data, name, sender] = f;
     const extended = flags.includes('x');
-    const kind = flags.includes('e') ? 'error frame' : flags.includes('r') ? 'remote' : '';
+    const kind = flags.includes('e') ? 'error frame'
+      : flags.includes('r') ? 'remote'
+      : flags.includes('f') ? 'CAN FD' : '';
     const bytes = data.match(/../g)?.join(' ') ?? '';
     const tr = h('tr', { 'data-seq': String(seq), class: flags.includes('e') ? 'bad' : '' },
       h('td', { text: t.toFixed(6) }),
