@@ -85,6 +85,12 @@ fn convert(input: &Path, output: &Path, direction: bool) -> Result<(), String> {
         LogFormat::Asc => export_asc(reader, out),
         LogFormat::Candump => export_candump(reader, out, direction),
         LogFormat::Blf => export_blf(reader, out),
+        LogFormat::Mf4 => {
+            return Err(format!(
+                "{}: MF4 is read here, not written",
+                output.display()
+            ))
+        }
     }
     .map_err(|ExportError::Write(e)| format!("{}: {e}", output.display()))?;
     eprint!("{} frames written to {}", summary.frames, output.display());

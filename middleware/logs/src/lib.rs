@@ -5,10 +5,10 @@
 //! | module | what |
 //! | --- | --- |
 //! | [`frame`] | [`LogFrame`]: a CAN or CAN FD frame with its time, channel, kind and direction |
-//! | [`read`] | streaming readers of candump `.log`, Vector `.asc` and `.blf`; [`open`] picks one from the name or the first bytes |
+//! | [`read`] | streaming readers of candump `.log`, Vector `.asc` and `.blf`, ASAM MDF 4 `.mf4` bus logging; [`open`] picks one from the name or the first bytes |
 //! | [`write`](mod@write) | candump and ASC writers; [`export_asc`] converts any log |
 //! | [`blf_write`] | the BLF writer ([`export_blf`] converts any log) |
-//! | [`mdf4`] | ASAM MDF 4: its blocks, read and checked (the reader of its bus logging comes on them) |
+//! | [`mdf4`] | ASAM MDF 4: its blocks, read and checked; data streams; where the bus logging is |
 //! | [`record`] | [`Recorder`]: live traffic to rotating candump files, flushed every 100 ms |
 //!
 //! Readers never load a whole file and never panic on bad input: a malformed line is an

@@ -23,7 +23,11 @@ It builds the `convert` example of autoplug-logs, then:
    then one fatal error saying the file is truncated;
 5. converts step 1's log, repeated to fill several log containers, with the Rust BLF
    writer and reads it with python-can's BLFReader: every frame the Rust reader takes from
-   the candump log, to the microsecond.
+   the candump log, to the microsecond;
+6. (with asammdf installed) writes the same frames with python-can's MF4Writer (asammdf
+   underneath: sorted data groups, transposed DZ blocks in data lists) and saves that with
+   asammdf with plain, deflate and transposed data blocks: the Rust reader must give
+   every frame of each, as python-can's MF4Reader does.
 
 Exits 1 on any disagreement, listing each.
 """
@@ -114,6 +118,9 @@ def canutils_channel(message):
 def same(a, b, fields):
     return {k: a[k] for k in fields} == {k: b[k] for k in fields}
 
+
+MF4_FIXTURES = ["python-can.mf4", "asammdf-plain.mf4", "asammdf-deflate.mf4",
+                "asammdf-transposed.mf4"]
 
 ALL = ["t_us", "channel", "id", "extended", "kind", "direction", "len", "data", "fd", "brs", "esi"]
 # An error frame's identifier and flags mean different things in each format.
@@ -281,6 +288,15 @@ def main():
             ("python-can-stored.blf", lambda p: can.BLFReader(p), lambda m: m.channel),
             ("python-can-split.blf", lambda p: can.BLFReader(p), lambda m: m.channel),
         ]
+        try:
+            import asammdf  # noqa: F401 (python-can's MF4 reader and writer need it)
+            have_asammdf = True
+        except ImportError:
+            have_asammdf = False
+            print("info: asammdf is not installed: the MF4 checks are left out")
+        if have_asammdf:
+            fixtures += [(name, lambda p: can.MF4Reader(p), lambda m: m.channel)
+                         for name in MF4_FIXTURES]
         for name, reader, channel in fixtures:
             python = [from_python(m, channel(m)) for m in reader(data / name)]
             compare(f"rust and python-can read {name}", rust_items(convert, data / name), python)
@@ -326,6 +342,46 @@ def main():
             at += size + size % 4
         check("rust's out.blf is log containers to its end, several of them",
               at == len(raw) and containers >= 2, f"{containers} containers, {at} of {len(raw)} bytes")
+
+        # 6. MF4 as python-can and asammdf write it, read by Rust and by python-can.
+        if have_asammdf:
+            from asammdf import MDF
+            mf4 = tmp / "many.mf4"
+            writer = can.MF4Writer(mf4)
+            for m in many:
+                writer.on_message_received(m)
+            writer.stop()
+            variants = [mf4]
+            for compression, name in [(0, "plain"), (1, "deflate"), (2, "transposed")]:
+                path = tmp / f"many-{name}.mf4"
+                MDF(mf4).save(path, overwrite=True, compression=compression)
+                variants.append(path)
+            for path in variants:
+                rust = rust_items(convert, path)
+                # python-can's MF4Writer keeps each time as (message time - the time the
+                # writer was opened) in f64 seconds, both times floats of Unix seconds
+                # (0.24 µs apart there): a time read back may be 1 µs off the original.
+                off = 0
+                original = [dict(w) for w in want]
+                for r, w in zip(rust, original):
+                    if "t_us" in r and r["t_us"] != w["t_us"] and abs(r["t_us"] - w["t_us"]) <= 1:
+                        off += 1
+                        w["t_us"] = r["t_us"]
+                print(f"info: {path.name}: {off} of {len(original)} times 1 µs off the original"
+                      " (python-can's float times)")
+                compare(f"rust reads {path.name} as the log it was written from", rust, original)
+                python = [from_python(m, m.channel) for m in can.MF4Reader(path)]
+                check(f"python-can reads every frame of {path.name}", len(python) == len(many),
+                      f"{len(python)} of {len(many)}")
+                # python-can adds the file's start (seconds since 1970) to each record's
+                # time as floats, which carry 0.24 µs there: its times may be 1 µs off.
+                near = 0
+                for r, p in zip(rust, python):
+                    near += abs(r.get("t_us", 0) - p["t_us"]) <= 1
+                    p["t_us"] = r.get("t_us", p["t_us"])
+                check(f"python-can's times of {path.name} within 1 µs of rust's",
+                      near == len(python), f"{near} of {len(python)}")
+                compare(f"rust and python-can read {path.name}", rust, python)
 
     if failures:
         print(f"\n{len(failures)} of {checks} checks FAILED")

@@ -84,6 +84,91 @@ fn python_can_blf() {
     }
 }
 
+/// python-can's MF4 (asammdf underneath: three sorted data groups, one per frame type,
+/// transposed DZ blocks) and asammdf's saves of it with plain, deflate and transposed
+/// data blocks: the same frames as python-can's other formats, merged in time order.
+#[test]
+fn python_can_and_asammdf_mf4() {
+    for name in [
+        "python-can.mf4",
+        "asammdf-plain.mf4",
+        "asammdf-deflate.mf4",
+        "asammdf-transposed.mf4",
+    ] {
+        let mut expected = expected(T0, 4, 0);
+        // python-can's error frame keeps its default `is_extended_id=True` (IDE 1).
+        expected[4].extended = true;
+        check(read(name, LogFormat::Mf4), expected);
+    }
+}
+
+/// A damaged data group after good ones: their frames, then the damage, named.
+#[test]
+fn a_damaged_mf4_data_group_keeps_the_ones_before_it() {
+    use autoplug_logs::mdf4::blocks::MdfBlocks;
+    let mut bytes = std::fs::read(data("python-can.mf4")).unwrap();
+    let (mut blocks, _) = MdfBlocks::open(std::io::Cursor::new(bytes.clone())).unwrap();
+    let hd = blocks.block(64, &[b"HD"]).unwrap();
+    let groups = blocks.chain(hd.link(0), 0, b"DG").unwrap();
+    // The remote frames' data group (the third): its channel group link sent outside.
+    let third = groups[2].header.at as usize;
+    bytes[third + 24 + 8..third + 24 + 16].copy_from_slice(&u64::MAX.to_le_bytes());
+    let got: Vec<_> =
+        autoplug_logs::LogReader::seekable(LogFormat::Mf4, Box::new(std::io::Cursor::new(bytes)))
+            .unwrap()
+            .collect();
+    let (last, frames) = got.split_last().unwrap();
+    let mut expected = expected(T0, 4, 0);
+    expected[4].extended = true;
+    expected.retain(|f| f.kind != FrameKind::Remote);
+    check(frames.to_vec(), expected);
+    let e = last.as_ref().unwrap_err();
+    assert!(e.fatal, "{e}");
+    assert!(
+        e.message
+            .starts_with("##CG block at byte 18446744073709551615: a link"),
+        "{e}"
+    );
+}
+
+/// Every cut of python-can's MF4 and every byte flipped: an error naming a block, or the
+/// frames before the damage, never a panic; what is read is what the file holds.
+#[test]
+fn truncated_and_corrupted_mf4_never_panic() {
+    let good = std::fs::read(data("python-can.mf4")).unwrap();
+    let all = expected(T0, 4, 0).len();
+    for cut in 0..good.len() {
+        let bytes = good[..cut].to_vec();
+        match autoplug_logs::LogReader::seekable(
+            LogFormat::Mf4,
+            Box::new(std::io::Cursor::new(bytes)),
+        ) {
+            Err(e) => assert!(
+                e.to_string().contains("block at byte") || e.to_string().contains("byte 0"),
+                "{cut}: {e}"
+            ),
+            Ok(reader) => {
+                let got: Vec<_> = reader.collect();
+                assert!(got.len() <= all + 1, "{cut}");
+                for item in &got[..got.len().saturating_sub(1)] {
+                    assert!(item.as_ref().is_ok_and(|_| true) || !item.as_ref().unwrap_err().fatal);
+                }
+            }
+        }
+    }
+    for at in 0..good.len() {
+        let mut bytes = good.clone();
+        bytes[at] ^= 0x55;
+        if let Ok(reader) = autoplug_logs::LogReader::seekable(
+            LogFormat::Mf4,
+            Box::new(std::io::Cursor::new(bytes)),
+        ) {
+            let errors: Vec<LogError> = reader.filter_map(|f| f.err()).collect();
+            assert!(errors.iter().filter(|e| e.fatal).count() <= 1);
+        }
+    }
+}
+
 #[test]
 fn truncated_and_corrupted_blf_give_a_clear_error() {
     let good = std::fs::read(data("python-can.blf")).unwrap();

@@ -104,7 +104,7 @@ impl fmt::Display for BlockError {
 
 impl std::error::Error for BlockError {}
 
-fn error(block: Option<String>, at: u64, message: impl Into<String>) -> BlockError {
+pub(crate) fn error(block: Option<String>, at: u64, message: impl Into<String>) -> BlockError {
     BlockError {
         block,
         at,
@@ -184,7 +184,7 @@ impl<R: Read + Seek> MdfBlocks<R> {
     }
 
     /// Reads as much of `buf` as the file has from `at`; the count read.
-    fn read_at(&mut self, at: u64, buf: &mut [u8]) -> Result<usize, String> {
+    pub(crate) fn read_at(&mut self, at: u64, buf: &mut [u8]) -> Result<usize, String> {
         self.input
             .seek(SeekFrom::Start(at))
             .map_err(|e| format!("cannot read the file: {e}"))?;

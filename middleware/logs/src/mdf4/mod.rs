@@ -5,5 +5,10 @@
 //! it. Built in layers:
 //!
 //! - [`blocks`]: the identification block and any block by its link, checked (inside the
-//!   file, a possible length, the expected type, no loop in a chain).
+//!   file, a possible length, the expected type, no loop in a chain);
+//! - [`data`]: the bytes behind a data link (DT, DZ, DL, HL) as one stream;
+//! - [`bus`]: where the CAN bus logging is (channel groups and their members' places);
+//! - [`crate::read::mf4`]: the reader of frames on these.
 pub mod blocks;
+pub mod bus;
+pub mod data;

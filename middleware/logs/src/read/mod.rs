@@ -20,10 +20,12 @@ pub mod asc;
 pub mod blf;
 pub mod candump;
 mod lines;
+pub mod mf4;
 
 pub use asc::AscReader;
 pub use blf::BlfReader;
 pub use candump::CandumpReader;
+pub use mf4::Mf4Reader;
 
 /// What an error's number counts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -32,6 +34,8 @@ pub enum Place {
     Line,
     /// Objects of a BLF file, from 1 (log containers are not counted).
     Object,
+    /// Records of an MF4 data group, from 1 (the message names the data group).
+    Record,
 }
 
 /// A frame that could not be read, and where.
@@ -92,6 +96,7 @@ impl fmt::Display for LogError {
         let place = match self.place {
             Place::Line => "line",
             Place::Object => "object",
+            Place::Record => "record",
         };
         write!(f, "{place} {}: {}", self.line, self.message)
     }
@@ -108,6 +113,8 @@ pub enum LogFormat {
     Asc,
     /// Vector BLF (`.blf`).
     Blf,
+    /// ASAM MDF 4 bus logging (`.mf4`).
+    Mf4,
 }
 
 impl LogFormat {
@@ -118,16 +125,21 @@ impl LogFormat {
             "log" => Some(Self::Candump),
             "asc" => Some(Self::Asc),
             "blf" => Some(Self::Blf),
+            "mf4" => Some(Self::Mf4),
             _ => None,
         }
     }
 
-    /// The format the first bytes of a file suggest: `LOGG` is BLF; `date `, `base `,
+    /// The format the first bytes of a file suggest: `LOGG` is BLF; `MDF     ` or
+    /// `UnFinMF ` is MF4; `date `, `base `,
     /// `//` or `Begin Triggerblock` is ASC; `(` is candump. Leading blank space and a
     /// UTF-8 byte-order mark are passed over.
     pub fn sniff(start: &[u8]) -> Option<Self> {
         if start.starts_with(b"LOGG") {
             return Some(Self::Blf);
+        }
+        if start.starts_with(b"MDF     ") || start.starts_with(b"UnFinMF ") {
+            return Some(Self::Mf4);
         }
         let text = start.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(start);
         let first = text.iter().position(|b| !b.is_ascii_whitespace())?;
@@ -149,6 +161,7 @@ impl LogFormat {
             Self::Candump => "candump",
             Self::Asc => "ASC",
             Self::Blf => "BLF",
+            Self::Mf4 => "MF4",
         }
     }
 }
@@ -162,10 +175,16 @@ impl fmt::Display for LogFormat {
 /// The input a [`LogReader`] reads from.
 pub type Input = Box<dyn BufRead + Send>;
 
+/// An input that can also seek, as MF4 needs (its blocks link to each other anywhere in
+/// the file): a file, or a cursor over bytes.
+pub trait SeekInput: io::Read + io::Seek + Send {}
+impl<T: io::Read + io::Seek + Send> SeekInput for T {}
+
 enum Inner {
     Candump(CandumpReader<Input>),
     Asc(AscReader<Input>),
     Blf(BlfReader<Input>),
+    Mf4(Box<Mf4Reader<Box<dyn SeekInput>>>),
 }
 
 /// A log of any supported format, read as one stream of frames.
@@ -176,14 +195,36 @@ pub struct LogReader {
 
 impl LogReader {
     /// A reader of `input` in this format. Reads the BLF file header at once
-    /// (`ErrorKind::InvalidData` if it is not one).
+    /// (`ErrorKind::InvalidData` if it is not one). MF4 needs an input that seeks: see
+    /// [`LogReader::seekable`] (`ErrorKind::InvalidInput` here).
     pub fn new(format: LogFormat, input: Input) -> io::Result<Self> {
         let inner = match format {
             LogFormat::Candump => Inner::Candump(CandumpReader::new(input)),
             LogFormat::Asc => Inner::Asc(AscReader::new(input)),
             LogFormat::Blf => Inner::Blf(BlfReader::new(input)?),
+            LogFormat::Mf4 => return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                "an MF4 file is read from a file (its blocks link anywhere in it), not a stream",
+            )),
         };
         Ok(Self { format, inner })
+    }
+
+    /// A reader of a seekable `input` in any format. Reads an MF4 file's blocks down to
+    /// its channels at once (`ErrorKind::InvalidData`, naming the block and its offset, if
+    /// they are damaged or hold no CAN bus logging).
+    pub fn seekable(format: LogFormat, input: Box<dyn SeekInput>) -> io::Result<Self> {
+        match format {
+            LogFormat::Mf4 => {
+                let reader = Mf4Reader::new(input)
+                    .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e.to_string()))?;
+                Ok(Self {
+                    format,
+                    inner: Inner::Mf4(Box::new(reader)),
+                })
+            }
+            _ => Self::new(format, Box::new(io::BufReader::new(input))),
+        }
     }
 
     /// The format being read.
@@ -196,7 +237,7 @@ impl LogReader {
     pub fn dropped_frames(&self) -> u64 {
         match &self.inner {
             Inner::Candump(r) => r.dropped_frames(),
-            Inner::Asc(_) | Inner::Blf(_) => 0,
+            Inner::Asc(_) | Inner::Blf(_) | Inner::Mf4(_) => 0,
         }
     }
 }
@@ -209,6 +250,7 @@ impl Iterator for LogReader {
             Inner::Candump(r) => r.next(),
             Inner::Asc(r) => r.next(),
             Inner::Blf(r) => r.next(),
+            Inner::Mf4(r) => r.next(),
         }
     }
 }
@@ -242,8 +284,8 @@ impl std::error::Error for OpenError {
     }
 }
 
-/// Opens a log file, its format known from the extension (`.log`, `.asc`, `.blf`) or
-/// else from its first bytes.
+/// Opens a log file, its format known from the extension (`.log`, `.asc`, `.blf`,
+/// `.mf4`) or else from its first bytes.
 pub fn open(path: impl AsRef<Path>) -> Result<LogReader, OpenError> {
     let path = path.as_ref();
     let fail = |error: io::Error| OpenError {
@@ -263,14 +305,17 @@ pub fn open(path: impl AsRef<Path>) -> Result<LogReader, OpenError> {
                 fail(io::Error::new(
                     io::ErrorKind::InvalidData,
                     if start.is_empty() {
-                        "empty file of unknown format (name it .log, .asc or .blf)".to_string()
+                        "empty file of unknown format (name it .log, .asc, .blf or .mf4)".to_string()
                     } else {
-                        "unknown log format: the name does not end in .log, .asc or .blf, and the file does not start like a candump (\"(\"), ASC (\"date \", \"base \") or BLF (\"LOGG\") log".to_string()
+                        "unknown log format: the name does not end in .log, .asc, .blf or .mf4, and the file does not start like a candump (\"(\"), ASC (\"date \", \"base \"), BLF (\"LOGG\") or MF4 (\"MDF \") log".to_string()
                     },
                 ))
             })?
         }
     };
+    if format == LogFormat::Mf4 {
+        return LogReader::seekable(format, Box::new(input)).map_err(fail);
+    }
     LogReader::new(format, Box::new(input)).map_err(fail)
 }
 

@@ -11,6 +11,9 @@ checked against files written by another implementation:
   python-can-split.blf    can.BLFWriter, 64-byte containers: objects cut across containers
   python-can.mf4          can.MF4Writer (asammdf underneath: MDF 4.10 bus logging, a
                           compressed data block), written only where asammdf is installed
+  asammdf-plain.mf4       python-can.mf4 saved again by asammdf: plain ##DT blocks,
+  asammdf-deflate.mf4     ##DZ deflate blocks,
+  asammdf-transposed.mf4  ##DZ transposed deflate blocks
 
 Run from anywhere: python3 middleware/logs/tests/data/make_fixtures.py (python-can 4.x).
 The files are committed; rerun only when MESSAGES changes, then update tests/fixtures.rs.
@@ -68,6 +71,11 @@ def main():
     try:
         write(can.MF4Writer(HERE / "python-can.mf4"))
         names.append("python-can.mf4")
+        from asammdf import MDF
+        for compression, name in [(0, "plain"), (1, "deflate"), (2, "transposed")]:
+            path = HERE / f"asammdf-{name}.mf4"
+            MDF(HERE / "python-can.mf4").save(path, overwrite=True, compression=compression)
+            names.append(path.name)
     except ImportError as e:  # python-can's MF4Writer needs asammdf
         print(f"python-can.mf4 not written: {e}")
     for name in names:
