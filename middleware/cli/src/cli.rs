@@ -389,6 +389,9 @@ pub struct ExportArgs {
     /// Skip malformed lines and count them, instead of stopping at the first.
     #[arg(long)]
     pub lenient: bool,
+    /// MF4 only: compress its data blocks (transposed deflate, as asammdf's smallest).
+    #[arg(long)]
+    pub compress: bool,
 }
 
 /// `log export --format`.
@@ -400,6 +403,9 @@ pub enum ExportFormat {
     Candump,
     /// Vector BLF, zlib-compressed (CANalyzer, CANoe, python-can).
     Blf,
+    /// ASAM MDF 4.10: the bus logging and every signal decoded (asammdf, CANape,
+    /// CANalyzer, python-can).
+    Mf4,
     /// MCAP with every signal decoded (Foxglove, Lichtblick, PlotJuggler).
     Mcap,
 }

@@ -62,6 +62,61 @@ fn diagnose_flags_the_faulty_cruise_with_its_number_and_exit_status_3() {
     assert!(text.contains("VehicleSpeedMsg  0x003"), "{text}");
 }
 
+/// The faulty drive exported to MF4 (plain and compressed) is judged as its log is: the
+/// same numbers, to the last digit, and `replay` reads the MF4 back frame for frame.
+#[test]
+fn an_mf4_export_is_diagnosed_as_the_log_it_came_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = bus_log(dir.path(), "cruise-faulty");
+    let original = autoplug(&["diagnose", "--json", log.to_str().unwrap()]);
+    let original: serde_json::Value = serde_json::from_slice(&original.stdout).unwrap();
+    for compress in [false, true] {
+        let mf4 = dir.path().join(format!("drive-{compress}.mf4"));
+        let mut args = vec![
+            "log",
+            "export",
+            log.to_str().unwrap(),
+            "--format",
+            "mf4",
+            "--out",
+            mf4.to_str().unwrap(),
+        ];
+        if compress {
+            args.push("--compress");
+        }
+        let export = autoplug(&args);
+        assert!(export.status.success(), "{export:?}");
+        let said = String::from_utf8_lossy(&export.stdout);
+        assert!(said.contains("decoded into their messages' signals"), "{said}");
+        let output = autoplug(&["diagnose", "--json", mf4.to_str().unwrap()]);
+        assert_eq!(output.status.code(), Some(3), "{output:?}");
+        let mut json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+        json["log"] = original["log"].clone();
+        assert_eq!(json, original);
+        let frames: Vec<_> = autoplug_logs::open(&mf4)
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect();
+        let logged: Vec<_> = autoplug_logs::open(&log)
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect();
+        assert_eq!(frames, logged);
+    }
+    let refused = autoplug(&[
+        "log",
+        "export",
+        log.to_str().unwrap(),
+        "--format",
+        "asc",
+        "--compress",
+        "--out",
+        dir.path().join("x.asc").to_str().unwrap(),
+    ]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--compress is for --format mf4"));
+}
+
 #[test]
 fn diagnose_on_correct_software_exits_0() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,8 +1,10 @@
-//! Converts a CAN log (candump, ASC or BLF) to ASC or candump, or dumps it as JSON lines.
+//! Converts a CAN log (candump, ASC, BLF or MF4) to ASC, BLF, MF4 or candump, or dumps it
+//! as JSON lines.
 //!
 //! ```text
 //! cargo run -p autoplug-logs --example convert -- IN OUT.asc
 //! cargo run -p autoplug-logs --example convert -- IN OUT.blf
+//! cargo run -p autoplug-logs --example convert -- [--compress] IN OUT.mf4
 //! cargo run -p autoplug-logs --example convert -- [--direction] IN OUT.log
 //! cargo run -p autoplug-logs --example convert -- --json IN
 //! ```
@@ -19,11 +21,11 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 use std::process::ExitCode;
 
-use autoplug_logs::write::{export_asc, export_blf, export_candump, ExportError};
+use autoplug_logs::write::{export_asc, export_blf, export_candump, export_mf4, ExportError};
 use autoplug_logs::{Direction, FrameKind, LogFormat};
 
 fn usage() -> ExitCode {
-    eprintln!("usage: convert [--direction] IN OUT.asc|OUT.blf|OUT.log\n       convert --json IN");
+    eprintln!("usage: convert [--direction] [--compress] IN OUT.asc|OUT.blf|OUT.mf4|OUT.log\n       convert --json IN");
     ExitCode::from(2)
 }
 
@@ -75,7 +77,7 @@ fn json(input: &Path) -> Result<(), String> {
     fatal.map_or(Ok(()), Err)
 }
 
-fn convert(input: &Path, output: &Path, direction: bool) -> Result<(), String> {
+fn convert(input: &Path, output: &Path, direction: bool, compress: bool) -> Result<(), String> {
     let reader = autoplug_logs::open(input).map_err(|e| e.to_string())?;
     let format = LogFormat::from_extension(output)
         .ok_or_else(|| format!("{}: name it .asc, .blf or .log", output.display()))?;
@@ -85,12 +87,7 @@ fn convert(input: &Path, output: &Path, direction: bool) -> Result<(), String> {
         LogFormat::Asc => export_asc(reader, out),
         LogFormat::Candump => export_candump(reader, out, direction),
         LogFormat::Blf => export_blf(reader, out),
-        LogFormat::Mf4 => {
-            return Err(format!(
-                "{}: MF4 is read here, not written",
-                output.display()
-            ))
-        }
+        LogFormat::Mf4 => export_mf4(reader, out, compress).map(|(summary, _)| summary),
     }
     .map_err(|ExportError::Write(e)| format!("{}: {e}", output.display()))?;
     eprint!("{} frames written to {}", summary.frames, output.display());
@@ -111,10 +108,13 @@ fn main() -> ExitCode {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let json_mode = args.iter().any(|a| a == "--json");
     let direction = args.iter().any(|a| a == "--direction");
-    args.retain(|a| a != "--json" && a != "--direction");
+    let compress = args.iter().any(|a| a == "--compress");
+    args.retain(|a| a != "--json" && a != "--direction" && a != "--compress");
     let result = match (json_mode, args.as_slice()) {
         (true, [input]) => json(Path::new(input)),
-        (false, [input, output]) => convert(Path::new(input), Path::new(output), direction),
+        (false, [input, output]) => {
+            convert(Path::new(input), Path::new(output), direction, compress)
+        }
         _ => return usage(),
     };
     match result {

@@ -8,6 +8,7 @@
 //! | [`read`] | streaming readers of candump `.log`, Vector `.asc` and `.blf`, ASAM MDF 4 `.mf4` bus logging; [`open`] picks one from the name or the first bytes |
 //! | [`write`](mod@write) | candump and ASC writers; [`export_asc`] converts any log |
 //! | [`blf_write`] | the BLF writer ([`export_blf`] converts any log) |
+//! | [`mdf4::write`] | the MF4 writer: bus logging and decoded signals ([`export_mf4`] converts any log) |
 //! | [`mdf4`] | ASAM MDF 4: its blocks, read and checked; data streams; where the bus logging is |
 //! | [`record`] | [`Recorder`]: live traffic to rotating candump files, flushed every 100 ms |
 //!
@@ -41,7 +42,8 @@ pub mod write;
 pub use blf_write::BlfWriter;
 pub use frame::{dlc_to_len, len_to_dlc, Direction, FdFlags, FrameError, FrameKind, LogFrame};
 pub use mcap_export::{export_mcap, McapSummary};
+pub use mdf4::write::Mf4Writer;
 pub use read::{open, LogError, LogFormat, LogReader, OpenError, Place};
 pub use record::{RecordError, RecordSummary, Recorder, RotatePolicy};
 pub use time::Utc;
-pub use write::{export_asc, export_blf, AscWriter, CandumpWriter};
+pub use write::{export_asc, export_blf, export_mf4, AscWriter, CandumpWriter};

@@ -327,6 +327,26 @@ where
     Ok(summary)
 }
 
+/// Converts a log to MDF 4.10 (see [`crate::mdf4::write`]), its data blocks compressed if
+/// `compress`; as [`export_asc`] otherwise. The summary's count of decoded catalogue frames
+/// comes second.
+pub fn export_mf4<I, W>(
+    frames: I,
+    out: W,
+    compress: bool,
+) -> Result<(ExportSummary, u64), ExportError>
+where
+    I: IntoIterator<Item = Result<LogFrame, LogError>>,
+    W: Write + std::io::Seek,
+{
+    let mut writer =
+        crate::mdf4::write::Mf4Writer::new(out, compress).map_err(ExportError::Write)?;
+    let summary = export(frames, |f| writer.write(f))?;
+    let decoded = writer.decoded;
+    writer.finish().map_err(ExportError::Write)?;
+    Ok((summary, decoded))
+}
+
 /// Converts a log to candump, with python-can's direction suffix if `direction`; as
 /// [`export_asc`] otherwise.
 pub fn export_candump<I, W>(

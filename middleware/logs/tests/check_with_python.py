@@ -27,7 +27,11 @@ It builds the `convert` example of autoplug-logs, then:
 6. (with asammdf installed) writes the same frames with python-can's MF4Writer (asammdf
    underneath: sorted data groups, transposed DZ blocks in data lists) and saves that with
    asammdf with plain, deflate and transposed data blocks: the Rust reader must give
-   every frame of each, as python-can's MF4Reader does.
+   every frame of each, as python-can's MF4Reader does;
+7. (with asammdf installed) converts step 1's log with the Rust MF4 writer (plain and
+   compressed): python-can's MF4Reader must read every frame of it, and asammdf every
+   signal of every catalogue message, exactly as cantools decodes the frames, with the
+   DBC's unit and the signal's VSS path as its display name.
 
 Exits 1 on any disagreement, listing each.
 """
@@ -207,6 +211,55 @@ def truncated_blf(convert, tmp):
     compare("rust and python-can read a BLF cut short", items[:-1], python)
 
 
+def mf4_written(convert, tmp, db, source, expected):
+    """Step 7: AutoPlug's MF4, read by python-can (frames) and asammdf (signals)."""
+    from asammdf import MDF
+    for flags, name in [([], "rust.mf4"), (["--compress"], "rust-compressed.mf4")]:
+        path = tmp / name
+        rust_convert(convert, source, path, *flags)
+        python = [from_python(m, m.channel) for m in can.MF4Reader(path)]
+        # MF4 keeps frames by type (data, error, remote), each group in time order.
+        want = sorted(expected, key=lambda e: e["t_us"])
+        compare(f"python-can MF4Reader reads rust's {name}", sorted(python, key=lambda e: e["t_us"]), want)
+        mdf = MDF(path)
+        start_us = round(mdf.header.start_time.timestamp() * 1e6)
+        groups = {g.channel_group.acq_name: i for i, g in enumerate(mdf.groups)}
+        signals = 0
+        # The periodic messages; the diagnostic transport ones (0x700 and up) carry ISO-TP
+        # payloads, not signals, and have no group of decoded signals.
+        periodic = [m for m in db.messages if m.frame_id < 0x700]
+        for message in periodic:
+            frames = [e for e in expected if e["kind"] == "data" and not e["extended"]
+                      and not e["fd"] and e["id"] == message.frame_id
+                      and e["len"] == message.length]
+            index = groups.get(message.name)
+            check(f"{name}: a channel group for {message.name}", index is not None, str(groups))
+            if index is None:
+                continue
+            for signal in message.signals:
+                got = mdf.get(signal.name, group=index, raw=False)
+                want_values = [message.decode(bytes.fromhex(f["data"]), decode_choices=False,
+                                              scaling=True)[signal.name] for f in frames]
+                times = [round(t * 1e6) + start_us for t in got.timestamps]
+                check(f"{name}: {message.name}.{signal.name} times",
+                      times == [f["t_us"] for f in frames], f"{times[:3]} ...")
+                check(f"{name}: {message.name}.{signal.name} values",
+                      len(got.samples) == len(want_values)
+                      and all(abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(b)))
+                              for a, b in zip(got.samples, want_values)),
+                      f"{list(got.samples[:3])} != {want_values[:3]}")
+                check(f"{name}: {message.name}.{signal.name} unit", got.unit == (signal.unit or ""),
+                      f"{got.unit!r} != {signal.unit!r}")
+                vss = (signal.dbc.attributes.get("VssPath").value
+                       if signal.dbc and "VssPath" in signal.dbc.attributes else "")
+                if vss:
+                    check(f"{name}: {message.name}.{signal.name} VSS display name",
+                          vss in got.display_names, str(got.display_names))
+                signals += 1
+        check(f"{name}: every signal of the periodic messages read",
+              signals == sum(len(m.signals) for m in periodic) and len(periodic) == 18, str(signals))
+
+
 def main():
     db = cantools.database.load_file(str(DBC))
     convert = convert_binary()
@@ -382,6 +435,10 @@ def main():
                 check(f"python-can's times of {path.name} within 1 µs of rust's",
                       near == len(python), f"{near} of {len(python)}")
                 compare(f"rust and python-can read {path.name}", rust, python)
+
+        # 7. The Rust MF4 writer, read by python-can and asammdf.
+        if have_asammdf:
+            mf4_written(convert, tmp, db, source, expected)
 
     if failures:
         print(f"\n{len(failures)} of {checks} checks FAILED")

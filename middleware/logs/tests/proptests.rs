@@ -274,6 +274,31 @@ proptest! {
     }
 
     #[test]
+    fn mf4_round_trip(mut frames in proptest::collection::vec(frame_strategy(), 0..40), compress in any::<bool>()) {
+        frames.sort_by_key(|f| f.t_us);
+        let (summary, _) = autoplug_logs::export_mf4(frames.iter().map(|f| Ok(*f)), std::io::Cursor::new(Vec::new()), compress).unwrap();
+        prop_assert_eq!(summary.frames, frames.len() as u64);
+        let mut writer = autoplug_logs::Mf4Writer::new(std::io::Cursor::new(Vec::new()), compress).unwrap();
+        for f in &frames {
+            writer.write(f).unwrap();
+        }
+        let bytes = writer.finish().unwrap().into_inner();
+        let got: Vec<LogFrame> = autoplug_logs::read::Mf4Reader::new(std::io::Cursor::new(bytes))
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect();
+        // One data group per frame type, merged by time: data, error, remote at a tie.
+        let rank = |f: &LogFrame| match f.kind {
+            FrameKind::Data => 0,
+            FrameKind::Error => 1,
+            FrameKind::Remote => 2,
+        };
+        let mut expected = frames.clone();
+        expected.sort_by_key(|f| (f.t_us, rank(f)));
+        prop_assert_eq!(got, expected);
+    }
+
+    #[test]
     fn asc_round_trip(frames in proptest::collection::vec(frame_strategy(), 0..40)) {
         let mut w = AscWriter::new(Vec::new());
         for f in &frames {

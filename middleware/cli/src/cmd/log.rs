@@ -1,4 +1,4 @@
-//! `autoplug log export`: a log converted to ASC, candump, BLF or MCAP.
+//! `autoplug log export`: a log converted to ASC, candump, BLF, MF4 or MCAP.
 
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -13,7 +13,13 @@ pub(crate) fn export(args: ExportArgs, out: &mut dyn Write) -> Result<(), CliErr
         format,
         out: file,
         lenient,
+        compress,
     } = args;
+    if compress && format != ExportFormat::Mf4 {
+        return Err(CliError::Log(
+            "--compress is for --format mf4 (BLF and MCAP are always compressed, ASC and candump never)".into(),
+        ));
+    }
     if file.exists() {
         return Err(CliError::Log(format!(
             "{}: already exists (not overwritten)",
@@ -32,6 +38,12 @@ pub(crate) fn export(args: ExportArgs, out: &mut dyn Write) -> Result<(), CliErr
         ExportFormat::Asc => autoplug_logs::export_asc(&mut reader, writer),
         ExportFormat::Candump => autoplug_logs::write::export_candump(&mut reader, writer, false),
         ExportFormat::Blf => autoplug_logs::export_blf(&mut reader, writer),
+        ExportFormat::Mf4 => {
+            autoplug_logs::export_mf4(&mut reader, writer, compress).map(|(s, ok)| {
+                decoded = Some((ok, 0));
+                s
+            })
+        }
         ExportFormat::Mcap => autoplug_logs::export_mcap(&mut reader, writer).map(|s| {
             decoded = Some((s.decoded, s.undecodable));
             s.export
@@ -56,7 +68,7 @@ pub(crate) fn export(args: ExportArgs, out: &mut dyn Write) -> Result<(), CliErr
         file.display(),
         summary.frames,
         decoded.map_or(String::new(), |(ok, bad)| format!(
-            ", {ok} decoded into their messages' channels{}",
+            ", {ok} decoded into their messages' signals{}",
             if bad > 0 {
                 format!(", {bad} not decodable (raw only)")
             } else {

@@ -8,7 +8,9 @@
 //!   file, a possible length, the expected type, no loop in a chain);
 //! - [`data`]: the bytes behind a data link (DT, DZ, DL, HL) as one stream;
 //! - [`bus`]: where the CAN bus logging is (channel groups and their members' places);
-//! - [`crate::read::mf4`]: the reader of frames on these.
+//! - [`crate::read::mf4`]: the reader of frames on these;
+//! - [`write`](mod@write): [`Mf4Writer`](write::Mf4Writer), the bus and the decoded signals.
 pub mod blocks;
 pub mod bus;
 pub mod data;
+pub mod write;
