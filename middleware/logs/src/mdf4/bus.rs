@@ -48,17 +48,29 @@ impl Field {
 
     /// The field as an unsigned integer (signed ones as their bits).
     pub fn uint(&self, record: &[u8]) -> u64 {
-        let bytes = &record[self.byte..self.byte + self.bytes_spanned()];
-        let mut v: u128 = 0;
-        if matches!(self.data_type, 1 | 3 | 5) {
-            for &b in bytes {
-                v = v << 8 | u128::from(b);
-            }
-        } else {
-            for (i, &b) in bytes.iter().enumerate() {
-                v |= u128::from(b) << (8 * i);
+        let span = self.bytes_spanned();
+        let bytes = &record[self.byte..self.byte + span];
+        // Byte-aligned little-endian fields of a whole word (nearly all of bus logging's)
+        // are loaded as they are; the rest through a 16-byte window.
+        if self.bit == 0 && !matches!(self.data_type, 1 | 3 | 5) {
+            match (self.bits, bytes) {
+                (8, [b]) => return u64::from(*b),
+                (16, &[a, b]) => return u64::from(u16::from_le_bytes([a, b])),
+                (32, &[a, b, c, d]) => return u64::from(u32::from_le_bytes([a, b, c, d])),
+                (64, b) if b.len() == 8 => {
+                    return u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])
+                }
+                _ => {}
             }
         }
+        let mut window = [0u8; 16];
+        let v = if matches!(self.data_type, 1 | 3 | 5) {
+            window[16 - span..].copy_from_slice(bytes);
+            u128::from_be_bytes(window)
+        } else {
+            window[..span].copy_from_slice(bytes);
+            u128::from_le_bytes(window)
+        };
         let v = v >> self.bit;
         let mask = if self.bits >= 64 {
             u64::MAX

@@ -67,6 +67,8 @@ struct Source {
     peeked: Option<LogFrame>,
     done: bool,
     record: Vec<u8>,
+    /// The last variable-length value taken.
+    value: Vec<u8>,
 }
 
 /// Reads MDF 4 bus logging; see the [module](self).
@@ -139,6 +141,7 @@ impl<R: Read + Seek> Mf4Reader<R> {
                 peeked: None,
                 done: false,
                 record: Vec::new(),
+                value: Vec::new(),
             });
         }
         Ok(Self {
@@ -326,10 +329,16 @@ fn decode<R: Read + Seek>(
         return Err(format!("record {}: time {seconds} s", source.records));
     }
     // The start and the record's offset added as integer nanoseconds, then rounded to
-    // the microsecond: exact for any time a file holds.
-    let offset_ns = (seconds * 1e9).round() as i128;
-    let t_ns = i128::from(start_ns).saturating_add(offset_ns).max(0);
-    let t_us = u64::try_from(t_ns.saturating_add(500) / 1000).unwrap_or(u64::MAX);
+    // the microsecond: exact for any time a file holds (i64 ns: ±292 years).
+    let offset_ns = (seconds * 1e9).round();
+    let t_ns = if offset_ns.abs() < 9e18 {
+        (start_ns as i64).saturating_add(offset_ns as i64).max(0)
+    } else if offset_ns < 0.0 {
+        0
+    } else {
+        i64::MAX
+    };
+    let t_us = (t_ns as u64).saturating_add(500) / 1000;
     let channel = value(&group.bus_channel).unwrap_or(0);
     let channel = u8::try_from(channel).map_err(|_| {
         format!(
@@ -353,13 +362,14 @@ fn decode<R: Read + Seek>(
         FrameType::Data | FrameType::Error => {
             let length = value(&group.data_length).map(|l| l as usize);
             let records = source.records;
-            let bytes: Vec<u8> = match &group.data_bytes {
-                None => Vec::new(),
-                Some(DataBytes::Fixed(field)) => field.slice(record).to_vec(),
+            let bytes: &[u8] = match &group.data_bytes {
+                None => &[],
+                Some(DataBytes::Fixed(field)) => field.slice(record),
                 Some(DataBytes::Variable(field, _)) => {
                     let offset = field.uint(record);
-                    signal_value(file, source.signals[index].as_mut(), offset)
-                        .map_err(|e| format!("record {records}: {e}"))?
+                    source.value = signal_value(file, source.signals[index].as_mut(), offset)
+                        .map_err(|e| format!("record {records}: {e}"))?;
+                    &source.value
                 }
             };
             let variable = matches!(group.data_bytes, Some(DataBytes::Variable(..)));
