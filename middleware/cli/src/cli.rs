@@ -156,9 +156,14 @@ pub struct GatewayArgs {
     /// socketcand://HOST:PORT/BUS or socketcan://IFACE.
     #[arg(long, value_name = "URL", value_parser = parse_bus)]
     pub bus: BusUrl,
-    /// Record all traffic into this directory (candump .log files, flushed every 100 ms).
+    /// Record all traffic into this directory (candump .log or MF4 files, flushed every
+    /// 100 ms).
     #[arg(long, value_name = "DIR")]
     pub record: Option<PathBuf>,
+    /// The recordings' format: candump, or MF4 (the bus and every signal decoded; a file
+    /// cut by a crash reads to its last flush).
+    #[arg(long, value_enum, default_value_t = RecordFormatArg::Candump)]
+    pub record_format: RecordFormatArg,
     /// Start a new recording file after this many MB.
     #[arg(long, value_name = "MB", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     pub rotate_mb: Option<u64>,
@@ -392,6 +397,15 @@ pub struct ExportArgs {
     /// MF4 only: compress its data blocks (transposed deflate, as asammdf's smallest).
     #[arg(long)]
     pub compress: bool,
+}
+
+/// `gateway --record-format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RecordFormatArg {
+    /// candump .log lines.
+    Candump,
+    /// ASAM MDF 4 .mf4.
+    Mf4,
 }
 
 /// `log export --format`.

@@ -87,7 +87,10 @@ fn an_mf4_export_is_diagnosed_as_the_log_it_came_from() {
         let export = autoplug(&args);
         assert!(export.status.success(), "{export:?}");
         let said = String::from_utf8_lossy(&export.stdout);
-        assert!(said.contains("decoded into their messages' signals"), "{said}");
+        assert!(
+            said.contains("decoded into their messages' signals"),
+            "{said}"
+        );
         let output = autoplug(&["diagnose", "--json", mf4.to_str().unwrap()]);
         assert_eq!(output.status.code(), Some(3), "{output:?}");
         let mut json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();

@@ -188,8 +188,48 @@ fn replay_stores_the_same_trip_as_the_live_gateway() {
     assert!(trips[0].stats.shifts > 10 && trips[0].stats.fuel_used_l > 0.5);
 }
 
+/// The same with MF4 recordings: the trip replayed from the MF4 is the live one.
+#[test]
+fn an_mf4_recording_replays_to_the_same_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let (live, rec, db) = record_fast(
+        "virtual:scenarios/drive-cycle.toml",
+        dir.path(),
+        &["--record-format", "mf4"],
+    );
+    assert!(live.status.success(), "{live:?}");
+    let files: Vec<PathBuf> = std::fs::read_dir(&rec)
+        .unwrap()
+        .map(|f| f.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1);
+    assert!(
+        files[0].extension().is_some_and(|e| e == "mf4"),
+        "{files:?}"
+    );
+    assert!(std::fs::read(&files[0]).unwrap().starts_with(b"MDF     "));
+    replay_recording(&rec, &db);
+    let store = SqliteStore::open(&db).unwrap();
+    let trips = store.trips(None).unwrap();
+    assert_eq!(trips.len(), 2);
+    assert_eq!(trips[0].stats, trips[1].stats, "live and replayed trips");
+}
+
 #[test]
 fn kill_9_during_a_recording_leaves_a_readable_log_and_a_consistent_database() {
+    kill_9_during_a_recording(&[]);
+}
+
+/// An MF4 recording killed: `UnFinMF`, read to its last flush.
+#[test]
+fn kill_9_during_an_mf4_recording_leaves_a_readable_file() {
+    let bytes = kill_9_during_a_recording(&["--record-format", "mf4"]);
+    assert!(bytes.starts_with(b"UnFinMF "));
+}
+
+/// The gateway recording the drive cycle at 20 x real time, killed after 3 s: a readable
+/// recording (its bytes returned) and a consistent database.
+fn kill_9_during_a_recording(extra: &[&str]) -> Vec<u8> {
     let dir = tempfile::tempdir().unwrap();
     let db = dir.path().join("trips.db");
     let rec = dir.path().join("rec");
@@ -207,6 +247,7 @@ fn kill_9_during_a_recording_leaves_a_readable_log_and_a_consistent_database() {
             "--db",
             db.to_str().unwrap(),
         ])
+        .args(extra)
         .current_dir(root())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -245,6 +286,7 @@ fn kill_9_during_a_recording_leaves_a_readable_log_and_a_consistent_database() {
     // behind them.
     let last_frame_s = frames.last().unwrap().t_us as f64 * 1e-6;
     assert!(trips[0].stats.end_us as f64 * 1e-6 <= last_frame_s + 0.2);
+    std::fs::read(files[0].as_ref().unwrap().path()).unwrap()
 }
 
 #[test]

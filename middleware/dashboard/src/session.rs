@@ -101,6 +101,7 @@ pub struct Session<'a> {
     firmware_ecus: Vec<Node>,
     recordings_dir: Option<PathBuf>,
     rotate: RotatePolicy,
+    record_format: autoplug_logs::RecordFormat,
     recording: Option<RecordingSink>,
     /// The world file beside the recording's candump file (opened with its first file).
     world_file: Option<WorldRecording>,
@@ -133,6 +134,7 @@ impl<'a> Session<'a> {
             firmware_ecus: Vec::new(),
             recordings_dir: None,
             rotate: RotatePolicy::default(),
+            record_format: autoplug_logs::RecordFormat::Candump,
             recording: None,
             world_file: None,
             flash: None,
@@ -176,7 +178,13 @@ impl<'a> Session<'a> {
     }
 
     /// Where recordings go (without a directory, recording is refused).
-    pub fn with_recordings(mut self, dir: PathBuf, rotate: RotatePolicy) -> Self {
+    pub fn with_recordings(
+        mut self,
+        dir: PathBuf,
+        rotate: RotatePolicy,
+        format: autoplug_logs::RecordFormat,
+    ) -> Self {
+        self.record_format = format;
         self.recordings_dir = Some(dir);
         self.rotate = rotate;
         self
@@ -499,8 +507,9 @@ impl<'a> Session<'a> {
         };
         std::fs::create_dir_all(&dir)
             .map_err(|e| format!("cannot create '{}': {e}", dir.display()))?;
-        let recorder = autoplug_logs::Recorder::start(&dir, "dashboard", self.rotate)
-            .map_err(|e| e.to_string())?;
+        let recorder =
+            autoplug_logs::Recorder::start_as(&dir, "dashboard", self.rotate, self.record_format)
+                .map_err(|e| e.to_string())?;
         self.recording = Some(RecordingSink::new(recorder));
         self.event("recording started".into());
         Ok(json!({ "on": true }))

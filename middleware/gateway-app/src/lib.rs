@@ -70,6 +70,8 @@ pub struct GatewayOptions {
     pub transmit: Option<u64>,
     pub record: Option<PathBuf>,
     pub rotate: autoplug_logs::RotatePolicy,
+    /// candump or MF4 recordings.
+    pub record_format: autoplug_logs::RecordFormat,
     pub db: Option<PathBuf>,
     /// `None`: the VIN the ECUs answer, else `local`.
     pub vehicle: Option<String>,
@@ -245,7 +247,7 @@ pub fn run(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
                 session = session.with_replay_pages(pages);
             }
             if let Some(dir) = options.recordings_dir.clone().or(options.record.clone()) {
-                session = session.with_recordings(dir, options.rotate);
+                session = session.with_recordings(dir, options.rotate, options.record_format);
             }
             if options.record.is_some() {
                 session.start_recording().map_err(RunError::Failed)?;
@@ -270,12 +272,23 @@ pub fn run(bus: &BusUrl, options: GatewayOptions, out: &mut dyn Write) -> Result
             (result, session.watch, recorded)
         }
         None => {
+            let recording = match options.record.as_deref() {
+                Some(dir) => Some(RecordingSink::new(
+                    autoplug_logs::Recorder::start_as(
+                        dir,
+                        "gateway",
+                        options.rotate,
+                        options.record_format,
+                    )
+                    .map_err(|e| RunError::Failed(e.to_string()))?,
+                )),
+                None => None,
+            };
             let (result, recorded) = run_watching(
                 &mut pipeline,
                 source.as_mut(),
                 &mut watch,
-                options.record.as_deref(),
-                options.rotate,
+                recording,
                 &mut stop,
                 out,
             )?;
@@ -384,19 +397,10 @@ fn run_watching(
     pipeline: &mut Pipeline,
     source: &mut dyn FrameSource,
     watch: &mut Watch<'_>,
-    record: Option<&Path>,
-    rotate: autoplug_logs::RotatePolicy,
+    mut recording: Option<RecordingSink>,
     stop: &mut dyn FnMut() -> bool,
     out: &mut dyn Write,
 ) -> Result<(Result<(), PipelineError>, Option<String>), RunError> {
-    let mut recording = match record {
-        Some(dir) => {
-            let recorder = autoplug_logs::Recorder::start(dir, "gateway", rotate)
-                .map_err(|e| RunError::Failed(e.to_string()))?;
-            Some(RecordingSink::new(recorder))
-        }
-        None => None,
-    };
     let result = {
         let mut observers: Vec<&mut dyn Observer> = vec![watch];
         if let Some(sink) = recording.as_mut() {

@@ -67,10 +67,16 @@ fn make_log(out: &Path, minutes: f64, compress: bool) -> Result<(), String> {
         offset += cycle_us;
     }
     if let Some(w) = candump {
-        w.finish().map_err(|e| e.to_string())?.flush().map_err(|e| e.to_string())?;
+        w.finish()
+            .map_err(|e| e.to_string())?
+            .flush()
+            .map_err(|e| e.to_string())?;
     }
     if let Some(w) = mdf {
-        w.finish().map_err(|e| e.to_string())?.flush().map_err(|e| e.to_string())?;
+        w.finish()
+            .map_err(|e| e.to_string())?
+            .flush()
+            .map_err(|e| e.to_string())?;
     }
     let seconds = started.elapsed().as_secs_f64();
     println!(

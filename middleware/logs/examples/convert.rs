@@ -5,11 +5,14 @@
 //! cargo run -p autoplug-logs --example convert -- IN OUT.asc
 //! cargo run -p autoplug-logs --example convert -- IN OUT.blf
 //! cargo run -p autoplug-logs --example convert -- [--compress] IN OUT.mf4
+//! cargo run -p autoplug-logs --example convert -- --recording [--crash] IN OUT.mf4
 //! cargo run -p autoplug-logs --example convert -- [--direction] IN OUT.log
 //! cargo run -p autoplug-logs --example convert -- --json IN
 //! ```
 //!
-//! `--direction` appends python-can's ` R` / ` T` to candump lines. `--json` prints one
+//! `--direction` appends python-can's ` R` / ` T` to candump lines. `--recording` writes
+//! MF4 as the gateway records it (one growing data block), `--crash` leaves it as a
+//! recorder killed after its last flush leaves it. `--json` prints one
 //! object per frame (`{"t_us":..,"channel":..,"id":..,"extended":..,"kind":"data",
 //! "direction":"rx","len":..,"data":"0A14","fd":false,"brs":false,"esi":false}`) or error (`{"error":"..","line":..,
 //! "fatal":..}`), which tests/check_with_python.py compares with python-can and cantools.
@@ -25,7 +28,7 @@ use autoplug_logs::write::{export_asc, export_blf, export_candump, export_mf4, E
 use autoplug_logs::{Direction, FrameKind, LogFormat};
 
 fn usage() -> ExitCode {
-    eprintln!("usage: convert [--direction] [--compress] IN OUT.asc|OUT.blf|OUT.mf4|OUT.log\n       convert --json IN");
+    eprintln!("usage: convert [--direction] [--compress] IN OUT.asc|OUT.blf|OUT.mf4|OUT.log\n       convert --recording [--crash] IN OUT.mf4\n       convert --json IN");
     ExitCode::from(2)
 }
 
@@ -77,6 +80,25 @@ fn json(input: &Path) -> Result<(), String> {
     fatal.map_or(Ok(()), Err)
 }
 
+/// IN as the gateway records MF4 (one growing data block); with `crash`, left as a
+/// recorder killed after handing its records to the OS leaves it (`UnFinMF`).
+fn record(input: &Path, output: &Path, crash: bool) -> Result<(), String> {
+    let reader = autoplug_logs::open(input).map_err(|e| e.to_string())?;
+    let file = File::create(output).map_err(|e| format!("{}: {e}", output.display()))?;
+    let mut writer = autoplug_logs::Mf4Writer::growing(file).map_err(|e| e.to_string())?;
+    for frame in reader {
+        writer
+            .write(&frame.map_err(|e| e.to_string())?)
+            .map_err(|e| e.to_string())?;
+    }
+    if crash {
+        writer.flush_data().map_err(|e| e.to_string())?;
+    } else {
+        writer.finish().map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
 fn convert(input: &Path, output: &Path, direction: bool, compress: bool) -> Result<(), String> {
     let reader = autoplug_logs::open(input).map_err(|e| e.to_string())?;
     let format = LogFormat::from_extension(output)
@@ -109,9 +131,17 @@ fn main() -> ExitCode {
     let json_mode = args.iter().any(|a| a == "--json");
     let direction = args.iter().any(|a| a == "--direction");
     let compress = args.iter().any(|a| a == "--compress");
-    args.retain(|a| a != "--json" && a != "--direction" && a != "--compress");
+    let recording = args.iter().any(|a| a == "--recording");
+    let crash = args.iter().any(|a| a == "--crash");
+    args.retain(|a| {
+        !matches!(
+            a.as_str(),
+            "--json" | "--direction" | "--compress" | "--recording" | "--crash"
+        )
+    });
     let result = match (json_mode, args.as_slice()) {
         (true, [input]) => json(Path::new(input)),
+        (false, [input, output]) if recording => record(Path::new(input), Path::new(output), crash),
         (false, [input, output]) => {
             convert(Path::new(input), Path::new(output), direction, compress)
         }

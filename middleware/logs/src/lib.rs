@@ -10,7 +10,7 @@
 //! | [`blf_write`] | the BLF writer ([`export_blf`] converts any log) |
 //! | [`mdf4::write`] | the MF4 writer: bus logging and decoded signals ([`export_mf4`] converts any log) |
 //! | [`mdf4`] | ASAM MDF 4: its blocks, read and checked; data streams; where the bus logging is |
-//! | [`record`] | [`Recorder`]: live traffic to rotating candump files, flushed every 100 ms |
+//! | [`record`] | [`Recorder`]: live traffic to rotating candump or MF4 files, flushed every 100 ms |
 //!
 //! Readers never load a whole file and never panic on bad input: a malformed line is an
 //! error naming its line number, and reading goes on with the next, so the caller chooses
@@ -44,6 +44,6 @@ pub use frame::{dlc_to_len, len_to_dlc, Direction, FdFlags, FrameError, FrameKin
 pub use mcap_export::{export_mcap, McapSummary};
 pub use mdf4::write::Mf4Writer;
 pub use read::{open, LogError, LogFormat, LogReader, OpenError, Place};
-pub use record::{RecordError, RecordSummary, Recorder, RotatePolicy};
+pub use record::{RecordError, RecordFormat, RecordSummary, Recorder, RotatePolicy};
 pub use time::Utc;
 pub use write::{export_asc, export_blf, export_mf4, AscWriter, CandumpWriter};

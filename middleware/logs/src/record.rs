@@ -1,8 +1,12 @@
-//! Recording live traffic to candump files, the way the gateway does it: one file per
-//! segment, rotated on size or time, flushed to the OS at least every
+//! Recording live traffic to candump or MF4 files, the way the gateway does it: one file
+//! per segment, rotated on size or time, flushed to the OS at least every
 //! [`FLUSH_INTERVAL`], so a crash or `kill -9` loses at most the last 100 ms.
 //!
-//! Files are named `PREFIX-YYYYmmddTHHMMSSZ-NNN.log`: the UTC wall-clock time the
+//! An MF4 segment is laid out as data loggers lay out theirs ([`Mf4Writer::growing`]):
+//! its blocks first, then one data block that grows, the file `UnFinMF` until the segment
+//! is closed; a crash leaves a file that reads to its last record handed to the OS.
+//!
+//! Files are named `PREFIX-YYYYmmddTHHMMSSZ-NNN.log` (`.mf4`): the UTC wall-clock time the
 //! segment was opened, then its number in the recording, so names sort in time order.
 //! Rotation never splits a line: a segment is closed before the line that would take it
 //! past `max_bytes`, or before the first frame `max_duration_us` (in the frames' own
@@ -19,8 +23,23 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crate::frame::LogFrame;
+use crate::mdf4::write::Mf4Writer;
 use crate::time::Utc;
 use crate::write::format_candump;
+
+/// The format a recording is written in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RecordFormat {
+    /// candump `.log` lines.
+    #[default]
+    Candump,
+    /// ASAM MDF 4 `.mf4`: the bus and every signal decoded.
+    Mf4,
+}
+
+/// A bound on the bytes one frame takes in an MF4 segment (its bus record and its decoded
+/// signals' record), for rotation on size.
+const MF4_FRAME_BYTES: u64 = 128;
 
 /// Longest time frames wait in the recorder's buffer before they are handed to the OS.
 pub const FLUSH_INTERVAL: Duration = Duration::from_millis(100);
@@ -108,10 +127,16 @@ impl std::error::Error for RecordError {
     }
 }
 
+/// Where a segment's bytes go.
+enum Sink {
+    Candump(File),
+    Mf4(Box<Mf4Writer<File>>),
+}
+
 /// The segment being written.
 struct Segment {
     path: PathBuf,
-    file: File,
+    sink: Sink,
     /// Bytes handed to the OS (all complete lines).
     written: u64,
     /// Bytes in the segment, buffered ones included (for rotation).
@@ -133,6 +158,7 @@ pub struct Recorder {
     last_flush: Instant,
     summary: RecordSummary,
     failed: bool,
+    format: RecordFormat,
 }
 
 impl Recorder {
@@ -150,6 +176,28 @@ impl Recorder {
         )
     }
 
+    /// As [`Recorder::start`], in `format`.
+    pub fn start_as(
+        dir: impl AsRef<Path>,
+        prefix: &str,
+        policy: RotatePolicy,
+        format: RecordFormat,
+    ) -> Result<Self, RecordError> {
+        Self::start_with_format(
+            dir,
+            prefix,
+            policy,
+            Box::new(|path| {
+                OpenOptions::new()
+                    .read(true)
+                    .write(true)
+                    .create_new(true)
+                    .open(path)
+            }),
+            format,
+        )
+    }
+
     /// As [`Recorder::start`], opening files with `opener` (which should create the file
     /// new, and fail if it exists).
     pub fn start_with(
@@ -157,6 +205,17 @@ impl Recorder {
         prefix: &str,
         policy: RotatePolicy,
         opener: FileOpener,
+    ) -> Result<Self, RecordError> {
+        Self::start_with_format(dir, prefix, policy, opener, RecordFormat::Candump)
+    }
+
+    /// As [`Recorder::start_with`], in `format`.
+    pub fn start_with_format(
+        dir: impl AsRef<Path>,
+        prefix: &str,
+        policy: RotatePolicy,
+        opener: FileOpener,
+        format: RecordFormat,
     ) -> Result<Self, RecordError> {
         let dir = dir.as_ref().to_path_buf();
         std::fs::create_dir_all(&dir).map_err(|error| RecordError::Io {
@@ -177,6 +236,7 @@ impl Recorder {
             last_flush: Instant::now(),
             summary: RecordSummary::default(),
             failed: false,
+            format,
         };
         recorder.open_segment()?;
         Ok(recorder)
@@ -207,18 +267,35 @@ impl Recorder {
         // A name taken (another recording in the same second) moves on to the next number.
         let mut tries = 0;
         loop {
-            let path = self
-                .dir
-                .join(format!("{}-{stamp}-{:03}.log", self.prefix, self.number));
+            let extension = match self.format {
+                RecordFormat::Candump => "log",
+                RecordFormat::Mf4 => "mf4",
+            };
+            let path = self.dir.join(format!(
+                "{}-{stamp}-{:03}.{extension}",
+                self.prefix, self.number
+            ));
             self.number += 1;
             match (self.opener)(&path) {
                 Ok(file) => {
+                    let sink = match self.format {
+                        RecordFormat::Candump => Sink::Candump(file),
+                        RecordFormat::Mf4 => match Mf4Writer::growing(file) {
+                            Ok(w) => Sink::Mf4(Box::new(w)),
+                            Err(e) => return Err(self.fail(path, e)),
+                        },
+                    };
+                    let written = match &sink {
+                        Sink::Mf4(w) => w.flushed_len(),
+                        Sink::Candump(_) => 0,
+                    };
+                    self.summary.bytes += written;
                     self.summary.files.push(path.clone());
                     self.segment = Some(Segment {
                         path,
-                        file,
-                        written: 0,
-                        bytes: 0,
+                        sink,
+                        written,
+                        bytes: written,
                         first_t_us: None,
                     });
                     return Ok(());
@@ -230,19 +307,28 @@ impl Recorder {
     }
 
     /// Hands the buffer to the OS. On failure the file is cut back to its last
-    /// complete line and the recorder stops.
+    /// complete line (record) and the recorder stops.
     fn flush_buffer(&mut self) -> Result<(), RecordError> {
         self.last_flush = Instant::now();
-        if self.buf.is_empty() {
-            return Ok(());
-        }
         let Some(segment) = self.segment.as_mut() else {
             return Ok(());
         };
-        match segment.file.write_all(&self.buf) {
-            Ok(()) => {
-                segment.written += self.buf.len() as u64;
-                self.summary.bytes += self.buf.len() as u64;
+        let result = match &mut segment.sink {
+            Sink::Candump(file) => {
+                if self.buf.is_empty() {
+                    return Ok(());
+                }
+                file.write_all(&self.buf).map(|()| self.buf.len() as u64)
+            }
+            Sink::Mf4(writer) => {
+                let before = writer.flushed_len();
+                writer.flush_data().map(|()| writer.flushed_len() - before)
+            }
+        };
+        match result {
+            Ok(bytes) => {
+                segment.written += bytes;
+                self.summary.bytes += bytes;
                 self.summary.frames += self.buffered_frames;
                 self.buf.clear();
                 self.buffered_frames = 0;
@@ -251,7 +337,11 @@ impl Recorder {
             Err(error) => {
                 // Part of the buffer may have reached the file: drop it, so the file
                 // ends with a complete line (best effort: a device cannot be cut).
-                let _ = segment.file.set_len(segment.written);
+                let file = match &segment.sink {
+                    Sink::Candump(file) => file,
+                    Sink::Mf4(writer) => writer.get_ref(),
+                };
+                let _ = file.set_len(segment.written);
                 let path = segment.path.clone();
                 Err(self.fail(path, error))
             }
@@ -262,22 +352,38 @@ impl Recorder {
     fn close_segment(&mut self) -> Result<(), RecordError> {
         self.flush_buffer()?;
         if let Some(segment) = self.segment.take() {
-            if let Err(error) = segment.file.sync_all() {
+            let file = match segment.sink {
+                Sink::Candump(file) => Ok(file),
+                Sink::Mf4(writer) => {
+                    let before = writer.flushed_len();
+                    writer.finish().inspect(|file| {
+                        // Its length: the end (lists, history) written by `finish`.
+                        let after = file.metadata().map_or(before, |m| m.len());
+                        self.summary.bytes += after.saturating_sub(before);
+                    })
+                }
+            };
+            if let Err(error) = file.and_then(|f| f.sync_all()) {
                 return Err(self.fail(segment.path, error));
             }
         }
         Ok(())
     }
 
-    /// Records one frame (as a candump line on `can<channel>`, without direction).
-    /// Flushes if [`FLUSH_INTERVAL`] has passed since the last flush.
+    /// Records one frame (as a candump line on `can<channel>`, without direction, or its
+    /// MF4 records). Flushes if [`FLUSH_INTERVAL`] has passed since the last flush.
     pub fn write(&mut self, frame: &LogFrame) -> Result<(), RecordError> {
         if self.failed {
             return Err(RecordError::Stopped);
         }
         self.line.clear();
-        format_candump(&mut self.line, frame, false);
-        let len = self.line.len() as u64;
+        let len = match self.format {
+            RecordFormat::Candump => {
+                format_candump(&mut self.line, frame, false);
+                self.line.len() as u64
+            }
+            RecordFormat::Mf4 => MF4_FRAME_BYTES,
+        };
         let rotate = match &self.segment {
             None => true,
             Some(s) => {
@@ -297,11 +403,24 @@ impl Recorder {
             self.open_segment()?;
         }
         let segment = self.segment.as_mut().ok_or(RecordError::Stopped)?;
-        segment.bytes += len;
         segment.first_t_us.get_or_insert(frame.t_us);
-        self.buf.extend_from_slice(&self.line);
+        let buffered = match &mut segment.sink {
+            Sink::Candump(_) => {
+                segment.bytes += len;
+                self.buf.extend_from_slice(&self.line);
+                self.buf.len()
+            }
+            Sink::Mf4(writer) => {
+                if let Err(error) = writer.write(frame) {
+                    let path = segment.path.clone();
+                    return Err(self.fail(path, error));
+                }
+                segment.bytes = writer.len();
+                (writer.len() - writer.flushed_len()) as usize
+            }
+        };
         self.buffered_frames += 1;
-        if self.buf.len() >= BUFFER_LIMIT || self.last_flush.elapsed() >= FLUSH_INTERVAL {
+        if buffered >= BUFFER_LIMIT || self.last_flush.elapsed() >= FLUSH_INTERVAL {
             self.flush_buffer()?;
         }
         Ok(())
@@ -397,6 +516,66 @@ mod tests {
             std::fs::metadata(&summary.files[0]).unwrap().len()
         );
         assert_eq!(read_back(&summary.files), frames);
+    }
+
+    fn read_mf4(path: &Path) -> Vec<LogFrame> {
+        crate::read::Mf4Reader::new(std::fs::File::open(path).unwrap())
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect()
+    }
+
+    /// MF4 segments: rotated like candump ones, each finished (`MDF`), read back whole; a
+    /// recorder that dies (no `stop`) leaves an `UnFinMF` file that reads to its last
+    /// flush.
+    #[test]
+    fn an_mf4_recording_reads_back_exactly_and_survives_a_crash() {
+        let dir = tempfile::tempdir().unwrap();
+        let policy = RotatePolicy {
+            max_bytes: Some(200_000),
+            max_duration_us: None,
+        };
+        let mut r = Recorder::start_as(dir.path(), "bus", policy, RecordFormat::Mf4).unwrap();
+        let frames: Vec<LogFrame> = (0..4000).map(frame).collect();
+        for f in &frames {
+            r.write(f).unwrap();
+        }
+        let summary = r.stop().unwrap();
+        assert!(summary.files.len() >= 2, "{:?}", summary.files);
+        assert_eq!(summary.frames, 4000);
+        let total: u64 = summary
+            .files
+            .iter()
+            .map(|f| std::fs::metadata(f).unwrap().len())
+            .sum();
+        assert_eq!(summary.bytes, total);
+        let mut back = Vec::new();
+        for f in &summary.files {
+            assert!(f.to_str().unwrap().ends_with(".mf4"));
+            let bytes = std::fs::read(f).unwrap();
+            assert!(bytes.starts_with(b"MDF     "), "finished");
+            assert!(bytes.len() <= 200_000 + 4096, "{}", bytes.len());
+            back.extend(read_mf4(f));
+        }
+        assert!(back == frames, "{} frames back", back.len());
+
+        let crash = tempfile::tempdir().unwrap();
+        let mut r = Recorder::start_as(
+            crash.path(),
+            "bus",
+            RotatePolicy::default(),
+            RecordFormat::Mf4,
+        )
+        .unwrap();
+        for f in &frames[..100] {
+            r.write(f).unwrap();
+        }
+        r.poll(Instant::now() + FLUSH_INTERVAL).unwrap();
+        r.write(&frames[100]).unwrap();
+        let path = r.current_file().unwrap().to_path_buf();
+        drop(r);
+        assert!(std::fs::read(&path).unwrap().starts_with(b"UnFinMF "));
+        assert!(read_mf4(&path) == frames[..100]);
     }
 
     #[test]

@@ -29,9 +29,10 @@ It builds the `convert` example of autoplug-logs, then:
    asammdf with plain, deflate and transposed data blocks: the Rust reader must give
    every frame of each, as python-can's MF4Reader does;
 7. (with asammdf installed) converts step 1's log with the Rust MF4 writer (plain and
-   compressed): python-can's MF4Reader must read every frame of it, and asammdf every
-   signal of every catalogue message, exactly as cantools decodes the frames, with the
-   DBC's unit and the signal's VSS path as its display name.
+   compressed, and as the gateway records it: finished, and as a killed recorder leaves it):
+   python-can's MF4Reader must read every frame of it, and asammdf every signal of every
+   catalogue message, exactly as cantools decodes the frames, with the DBC's unit and the
+   signal's VSS path as its display name.
 
 Exits 1 on any disagreement, listing each.
 """
@@ -214,7 +215,9 @@ def truncated_blf(convert, tmp):
 def mf4_written(convert, tmp, db, source, expected):
     """Step 7: AutoPlug's MF4, read by python-can (frames) and asammdf (signals)."""
     from asammdf import MDF
-    for flags, name in [([], "rust.mf4"), (["--compress"], "rust-compressed.mf4")]:
+    for flags, name in [([], "rust.mf4"), (["--compress"], "rust-compressed.mf4"),
+                        (["--recording"], "rust-recording.mf4"),
+                        (["--recording", "--crash"], "rust-recording-killed.mf4")]:
         path = tmp / name
         rust_convert(convert, source, path, *flags)
         python = [from_python(m, m.channel) for m in can.MF4Reader(path)]

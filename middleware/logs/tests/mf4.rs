@@ -464,3 +464,63 @@ fn find_last_record(bytes: &[u8], dt: u64, wanted: u8) -> usize {
     }
     last.unwrap()
 }
+
+/// The growing layout (what the gateway records): read back whole once finished, and
+/// after a "crash" (the writer dropped after handing its records over, the file never
+/// finished) read to its last record, a record cut in half at the end included.
+#[test]
+fn a_growing_recording_reads_whole_and_after_a_crash() {
+    let frames: Vec<LogFrame> = frames_of(&sample())
+        .into_iter()
+        .chain((0..500u64).map(|i| {
+            let speed = autoplug_can::Frame::new(0x003, &[(i % 200) as u8]).unwrap();
+            LogFrame::from_can(1_700_000_010_000_000 + i * 10_000, 0, &speed)
+        }))
+        .collect();
+    let mut finished = Vec::new();
+    let mut writer = autoplug_logs::Mf4Writer::growing(Cursor::new(&mut finished)).unwrap();
+    for f in &frames {
+        writer.write(f).unwrap();
+    }
+    assert_eq!(writer.decoded, 501, "the 500 speeds and the sample's 0x00C");
+    writer.finish().unwrap();
+    assert!(finished.starts_with(b"MDF     "));
+    let got: Vec<LogFrame> = read(finished)
+        .unwrap()
+        .into_iter()
+        .map(|f| f.unwrap())
+        .collect();
+    assert!(
+        got == frames,
+        "one data group, the file's order: {} frames",
+        got.len()
+    );
+
+    let mut crashed = Vec::new();
+    let mut writer = autoplug_logs::Mf4Writer::growing(Cursor::new(&mut crashed)).unwrap();
+    for f in &frames[..300] {
+        writer.write(f).unwrap();
+    }
+    writer.flush_data().unwrap();
+    for f in &frames[300..] {
+        // Written after the last flush: lost with the crash.
+        writer.write(f).unwrap();
+    }
+    drop(writer);
+    assert!(crashed.starts_with(b"UnFinMF "));
+    let got: Vec<LogFrame> = read(crashed.clone())
+        .unwrap()
+        .into_iter()
+        .map(|f| f.unwrap())
+        .collect();
+    assert!(got == frames[..300], "{} frames", got.len());
+    // Power lost in the middle of a record: the last frame's decoded record (13 bytes)
+    // and the end of its bus record.
+    crashed.truncate(crashed.len() - 20);
+    let got: Vec<LogFrame> = read(crashed)
+        .unwrap()
+        .into_iter()
+        .map(|f| f.unwrap())
+        .collect();
+    assert!(got == frames[..299], "{} frames", got.len());
+}

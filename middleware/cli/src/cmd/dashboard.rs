@@ -69,6 +69,7 @@ pub(crate) fn run(args: DashboardArgs, out: &mut dyn Write) -> Result<(), CliErr
             .then_some(60_000_000),
         record: None,
         rotate: autoplug_logs::RotatePolicy::default(),
+        record_format: autoplug_logs::RecordFormat::Candump,
         db: Some(folder.trips_db()),
         vehicle,
         speed: None,

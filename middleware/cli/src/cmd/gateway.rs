@@ -5,7 +5,7 @@ use std::io::Write;
 
 use autoplug_gateway_app::GatewayOptions;
 
-use crate::cli::{CliError, GatewayArgs};
+use crate::cli::{CliError, GatewayArgs, RecordFormatArg};
 
 /// Watches the bus `--bus` names with the options of the command line.
 pub(crate) fn run(args: GatewayArgs, out: &mut dyn Write) -> Result<(), CliError> {
@@ -14,6 +14,7 @@ pub(crate) fn run(args: GatewayArgs, out: &mut dyn Write) -> Result<(), CliError
         record,
         rotate_mb,
         rotate_minutes,
+        record_format,
         db,
         no_db,
         vehicle,
@@ -36,6 +37,10 @@ pub(crate) fn run(args: GatewayArgs, out: &mut dyn Write) -> Result<(), CliError
         rotate: autoplug_logs::RotatePolicy {
             max_bytes: rotate_mb.map(|mb| mb * 1_000_000),
             max_duration_us: rotate_minutes.map(|m| m * 60_000_000),
+        },
+        record_format: match record_format {
+            RecordFormatArg::Candump => autoplug_logs::RecordFormat::Candump,
+            RecordFormatArg::Mf4 => autoplug_logs::RecordFormat::Mf4,
         },
         vehicle,
         speed,

@@ -62,8 +62,17 @@ pub struct Mf4Writer<W: Write + Seek> {
     start_ns: Option<u64>,
     /// 0 data frames, 1 error frames, 2 remote frames, then the messages of [`MESSAGES`].
     groups: Vec<Group>,
+    /// The logger's layout: one growing data block.
+    growing: Option<Growing>,
     /// Catalogue frames decoded into their message's group.
     pub decoded: u64,
+}
+
+/// The layout of a recording that a crash may end (see [`Mf4Writer::growing`]).
+struct Growing {
+    dt_at: u64,
+    pending: Vec<u8>,
+    data_bytes: u64,
 }
 
 /// A block's bytes: `##` id, reserved, length, link count, links, data (padded to 8).
@@ -139,8 +148,21 @@ fn xml_escape(text: &str) -> String {
 
 impl<W: Write + Seek> Mf4Writer<W> {
     /// A writer that writes the file's blocks down to its channels now; `compress` makes
-    /// its data blocks `##DZ` (transposed deflate).
-    pub fn new(mut out: W, compress: bool) -> io::Result<Self> {
+    /// its data blocks `##DZ` (transposed deflate). Sorted: a data group per channel group.
+    pub fn new(out: W, compress: bool) -> io::Result<Self> {
+        Self::start(out, compress, false)
+    }
+
+    /// A writer laid out as data loggers lay out a recording, so a crash leaves a file that
+    /// reads to its last record: one unsorted data group (record ids), its one data block
+    /// last in the file and growing, the file `UnFinMF` with "the last data block's length
+    /// is not written" until [`finish`](Self::finish). Records are handed to `out` by
+    /// [`flush_data`](Self::flush_data). Not compressed (a zlib block cannot grow).
+    pub fn growing(out: W) -> io::Result<Self> {
+        Self::start(out, false, true)
+    }
+
+    fn start(mut out: W, compress: bool, growing: bool) -> io::Result<Self> {
         let at = out.stream_position()?;
         let mut w = Self {
             out,
@@ -149,6 +171,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
             hd_at: 0,
             start_ns: None,
             groups: Vec::new(),
+            growing: None,
             decoded: 0,
         };
         let mut id = [0u8; 64];
@@ -156,8 +179,10 @@ impl<W: Write + Seek> Mf4Writer<W> {
         id[8..16].copy_from_slice(b"4.10    ");
         id[16..24].copy_from_slice(b"AutoPlug");
         id[28..30].copy_from_slice(&410u16.to_le_bytes());
-        // Until `finish`: cycle counts and data lists left to write.
-        id[60..62].copy_from_slice(&(0x1u16 | 0x10).to_le_bytes());
+        // Until `finish`: cycle counts, and data lists or the last block's length, left to
+        // write.
+        let left: u16 = if growing { 0x1 | 0x4 } else { 0x1 | 0x10 };
+        id[60..62].copy_from_slice(&left.to_le_bytes());
         w.put(&id)?;
         // HD: links DG, FH, CH, AT, EV, comment; data: start (patched at the first frame),
         // time zone and DST offsets, flags, start angle and distance.
@@ -168,32 +193,88 @@ impl<W: Write + Seek> Mf4Writer<W> {
             &[source_name, source_name, 0],
             &[2, 2, 0, 0, 0, 0, 0, 0],
         ))?;
-        let mut first_dg = 0;
-        let mut previous_dg = 0;
         for (name, members, record) in [
             ("CAN_DataFrame", FrameType::Data, FRAME_BYTES),
             ("CAN_ErrorFrame", FrameType::Error, FRAME_BYTES),
             ("CAN_RemoteFrame", FrameType::Remote, REMOTE_BYTES),
         ] {
-            let dg = w.bus_group(name, members, record, source)?;
-            w.chain_dg(&mut first_dg, &mut previous_dg, dg)?;
+            w.bus_group(name, members, record, source)?;
         }
         for spec in MESSAGES {
-            let dg = w.message_group(&spec)?;
-            w.chain_dg(&mut first_dg, &mut previous_dg, dg)?;
+            w.message_group(&spec)?;
         }
+        let cgs: Vec<u64> = w.groups.iter().map(|g| g.cg_at).collect();
+        let first_dg = if growing {
+            for pair in cgs.windows(2) {
+                w.patch(pair[0] + 24, &pair[1].to_le_bytes())?;
+            }
+            let mut d = [0u8; 8];
+            d[0] = 1; // one byte of record id
+            let dg = w.put(&block(b"DG", &[0, cgs[0], 0, 0], &d))?;
+            // The data block last: its length (the header's alone) is written at the end.
+            let dt_at = w.put(&block(b"DT", &[], &[]))?;
+            w.patch(dg + 24 + 2 * 8, &dt_at.to_le_bytes())?;
+            w.growing = Some(Growing {
+                dt_at,
+                pending: Vec::new(),
+                data_bytes: 0,
+            });
+            dg
+        } else {
+            let mut dgs = Vec::new();
+            for (i, cg) in cgs.iter().enumerate() {
+                let dg = w.put(&block(b"DG", &[0, *cg, 0, 0], &[0; 8]))?;
+                w.groups[i].dg_at = dg;
+                dgs.push(dg);
+            }
+            for pair in dgs.windows(2) {
+                w.patch(pair[0] + 24, &pair[1].to_le_bytes())?;
+            }
+            dgs[0]
+        };
         w.patch(w.hd_at + 24, &first_dg.to_le_bytes())?;
         Ok(w)
     }
 
-    fn chain_dg(&mut self, first: &mut u64, previous: &mut u64, dg: u64) -> io::Result<()> {
-        if *previous == 0 {
-            *first = dg;
-        } else {
-            self.patch(*previous + 24, &dg.to_le_bytes())?;
+    /// The file's length so far, records not yet handed to the output included.
+    pub fn len(&self) -> u64 {
+        self.at
+            + self
+                .groups
+                .iter()
+                .map(|g| g.pending.len() as u64)
+                .sum::<u64>()
+            + self.growing.as_ref().map_or(0, |g| g.pending.len() as u64)
+    }
+
+    /// Whether nothing has been written (never: the blocks are written at the start).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Hands the records gathered so far to the output (the growing layout; the sorted
+    /// one writes a block as it fills). Until then they are in memory only.
+    pub fn flush_data(&mut self) -> io::Result<()> {
+        let Some(mut growing) = self.growing.take() else {
+            return Ok(());
+        };
+        let result = self.put(&growing.pending);
+        if result.is_ok() {
+            growing.data_bytes += growing.pending.len() as u64;
+            growing.pending.clear();
         }
-        *previous = dg;
-        Ok(())
+        self.growing = Some(growing);
+        result.map(|_| ())
+    }
+
+    /// The bytes handed to the output: where a file cut after a failed write is whole.
+    pub fn flushed_len(&self) -> u64 {
+        self.at
+    }
+
+    /// The output.
+    pub fn get_ref(&self) -> &W {
+        &self.out
     }
 
     /// Appends bytes at the end; where they start.
@@ -272,7 +353,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
         Ok(offsets.first().copied().unwrap_or(0))
     }
 
-    /// A DG with one CG of `record_len` data bytes (the time included); the DG's offset.
+    /// A CG of `record_len` data bytes (the time included); its offset.
     fn group(
         &mut self,
         first_cn: u64,
@@ -284,12 +365,13 @@ impl<W: Write + Seek> Mf4Writer<W> {
     ) -> io::Result<u64> {
         let name = self.text(name)?;
         let mut d = vec![0u8; 32];
+        // Record ids from 1, used by the growing layout's one data group.
+        d[0..8].copy_from_slice(&(self.groups.len() as u64 + 1).to_le_bytes());
         d[16..18].copy_from_slice(&flags.to_le_bytes());
         d[24..28].copy_from_slice(&(record_len as u32).to_le_bytes());
         let cg = self.put(&block(b"CG", &[0, first_cn, name, source, 0, comment], &d))?;
-        let dg = self.put(&block(b"DG", &[0, cg, 0, 0], &[0; 8]))?;
         self.groups.push(Group {
-            dg_at: dg,
+            dg_at: 0,
             cg_at: cg,
             record_len,
             pending: Vec::new(),
@@ -297,7 +379,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
             written: 0,
             cycles: 0,
         });
-        Ok(dg)
+        Ok(cg)
     }
 
     fn bus_group(
@@ -455,6 +537,12 @@ impl<W: Write + Seek> Mf4Writer<W> {
     }
 
     fn record(&mut self, group: usize, record: &[u8]) -> io::Result<()> {
+        if let Some(growing) = self.growing.as_mut() {
+            growing.pending.push(group as u8 + 1);
+            growing.pending.extend_from_slice(record);
+            self.groups[group].cycles += 1;
+            return Ok(());
+        }
         let g = &mut self.groups[group];
         g.pending.extend_from_slice(record);
         g.cycles += 1;
@@ -510,7 +598,20 @@ impl<W: Write + Seek> Mf4Writer<W> {
         if self.start_ns.is_none() {
             self.start_ns = Some(0);
         }
+        if let Some(dt) = self.growing.as_ref().map(|g| g.dt_at) {
+            self.flush_data()?;
+            let data = self.growing.as_ref().map_or(0, |g| g.data_bytes);
+            self.patch(dt + 8, &(24 + data).to_le_bytes())?;
+            // The block ends the data: the next block starts 8-byte aligned.
+            let pad = (8 - (self.at % 8)) % 8;
+            self.put(&vec![0u8; pad as usize])?;
+        }
         for group in 0..self.groups.len() {
+            if self.growing.is_some() {
+                let (cg, cycles) = (self.groups[group].cg_at, self.groups[group].cycles);
+                self.patch(cg + 24 + 6 * 8 + 8, &cycles.to_le_bytes())?;
+                continue;
+            }
             self.flush(group)?;
             let (dg, cg, cycles, blocks) = {
                 let g = &self.groups[group];
