@@ -3,7 +3,8 @@
 
     python3 middleware/logs/tests/check_with_python.py     (from the workspace root or anywhere)
 
-Needs python-can 4.x and cantools (`pip install python-can cantools`, or scripts/setup).
+Needs python-can 4.x, cantools and asammdf (`pip install python-can cantools asammdf`, or
+scripts/setup-tests).
 It builds the `convert` example of autoplug-logs, then:
 
 1. writes a candump log with python-can's CanutilsLogWriter (with its R/T suffix): frames
@@ -24,11 +25,11 @@ It builds the `convert` example of autoplug-logs, then:
 5. converts step 1's log, repeated to fill several log containers, with the Rust BLF
    writer and reads it with python-can's BLFReader: every frame the Rust reader takes from
    the candump log, to the microsecond;
-6. (with asammdf installed) writes the same frames with python-can's MF4Writer (asammdf
+6. writes the same frames with python-can's MF4Writer (asammdf
    underneath: sorted data groups, transposed DZ blocks in data lists) and saves that with
    asammdf with plain, deflate and transposed data blocks: the Rust reader must give
    every frame of each, as python-can's MF4Reader does;
-7. (with asammdf installed) converts step 1's log with the Rust MF4 writer (plain and
+7. converts step 1's log with the Rust MF4 writer (plain and
    compressed, and as the gateway records it: finished, and as a killed recorder leaves it):
    python-can's MF4Reader must read every frame of it, and asammdf every signal of every
    catalogue message, exactly as cantools decodes the frames, with the DBC's unit and the
@@ -48,8 +49,10 @@ try:
     import can
     import cantools
     import cantools.logreader
+    from asammdf import MDF
 except ImportError as e:  # pragma: no cover
-    sys.exit(f"check_with_python: {e}; install with: pip install python-can cantools")
+    sys.exit(f"check_with_python: {e}; install with: pip install python-can cantools asammdf"
+             " (or scripts/setup-tests)")
 
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
@@ -214,7 +217,6 @@ def truncated_blf(convert, tmp):
 
 def mf4_written(convert, tmp, db, source, expected):
     """Step 7: AutoPlug's MF4, read by python-can (frames) and asammdf (signals)."""
-    from asammdf import MDF
     for flags, name in [([], "rust.mf4"), (["--compress"], "rust-compressed.mf4"),
                         (["--recording"], "rust-recording.mf4"),
                         (["--recording", "--crash"], "rust-recording-killed.mf4")]:
@@ -344,15 +346,8 @@ def main():
             ("python-can-stored.blf", lambda p: can.BLFReader(p), lambda m: m.channel),
             ("python-can-split.blf", lambda p: can.BLFReader(p), lambda m: m.channel),
         ]
-        try:
-            import asammdf  # noqa: F401 (python-can's MF4 reader and writer need it)
-            have_asammdf = True
-        except ImportError:
-            have_asammdf = False
-            print("info: asammdf is not installed: the MF4 checks are left out")
-        if have_asammdf:
-            fixtures += [(name, lambda p: can.MF4Reader(p), lambda m: m.channel)
-                         for name in MF4_FIXTURES]
+        fixtures += [(name, lambda p: can.MF4Reader(p), lambda m: m.channel)
+                     for name in MF4_FIXTURES]
         for name, reader, channel in fixtures:
             python = [from_python(m, channel(m)) for m in reader(data / name)]
             compare(f"rust and python-can read {name}", rust_items(convert, data / name), python)
@@ -400,48 +395,45 @@ def main():
               at == len(raw) and containers >= 2, f"{containers} containers, {at} of {len(raw)} bytes")
 
         # 6. MF4 as python-can and asammdf write it, read by Rust and by python-can.
-        if have_asammdf:
-            from asammdf import MDF
-            mf4 = tmp / "many.mf4"
-            writer = can.MF4Writer(mf4)
-            for m in many:
-                writer.on_message_received(m)
-            writer.stop()
-            variants = [mf4]
-            for compression, name in [(0, "plain"), (1, "deflate"), (2, "transposed")]:
-                path = tmp / f"many-{name}.mf4"
-                MDF(mf4).save(path, overwrite=True, compression=compression)
-                variants.append(path)
-            for path in variants:
-                rust = rust_items(convert, path)
-                # python-can's MF4Writer keeps each time as (message time - the time the
-                # writer was opened) in f64 seconds, both times floats of Unix seconds
-                # (0.24 µs apart there): a time read back may be 1 µs off the original.
-                off = 0
-                original = [dict(w) for w in want]
-                for r, w in zip(rust, original):
-                    if "t_us" in r and r["t_us"] != w["t_us"] and abs(r["t_us"] - w["t_us"]) <= 1:
-                        off += 1
-                        w["t_us"] = r["t_us"]
-                print(f"info: {path.name}: {off} of {len(original)} times 1 µs off the original"
-                      " (python-can's float times)")
-                compare(f"rust reads {path.name} as the log it was written from", rust, original)
-                python = [from_python(m, m.channel) for m in can.MF4Reader(path)]
-                check(f"python-can reads every frame of {path.name}", len(python) == len(many),
-                      f"{len(python)} of {len(many)}")
-                # python-can adds the file's start (seconds since 1970) to each record's
-                # time as floats, which carry 0.24 µs there: its times may be 1 µs off.
-                near = 0
-                for r, p in zip(rust, python):
-                    near += abs(r.get("t_us", 0) - p["t_us"]) <= 1
-                    p["t_us"] = r.get("t_us", p["t_us"])
-                check(f"python-can's times of {path.name} within 1 µs of rust's",
-                      near == len(python), f"{near} of {len(python)}")
-                compare(f"rust and python-can read {path.name}", rust, python)
+        mf4 = tmp / "many.mf4"
+        writer = can.MF4Writer(mf4)
+        for m in many:
+            writer.on_message_received(m)
+        writer.stop()
+        variants = [mf4]
+        for compression, name in [(0, "plain"), (1, "deflate"), (2, "transposed")]:
+            path = tmp / f"many-{name}.mf4"
+            MDF(mf4).save(path, overwrite=True, compression=compression)
+            variants.append(path)
+        for path in variants:
+            rust = rust_items(convert, path)
+            # python-can's MF4Writer keeps each time as (message time - the time the
+            # writer was opened) in f64 seconds, both times floats of Unix seconds
+            # (0.24 µs apart there): a time read back may be 1 µs off the original.
+            off = 0
+            original = [dict(w) for w in want]
+            for r, w in zip(rust, original):
+                if "t_us" in r and r["t_us"] != w["t_us"] and abs(r["t_us"] - w["t_us"]) <= 1:
+                    off += 1
+                    w["t_us"] = r["t_us"]
+            print(f"info: {path.name}: {off} of {len(original)} times 1 µs off the original"
+                  " (python-can's float times)")
+            compare(f"rust reads {path.name} as the log it was written from", rust, original)
+            python = [from_python(m, m.channel) for m in can.MF4Reader(path)]
+            check(f"python-can reads every frame of {path.name}", len(python) == len(many),
+                  f"{len(python)} of {len(many)}")
+            # python-can adds the file's start (seconds since 1970) to each record's
+            # time as floats, which carry 0.24 µs there: its times may be 1 µs off.
+            near = 0
+            for r, p in zip(rust, python):
+                near += abs(r.get("t_us", 0) - p["t_us"]) <= 1
+                p["t_us"] = r.get("t_us", p["t_us"])
+            check(f"python-can's times of {path.name} within 1 µs of rust's",
+                  near == len(python), f"{near} of {len(python)}")
+            compare(f"rust and python-can read {path.name}", rust, python)
 
         # 7. The Rust MF4 writer, read by python-can and asammdf.
-        if have_asammdf:
-            mf4_written(convert, tmp, db, source, expected)
+        mf4_written(convert, tmp, db, source, expected)
 
     if failures:
         print(f"\n{len(failures)} of {checks} checks FAILED")
