@@ -2,6 +2,7 @@
 """A gateway recording and its ASC export, read by cantools and python-can.
 
     python3 scripts/recording-check.py DBC RECORDING.log EXPORT.asc REFERENCE.log [EXPORT.mcap]
+        [--mf4 FILE.mf4]...
 
 RECORDING.log is what `autoplug gateway --record` wrote, EXPORT.asc what
 `autoplug log export` made of it, REFERENCE.log the virtual car's own bus log of the same
@@ -12,7 +13,11 @@ must hold exactly the reference's frames, in order, with the same identifiers an
 (the ASC export's times are relative to its first frame, so times are compared as
 offsets from the first frame, to the microsecond). EXPORT.mcap, if given, is read with
 the mcap package: its raw channel must hold every frame, and each message channel's
-decoded signals must equal cantools' decoding of the same frame (to float precision).
+decoded signals must equal cantools' decoding of the same frame (to float precision). Each
+--mf4 file (the recording exported to MF4, the gateway's own MF4 recording) is read with
+python-can's MF4Reader, which must give exactly the ASC export's frames (times as offsets
+from the first, to the microsecond), and with asammdf, whose every signal of every
+catalogue message must equal cantools' decoding of the ASC export's frames, at their times.
 Exits 1 on any disagreement.
 """
 
@@ -80,11 +85,57 @@ def check_mcap(db, catalogue, rec, path, failures):
     return len(decoded)
 
 
+def check_mf4(db, catalogue, asc, path, failures):
+    """An MF4 of the drive against the ASC export: python-can's frames, asammdf's signals."""
+    try:
+        from asammdf import MDF
+    except ImportError as e:  # pragma: no cover
+        sys.exit(f"recording-check: {e}; run scripts/setup-tests (it installs it into .venv)")
+    frames = [(round(m.timestamp * 1e6), m.arbitration_id, bytes(m.data))
+              for m in can.MF4Reader(path) if not m.is_error_frame]
+    if relative(frames) != relative(asc):
+        failures.append(f"{path}: python-can reads {len(frames)} frames, the ASC export has "
+                        f"{len(asc)}, or different ones")
+    mdf = MDF(path)
+    start_us = round(mdf.header.start_time.timestamp() * 1e6)
+    t0 = frames[0][0] if frames else 0
+    groups = {g.channel_group.acq_name: i for i, g in enumerate(mdf.groups)}
+    asc_t0 = asc[0][0] if asc else 0
+    values = 0
+    for frame_id in sorted(catalogue):
+        message = db.get_message_by_frame_id(frame_id)
+        mine = [(t - asc_t0, d) for t, i, d in asc if i == frame_id and len(d) == message.length]
+        index = groups.get(message.name)
+        if index is None:
+            failures.append(f"{path}: no channel group {message.name}")
+            continue
+        for signal in message.signals:
+            got = mdf.get(signal.name, group=index)
+            want = [message.decode(d, decode_choices=False)[signal.name] for _, d in mine]
+            times = [round(t * 1e6) + start_us - t0 for t in got.timestamps]
+            if times != [t for t, _ in mine] or len(got.samples) != len(want) or any(
+                    abs(float(a) - float(b)) > 1e-9 * max(1.0, abs(float(b)))
+                    for a, b in zip(got.samples, want)):
+                failures.append(f"{path}: {message.name}.{signal.name}: asammdf's values or times "
+                                "differ from cantools' decoding of the ASC export")
+                continue
+            values += len(want)
+    return len(frames), values
+
+
 def main():
-    if len(sys.argv) not in (5, 6):
+    args = sys.argv[1:]
+    mf4_paths = []
+    while "--mf4" in args:
+        at = args.index("--mf4")
+        if at + 1 >= len(args):
+            sys.exit(__doc__)
+        mf4_paths.append(args[at + 1])
+        del args[at:at + 2]
+    if len(args) not in (4, 5):
         sys.exit(__doc__)
-    dbc, recording, export, reference = sys.argv[1:5]
-    mcap_path = sys.argv[5] if len(sys.argv) == 6 else None
+    dbc, recording, export, reference = args[:4]
+    mcap_path = args[4] if len(args) == 5 else None
     db = cantools.database.load_file(dbc)
     catalogue = {m.frame_id for m in db.messages if not m.name.startswith(("Diag", "Obd"))}
     ref = candump_frames(reference)
@@ -110,8 +161,13 @@ def main():
     mcap_decoded = 0
     if mcap_path:
         mcap_decoded = check_mcap(db, catalogue, rec, mcap_path, failures)
+    mf4_summaries = [f"{p}: {n} frames, {v} signal values"
+                     for p, (n, v) in ((p, check_mf4(db, catalogue, asc, p, failures))
+                                       for p in mf4_paths)]
     for f in failures:
         print(f"FAIL {f}")
+    for line in mf4_summaries:
+        print(f"MF4 {line} as the ASC export and cantools have them")
     print(f"recording-check: {len(rec)} frames recorded, {len(asc)} exported to ASC, "
           f"{decoded} catalogue frames decoded by cantools, {mcap_decoded} MCAP messages "
           f"matching cantools' decoding, {len(failures)} failure(s)")

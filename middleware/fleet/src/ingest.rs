@@ -357,8 +357,9 @@ impl Ingest {
     pub fn recv_batch(&mut self, wait: Duration) -> Vec<Message> {
         if let Some(queue) = &mut self.queue {
             let batch = queue.recv_batch(wait, MAX_BATCH);
-            if let Some(said) = queue.take_notice() {
-                self.notice(said);
+            let said: Vec<String> = std::iter::from_fn(|| queue.take_notice()).collect();
+            for notice in said {
+                self.notice(notice);
             }
             return batch;
         }

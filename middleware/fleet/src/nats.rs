@@ -128,9 +128,16 @@ pub struct WorkQueue {
     consumer: Option<consumer::Consumer<consumer::pull::Config>>,
     status: Arc<Mutex<QueueStatus>>,
     servers: String,
-    unseen: Option<String>,
+    /// Notices the operator has not been told yet, oldest first: a queue, so that "the
+    /// work queue is ready" is not overwritten by an error of the next pull before it is
+    /// printed (seen: a CI run whose test waited for the ready line in vain).
+    unseen: std::collections::VecDeque<String>,
     started: std::time::Instant,
 }
+
+/// Notices kept for the operator at most; older ones give way (each differs from the one
+/// before, so this is a burst of distinct errors).
+const MAX_NOTICES: usize = 16;
 
 impl WorkQueue {
     /// Starts connecting to `servers` on `runtime` (returns at once; the stream and the
@@ -173,7 +180,7 @@ impl WorkQueue {
             consumer: None,
             status: Arc::new(Mutex::new(QueueStatus::default())),
             servers: servers.to_string(),
-            unseen: None,
+            unseen: std::collections::VecDeque::new(),
             started: std::time::Instant::now(),
         })
     }
@@ -195,18 +202,30 @@ impl WorkQueue {
         if error == NOT_CONNECTED && self.started.elapsed() < QUIET_START {
             return;
         }
-        if let Ok(mut s) = self.status.lock() {
-            if s.last_error.as_ref() != Some(&error) {
-                self.unseen = Some(error.clone());
+        let new = match self.status.lock() {
+            Ok(mut s) => {
+                let new = s.last_error.as_ref() != Some(&error);
+                s.last_error = Some(error.clone());
+                new
             }
-            s.last_error = Some(error);
+            Err(_) => false,
+        };
+        if new {
+            self.notice(error);
         }
     }
 
-    /// What the operator has not been told yet: the queue ready, or a new error (one notice
-    /// per error, not one per pull).
+    fn notice(&mut self, text: String) {
+        if self.unseen.len() == MAX_NOTICES {
+            self.unseen.pop_front();
+        }
+        self.unseen.push_back(text);
+    }
+
+    /// What the operator has not been told yet, oldest first: the queue ready, or a new
+    /// error (one notice per error, not one per pull).
     pub fn take_notice(&mut self) -> Option<String> {
-        self.unseen.take()
+        self.unseen.pop_front()
     }
 
     /// The stream and the consumer, made if missing: the stream replicated on as many
@@ -278,7 +297,7 @@ impl WorkQueue {
                     s.replicas = replicas;
                     s.last_error = None;
                 }
-                self.unseen = Some(format!(
+                self.notice(format!(
                     "the work queue is ready: stream {STREAM} on {replicas} node(s), consumer {CONSUMER}"
                 ));
                 Ok(())
