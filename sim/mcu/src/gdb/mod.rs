@@ -246,6 +246,10 @@ impl GdbServer {
         else {
             return false;
         };
+        // A client gone before its turn is not worth halting the MCU for.
+        if hung_up(&stream) {
+            return false;
+        }
         match Session::start(stream, peer, mcu, &self.shared) {
             Ok(session) => {
                 self.shared.busy.store(true, Ordering::Release);
@@ -455,6 +459,12 @@ fn listen(listener: TcpListener, shared: &Arc<Shared>) {
                     let shared = &shared.0;
                     let start = Instant::now();
                     while start.elapsed() < HANDOVER_WAIT {
+                        // One that hung up while waiting gives its place back at once and
+                        // never takes the port: a flood of dead connections must not
+                        // halt the MCU one by one, nor crowd out the next real client.
+                        if hung_up(&stream) {
+                            return;
+                        }
                         if !shared.busy.load(Ordering::Acquire) {
                             if let Ok(mut pending) = shared.pending.lock() {
                                 if pending.is_none() {
@@ -480,6 +490,21 @@ fn listen(listener: TcpListener, shared: &Arc<Shared>) {
         *pending = Some((stream, peer));
         shared.attention.store(true, Ordering::Release);
     }
+}
+
+/// Whether the client has closed its side (end of stream waiting to be read); its
+/// packets, if any, stay unread.
+fn hung_up(stream: &TcpStream) -> bool {
+    if stream.set_nonblocking(true).is_err() {
+        return true;
+    }
+    let mut probe = [0u8; 1];
+    let gone = match stream.peek(&mut probe) {
+        Ok(0) => true,
+        Ok(_) => false,
+        Err(e) => e.kind() != std::io::ErrorKind::WouldBlock,
+    };
+    gone || stream.set_nonblocking(false).is_err()
 }
 
 /// Tells a second client why it cannot have the port: an error reply to its first
