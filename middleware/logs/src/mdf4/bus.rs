@@ -39,6 +39,10 @@ pub struct Field {
     pub bits: u32,
     /// MDF's data type: 0/1 unsigned LE/BE, 2/3 signed, 4/5 float, 10 bytes.
     pub data_type: u8,
+    /// Its value is the word at `byte` shifted by `bit` and masked (little-endian, within
+    /// 8 bytes): worked out once, as every record reads it.
+    word: bool,
+    mask: u64,
 }
 
 impl Field {
@@ -46,23 +50,36 @@ impl Field {
         (self.bit as usize + self.bits as usize).div_ceil(8)
     }
 
+    /// A field at `byte`, `bit` of `bits` bits, of MDF data type `data_type`.
+    pub fn new(cn_at: u64, byte: usize, bit: u32, bits: u32, data_type: u8) -> Self {
+        Self {
+            cn_at,
+            byte,
+            bit,
+            bits,
+            data_type,
+            word: !matches!(data_type, 1 | 3 | 5) && (1..=64).contains(&bits) && bit <= 64 - bits,
+            mask: u64::MAX
+                .checked_shr(64u32.saturating_sub(bits))
+                .unwrap_or(0),
+        }
+    }
+
     /// The field as an unsigned integer (signed ones as their bits).
+    #[inline]
     pub fn uint(&self, record: &[u8]) -> u64 {
-        let span = self.bytes_spanned();
-        let bytes = &record[self.byte..self.byte + span];
-        // Byte-aligned little-endian fields of a whole word (nearly all of bus logging's)
-        // are loaded as they are; the rest through a 16-byte window.
-        if self.bit == 0 && !matches!(self.data_type, 1 | 3 | 5) {
-            match (self.bits, bytes) {
-                (8, [b]) => return u64::from(*b),
-                (16, &[a, b]) => return u64::from(u16::from_le_bytes([a, b])),
-                (32, &[a, b, c, d]) => return u64::from(u32::from_le_bytes([a, b, c, d])),
-                (64, b) if b.len() == 8 => {
-                    return u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])
-                }
-                _ => {}
+        // Nearly every field of bus logging is little-endian within 8 bytes of the record
+        // (whole words, and the bits and nibbles: IDE, Dir, DLC, EDL): one unaligned word,
+        // shifted and masked. The reader hands over the record with what follows it in
+        // its buffer, so the word is nearly always there.
+        if self.word {
+            if let Some(w) = record.get(self.byte..self.byte + 8) {
+                let word = u64::from_le_bytes([w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]]);
+                return (word >> self.bit) & self.mask;
             }
         }
+        let span = self.bytes_spanned();
+        let bytes = &record[self.byte..self.byte + span];
         let mut window = [0u8; 16];
         let v = if matches!(self.data_type, 1 | 3 | 5) {
             window[16 - span..].copy_from_slice(bytes);
@@ -257,13 +274,13 @@ impl Channel {
     /// whatever the values' data type).
     fn field(&self, record_len: usize, bytes: bool) -> Result<Field, BlockError> {
         let d = &self.block.data;
-        let field = Field {
-            cn_at: self.at(),
-            data_type: if self.kind() == 1 { 0 } else { d[2] },
-            bit: u32::from(d[3]),
-            byte: u32_at(d, 4) as usize,
-            bits: u32_at(d, 8),
-        };
+        let field = Field::new(
+            self.at(),
+            u32_at(d, 4) as usize,
+            u32::from(d[3]),
+            u32_at(d, 8),
+            if self.kind() == 1 { 0 } else { d[2] },
+        );
         let bad = |why: String| {
             error(
                 Some("##CN".into()),
@@ -586,4 +603,47 @@ fn master<R: Read + Seek>(
         offset,
         factor,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Field;
+
+    /// The bits of `record` from bit `first` on, `bits` of them, as MDF counts them
+    /// (little-endian: bit 0 of byte 0 first; big-endian: the bytes spanned reversed).
+    fn by_bits(record: &[u8], byte: usize, bit: u32, bits: u32, big_endian: bool) -> u64 {
+        let span = (bit + bits).div_ceil(8) as usize;
+        let mut bytes = record[byte..byte + span].to_vec();
+        if big_endian {
+            bytes.reverse();
+        }
+        (0..bits).fold(0u64, |value, k| {
+            let at = (bit + k) as usize;
+            value | (u64::from(bytes[at / 8] >> (at % 8) & 1) << k)
+        })
+    }
+
+    #[test]
+    fn a_field_reads_the_same_whether_its_word_is_loaded_whole_or_not() {
+        // A record with every byte different, and 8 more after it (as the reader's buffer
+        // mostly has): the word load and the byte-exact path must agree everywhere.
+        let record: Vec<u8> = (0..24u32).map(|i| (i * 37 + 11) as u8).collect();
+        for data_type in [0u8, 1, 2] {
+            for byte in 0..4usize {
+                for bit in 0..8u32 {
+                    for bits in 1..=64u32 {
+                        if bit + bits > 64 + 7 {
+                            continue;
+                        }
+                        let field = Field::new(0, byte, bit, bits, data_type);
+                        let span = (bit + bits).div_ceil(8) as usize;
+                        let exact = &record[..byte + span];
+                        let expected = by_bits(&record, byte, bit, bits, data_type == 1);
+                        assert_eq!(field.uint(&record), expected, "{byte}.{bit} {bits} bits");
+                        assert_eq!(field.uint(exact), expected, "{byte}.{bit} {bits} bits");
+                    }
+                }
+            }
+        }
+    }
 }

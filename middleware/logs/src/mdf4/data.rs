@@ -153,6 +153,13 @@ impl DataStream {
         Ok(Some(&self.buf[at..at + n]))
     }
 
+    /// The last `n` bytes taken (at most what the last `take` gave), and up to 8 bytes
+    /// that follow them if the buffer has them: a field is read as the word it starts.
+    pub fn last_taken(&self, n: usize) -> &[u8] {
+        let start = self.pos.saturating_sub(n);
+        &self.buf[start..(self.pos + 8).min(self.buf.len())]
+    }
+
     /// Passes over `n` bytes; `false` if the data end first.
     pub fn skip<R: Read + Seek>(
         &mut self,

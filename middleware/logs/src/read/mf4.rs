@@ -66,7 +66,6 @@ struct Source {
     group_records: Vec<u64>,
     peeked: Option<LogFrame>,
     done: bool,
-    record: Vec<u8>,
     /// The last variable-length value taken.
     value: Vec<u8>,
 }
@@ -140,7 +139,6 @@ impl<R: Read + Seek> Mf4Reader<R> {
                 records: 0,
                 peeked: None,
                 done: false,
-                record: Vec::new(),
                 value: Vec::new(),
             });
         }
@@ -212,7 +210,7 @@ impl<R: Read + Seek> Mf4Reader<R> {
     }
 }
 
-/// The next record of the source into `source.record`: `Ok(Some((bus group index, its
+/// The next record of the source, left as the stream's last taken bytes: `Ok(Some((bus group index, its
 /// record number)))` for a bus group's record, `Ok(None)` for another (read past),
 /// `Err(None)` at the end, `Err(Some(message))` on damage.
 fn next_record<R: Read + Seek>(
@@ -235,10 +233,7 @@ fn next_record<R: Read + Seek>(
         }
         let len = group.record_len;
         match source.stream.take(file, len).map_err(damage)? {
-            Some(bytes) => {
-                source.record.clear();
-                source.record.extend_from_slice(bytes);
-            }
+            Some(_) => {}
             None => return Err(end(&source.stream, "record")),
         }
         source.records += 1;
@@ -261,14 +256,12 @@ fn next_record<R: Read + Seek>(
     };
     match len {
         RecordLen::Fixed(len) => {
-            let Some(bytes) = source.stream.take(file, len).map_err(damage)? else {
+            if source.stream.take(file, len).map_err(damage)?.is_none() {
                 return Err(end(&source.stream, "record"));
-            };
+            }
             let Some(index) = source.group.groups.iter().position(|g| g.record_id == id) else {
                 return Ok(None);
             };
-            source.record.clear();
-            source.record.extend_from_slice(bytes);
             source.group_records[index] += 1;
             Ok(Some((index, source.group_records[index] - 1)))
         }
@@ -307,7 +300,7 @@ fn next_record<R: Read + Seek>(
     }
 }
 
-/// The frame of bus group `index`'s record in `source.record`.
+/// The frame of bus group `index`'s record, the stream's last taken bytes.
 fn decode<R: Read + Seek>(
     file: &mut MdfBlocks<R>,
     source: &mut Source,
@@ -316,7 +309,8 @@ fn decode<R: Read + Seek>(
     start_ns: u64,
 ) -> Result<LogFrame, String> {
     let group: &BusGroup = &source.group.groups[index];
-    let record = &source.record[..];
+    // The record and what follows it in the buffer (fields are read as whole words).
+    let record = source.stream.last_taken(group.record_len);
     let value = |field: &Option<crate::mdf4::bus::Field>| field.as_ref().map(|f| f.uint(record));
     let seconds = group.time.offset
         + group.time.factor
@@ -480,7 +474,7 @@ impl<R: Read + Seek> Iterator for Mf4Reader<R> {
             .sources
             .iter()
             .enumerate()
-            .filter_map(|(i, s)| s.peeked.map(|f| (f.t_us, i)))
+            .filter_map(|(i, s)| s.peeked.as_ref().map(|f| (f.t_us, i)))
             .min();
         match earliest {
             Some((_, i)) => self.sources[i].peeked.take().map(Ok),
