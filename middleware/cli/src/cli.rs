@@ -229,7 +229,7 @@ pub struct DashboardArgs {
     /// virtual:SCENARIO.toml, socketcand://HOST:PORT/BUS or socketcan://IFACE.
     #[arg(long, value_name = "URL", default_value = "virtual", value_parser = parse_bus)]
     pub bus: BusUrl,
-    /// Replay this log instead of a bus (candump, ASC, BLF), with play, pause, speed
+    /// Replay this log instead of a bus (candump, ASC, BLF, MF4), with play, pause, speed
     /// and seek on the page.
     #[arg(long, value_name = "LOG", conflicts_with = "bus")]
     pub log: Option<PathBuf>,

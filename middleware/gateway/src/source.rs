@@ -128,7 +128,7 @@ pub struct LogSource {
 }
 
 impl LogSource {
-    /// Opens a log file of any supported format (candump, ASC, BLF).
+    /// Opens a log file of any supported format (candump, ASC, BLF, MF4).
     pub fn open(path: &std::path::Path) -> Result<Self, SourceError> {
         // The open error's own text is the reason alone: the path is said once, here.
         let reader = autoplug_logs::open(path).map_err(|e| SourceError {

@@ -1,5 +1,5 @@
 //! One logged frame, whatever file it came from: the record every reader yields and
-//! every writer takes, so the gateway handles a candump, ASC or BLF log (or a live bus)
+//! every writer takes, so the gateway handles a candump, ASC, BLF or MF4 log (or a live bus)
 //! through the same code.
 
 use std::fmt;
