@@ -36,6 +36,9 @@ pub struct BusFigures {
     pub unknown_frames: u64,
     /// Diagnostic transport frames.
     pub diagnostic_frames: u64,
+    /// CAN FD frames: counted, and left out of everything else (a classic bus cannot
+    /// carry them; they come from logs of other buses).
+    pub fd_frames: u64,
     /// Bus load over the last second or more of bus time, percent of the bit rate: the
     /// frames' exact lengths on the wire, stuff bits and intermission included (`None`
     /// until a second has passed).
@@ -268,6 +271,7 @@ impl LiveTable {
             error_frames: counters.error_frames,
             unknown_frames: counters.unknown_frames,
             diagnostic_frames: counters.diagnostic_frames,
+            fd_frames: counters.fd_frames,
             load_percent,
         };
         let next = table.version + 1;

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use autoplug_can::{CanMessage, SteeringMsg, VehicleSpeedMsg};
 use autoplug_gateway::CarState;
-use autoplug_logs::LogFrame;
+use autoplug_logs::{FdFlags, LogFrame};
 use autoplug_web::{LiveTable, WebConfig, WebServer};
 use futures_util::{SinkExt, StreamExt};
 use serde_json::Value;
@@ -112,6 +112,19 @@ fn the_stream_sends_the_catalog_everything_then_only_changes() {
         assert_eq!(messages["VehicleSpeedMsg"]["period_ms"], 10.0);
         assert_eq!(messages["VehicleSpeedMsg"]["data"], "2B");
         assert!((update["t"].as_f64().expect("t") - 0.010).abs() < 1e-9);
+        assert_eq!(update["bus"]["fd_frames"], 0);
+
+        // A CAN FD frame on the speed's identifier (a log of another bus): counted as CAN FD,
+        // and not taken for a speed.
+        let fd = LogFrame::new_fd(20_000, 0, 3, false, &[99; 12], FdFlags::default())
+            .expect("a CAN FD frame");
+        state.update(&fd);
+        state.update(&speed(30, 44.0));
+        table.publish(&state);
+        let update = next_json(&mut client).await;
+        assert_eq!(update["bus"]["fd_frames"], 1, "{update}");
+        assert_eq!(update["signals"]["Vehicle.Speed"], 44.0);
+        assert_eq!(update["messages"]["VehicleSpeedMsg"]["count"], 3);
 
         // A message goes stale 3 periods after its last frame: null.
         state.update(&LogFrame::from_can(

@@ -36,6 +36,8 @@ export interface BusFigures {
   error_frames: number;
   unknown_frames: number;
   diagnostic_frames: number;
+  /** CAN FD frames, counted apart: a classic bus leaves them aside. */
+  fd_frames: number;
   /** The last second's bits on the wire, percent of the bit rate. */
   load_percent: number | null;
 }

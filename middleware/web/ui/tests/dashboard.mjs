@@ -388,6 +388,7 @@ async function busFilters(page) {
   await view(page, 'bus');
   await until('the bus load', async () => /%$/.test(await page.textContent('[data-testid=bus-load]')), 5_000);
   const load = await page.textContent('[data-testid=bus-load]');
+  assert.equal(await page.textContent('[data-testid=fd-frames]'), '0', 'the virtual car\'s classic bus carries no CAN FD frame');
   await page.fill('[data-testid=bus-filter]', 'pedals');
   const visible = async (name) => page.isVisible(`[data-testid=msg-${name}]`);
   await until('the filter to apply', async () => !(await visible('EngineMsg')), 5_000);

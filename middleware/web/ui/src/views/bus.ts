@@ -40,6 +40,7 @@ export function busView(ctx: Ctx): View {
   const errors = h('div', { class: 'figure', 'data-testid': 'error-frames' });
   const unknown = h('div', { class: 'figure', 'data-testid': 'unknown-frames' });
   const diag = h('div', { class: 'figure' });
+  const fd = h('div', { class: 'figure', 'data-testid': 'fd-frames' });
   const overdue = h('div', { class: 'figure', 'data-testid': 'overdue' });
   const since = h('div', { class: 'muted small', 'data-testid': 'stats-since' });
   const filter = h('input', { type: 'search', class: 'filter', placeholder: 'filter: ID, name, sender, signal', 'aria-label': 'filter the bus', 'data-testid': 'bus-filter' });
@@ -65,6 +66,8 @@ export function busView(ctx: Ctx): View {
       h('div', {}, h('div', { class: 'muted small', text: 'Error frames' }), errors),
       h('div', {}, h('div', { class: 'muted small', text: 'Unknown IDs (frames)' }), unknown),
       h('div', {}, h('div', { class: 'muted small', text: 'Diagnostic frames' }), diag),
+      h('div', { title: 'CAN FD frames (from a log of another bus): counted, not decoded; a classic bus cannot carry them' },
+        h('div', { class: 'muted small', text: 'CAN FD frames' }), fd),
       h('div', {}, h('div', { class: 'muted small', text: 'Overdue messages' }), overdue),
       since),
     h('div', { class: 'toolbar' }, h('span', { class: 'btn-group' }, tabMessages, tabTrace), filter, pause, reset, dbc),
@@ -94,7 +97,7 @@ export function busView(ctx: Ctx): View {
   });
 
   // ---- statistics, since the page opened or the last reset ----
-  let base = { t: 0, counts: new Map<string, number>(), frames: 0, errors: 0, unknown: 0, diag: 0 };
+  let base = { t: 0, counts: new Map<string, number>(), frames: 0, errors: 0, unknown: 0, diag: 0, fd: 0 };
   function resetStats(): void {
     const b = live.bus;
     base = {
@@ -104,6 +107,7 @@ export function busView(ctx: Ctx): View {
       errors: b?.error_frames ?? 0,
       unknown: b?.unknown_frames ?? 0,
       diag: b?.diagnostic_frames ?? 0,
+      fd: b?.fd_frames ?? 0,
     };
   }
   let resetDone = false;
@@ -239,6 +243,7 @@ export function busView(ctx: Ctx): View {
       errors.classList.toggle('bad', b.error_frames > base.errors);
       setText(unknown, String(b.unknown_frames - base.unknown));
       setText(diag, String(b.diagnostic_frames - base.diag));
+      setText(fd, String(b.fd_frames - base.fd));
     }
     setText(overdue, String(late));
     overdue.classList.toggle('bad', late > 0);
