@@ -21,7 +21,8 @@
 //!    `wrong_length`, `invalid`, `period_ms` and `jitter_ms` measured over the last 64
 //!    intervals, `last_t` the bus time of the latest frame, the last `data` in hex);
 //!    `bus` holds `frames`, `error_frames`, `unknown_frames`, `diagnostic_frames`,
-//!    `fd_frames` (CAN FD, which a classic bus leaves aside) and `load_percent` (the last second's bits on the wire, stuff bits included);
+//!    `fd_frames` (CAN FD, which a classic bus leaves aside) and `load_percent` (the last
+//!    second's bits on the wire, stuff bits included);
 //! 3. then, at most every 50 ms (20 Hz) and only when something changed, an `update` with
 //!    only the signals that changed since the last one sent to this client (`messages` and
 //!    `bus` only with what changed). A client that reads slowly gets fewer updates with the latest values,

@@ -210,9 +210,9 @@ impl<R: Read + Seek> Mf4Reader<R> {
     }
 }
 
-/// The next record of the source, left as the stream's last taken bytes: `Ok(Some((bus group index, its
-/// record number)))` for a bus group's record, `Ok(None)` for another (read past),
-/// `Err(None)` at the end, `Err(Some(message))` on damage.
+/// The next record of the source, left as the stream's last taken bytes:
+/// `Ok(Some((bus group index, its record number)))` for a bus group's record, `Ok(None)`
+/// for another (read past), `Err(None)` at the end, `Err(Some(message))` on damage.
 fn next_record<R: Read + Seek>(
     file: &mut MdfBlocks<R>,
     source: &mut Source,
