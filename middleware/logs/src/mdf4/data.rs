@@ -376,16 +376,7 @@ fn inflate<R: Read + Seek>(
         if columns == 0 {
             return Err(fail("transposed with 0 columns".into()));
         }
-        let rows = out.len() / columns;
-        let mut plain = vec![0u8; out.len()];
-        for c in 0..columns {
-            for r in 0..rows {
-                plain[r * columns + c] = out[c * rows + r];
-            }
-        }
-        // What does not fill a whole row was left as it was.
-        plain[rows * columns..].copy_from_slice(&out[rows * columns..]);
-        out = plain;
+        out = super::transpose::rows_from_columns(&out, columns);
     }
     Ok(out)
 }

@@ -560,13 +560,7 @@ impl<W: Write + Seek> Mf4Writer<W> {
         }
         let record_len = self.groups[group].record_len;
         let bytes = if self.compress {
-            let rows = pending.len() / record_len;
-            let mut transposed = vec![0u8; pending.len()];
-            for r in 0..rows {
-                for c in 0..record_len {
-                    transposed[c * rows + r] = pending[r * record_len + c];
-                }
-            }
+            let transposed = super::transpose::columns_from_rows(&pending, record_len);
             let mut z = ZlibEncoder::new(Vec::new(), Compression::default());
             z.write_all(&transposed)?;
             let zipped = z.finish()?;
