@@ -524,3 +524,90 @@ fn a_growing_recording_reads_whole_and_after_a_crash() {
         .collect();
     assert!(got == frames[..299], "{} frames", got.len());
 }
+
+/// The reader takes the records whole in its buffer many at a time, and hands the others
+/// (an FD frame, a remote frame's record among them, one it refuses) to its one-record
+/// path: across hundreds of records, the frames come out the same and in order, and the
+/// refused record's error comes out in its place with every frame around it kept. Sorted
+/// (one data group a frame type) and as a recording grows (one unsorted data group).
+#[test]
+fn records_read_many_at_a_time_come_out_as_one_at_a_time() {
+    let marker = [0xA5, 0x5A, 0xC3, 0x3C, 0x96, 0x69, 0x0F, 0xF0];
+    let frames: Vec<LogFrame> = (0..700u32)
+        .map(|k| {
+            let t_us = 1_000_000 + 997 * u64::from(k);
+            match k {
+                300 => LogFrame::new(t_us, 0, 0x123, false, FrameKind::Data, &marker).unwrap(),
+                200 | 450 => LogFrame::new_fd(
+                    t_us,
+                    1,
+                    0x1AB,
+                    false,
+                    &[k as u8; 12],
+                    FdFlags {
+                        brs: true,
+                        esi: false,
+                    },
+                )
+                .unwrap(),
+                420 => LogFrame::remote(t_us, 0, 0x2F0, false, 3).unwrap(),
+                _ => LogFrame::new(
+                    t_us,
+                    (k % 3) as u8,
+                    k % 0x7FF,
+                    k % 5 == 0,
+                    FrameKind::Data,
+                    &k.to_le_bytes()[..(k % 9) as usize % 5],
+                )
+                .unwrap()
+                .with_direction(if k % 7 == 0 {
+                    Direction::Tx
+                } else {
+                    Direction::Rx
+                }),
+            }
+        })
+        .collect();
+    for growing in [false, true] {
+        let mut writer = if growing {
+            autoplug_logs::Mf4Writer::growing(Cursor::new(Vec::new())).unwrap()
+        } else {
+            autoplug_logs::Mf4Writer::new(Cursor::new(Vec::new()), false).unwrap()
+        };
+        for f in &frames {
+            writer.write(f).unwrap();
+        }
+        let bytes = writer.finish().unwrap().into_inner();
+        let got: Vec<LogFrame> = read(bytes.clone())
+            .unwrap()
+            .into_iter()
+            .map(|f| f.unwrap())
+            .collect();
+        assert_eq!(got, frames, "growing: {growing}");
+
+        // Frame 300's identifier made 0x800 without IDE: a record the reader refuses.
+        let data_at = bytes
+            .windows(8)
+            .position(|w| w == marker)
+            .expect("the marker's data bytes");
+        let mut damaged = bytes;
+        // The record: time (8), BusChannel, ID (4), IDE, DLC, DataLength, DataBytes.
+        damaged[data_at - 7..data_at - 3].copy_from_slice(&0x800u32.to_le_bytes());
+        let got = read(damaged).unwrap();
+        assert_eq!(got.len(), frames.len(), "growing: {growing}");
+        for (k, (got, want)) in got.iter().zip(&frames).enumerate() {
+            match (k, got) {
+                (300, Err(e)) => {
+                    assert!(!e.fatal);
+                    assert!(
+                        e.to_string()
+                            .contains("identifier 0x800 does not fit 11 bits"),
+                        "{e}"
+                    );
+                }
+                (_, Ok(f)) => assert_eq!(f, want, "frame {k}, growing: {growing}"),
+                (_, other) => panic!("frame {k}, growing: {growing}: {other:?}"),
+            }
+        }
+    }
+}

@@ -78,6 +78,13 @@ impl Field {
                 return (word >> self.bit) & self.mask;
             }
         }
+        self.uint_bytewise(record)
+    }
+
+    /// [`uint`](Self::uint) of a big-endian field, or one at the end of the buffer.
+    #[cold]
+    #[inline(never)]
+    fn uint_bytewise(&self, record: &[u8]) -> u64 {
         let span = self.bytes_spanned();
         let bytes = &record[self.byte..self.byte + span];
         let mut window = [0u8; 16];
@@ -98,6 +105,7 @@ impl Field {
     }
 
     /// The field as a number: floats as floats, integers (signed or not) as theirs.
+    #[inline]
     pub fn number(&self, record: &[u8]) -> f64 {
         let raw = self.uint(record);
         match (self.data_type, self.bits) {

@@ -160,6 +160,19 @@ impl DataStream {
         &self.buf[start..(self.pos + 8).min(self.buf.len())]
     }
 
+    /// The bytes loaded and not yet taken: a reader may look at several records here
+    /// at once and then [`consume`](Self::consume) them.
+    pub fn buffered(&self) -> &[u8] {
+        &self.buf[self.pos..]
+    }
+
+    /// Takes the first `n` of the [`buffered`](Self::buffered) bytes (at most all of them).
+    pub fn consume(&mut self, n: usize) {
+        let n = n.min(self.buf.len() - self.pos);
+        self.pos += n;
+        self.taken += n as u64;
+    }
+
     /// Passes over `n` bytes; `false` if the data end first.
     pub fn skip<R: Read + Seek>(
         &mut self,
