@@ -137,19 +137,16 @@ impl<R: Read + Seek> Mf4Reader<R> {
                     _ => None,
                 });
             }
-            let buffered_group = match group.record_id_len {
-                0 if group.groups.len() == 1 => Some(0),
-                1 => group.groups.iter().position(|g| {
-                    g.frame_type == FrameType::Data
-                        && !matches!(g.data_bytes, Some(DataBytes::Variable(..)))
-                }),
-                _ => None,
-            }
-            .filter(|&k| {
-                let g = &group.groups[k];
+            let in_record = |g: &BusGroup| {
                 g.frame_type == FrameType::Data
                     && !matches!(g.data_bytes, Some(DataBytes::Variable(..)))
-            });
+            };
+            let buffered_group = match group.record_id_len {
+                0 if group.groups.len() == 1 => Some(0),
+                1 => group.groups.iter().position(in_record),
+                _ => None,
+            }
+            .filter(|&k| in_record(&group.groups[k]));
             sources.push(Source {
                 buffered_group,
                 stream: DataStream::new(group.data.clone()),
