@@ -99,13 +99,24 @@ struct Plain {
     cut: Option<BlockError>,
 }
 
+/// `buf` at least `len` long: zeroed only where it grows.
+fn make_room(buf: &mut Vec<u8>, len: usize) {
+    if buf.len() < len {
+        buf.resize(len, 0);
+    }
+}
+
 /// The stream of one [`DataLink`]'s bytes.
 pub struct DataStream {
     link: DataLink,
     next: usize,
     plain: Option<Plain>,
+    /// The bytes loaded are `buf[pos..end]`; the rest of `buf` is room, kept initialized
+    /// from one load to the next: zeroing a megabyte piece before reading into it was a
+    /// tenth of reading a file (callgrind), and is done only as the buffer grows.
     buf: Vec<u8>,
     pos: usize,
+    end: usize,
     /// Bytes taken so far: the stream offset of `buf[pos]`.
     taken: u64,
     damage: Option<BlockError>,
@@ -121,6 +132,7 @@ impl DataStream {
             plain: None,
             buf: Vec::new(),
             pos: 0,
+            end: 0,
             taken: 0,
             damage: None,
             done: false,
@@ -139,7 +151,7 @@ impl DataStream {
         file: &mut MdfBlocks<R>,
         n: usize,
     ) -> Result<Option<&[u8]>, BlockError> {
-        while self.buf.len() - self.pos < n {
+        while self.end - self.pos < n {
             if !self.load(file)? {
                 return match self.damage.take() {
                     Some(e) => Err(e),
@@ -157,18 +169,18 @@ impl DataStream {
     /// that follow them if the buffer has them: a field is read as the word it starts.
     pub fn last_taken(&self, n: usize) -> &[u8] {
         let start = self.pos.saturating_sub(n);
-        &self.buf[start..(self.pos + 8).min(self.buf.len())]
+        &self.buf[start..(self.pos + 8).min(self.end)]
     }
 
     /// The bytes loaded and not yet taken: a reader may look at several records here
     /// at once and then [`consume`](Self::consume) them.
     pub fn buffered(&self) -> &[u8] {
-        &self.buf[self.pos..]
+        &self.buf[self.pos..self.end]
     }
 
     /// Takes the first `n` of the [`buffered`](Self::buffered) bytes (at most all of them).
     pub fn consume(&mut self, n: usize) {
-        let n = n.min(self.buf.len() - self.pos);
+        let n = n.min(self.end - self.pos);
         self.pos += n;
         self.taken += n as u64;
     }
@@ -191,7 +203,7 @@ impl DataStream {
 
     /// Bytes left over at the end that did not make a whole `take`.
     pub fn leftover(&self) -> usize {
-        self.buf.len() - self.pos
+        self.end - self.pos
     }
 
     /// Appends more data to the buffer; `false` when there is none (or damage was found:
@@ -202,21 +214,22 @@ impl DataStream {
         }
         // Keep the unread bytes only.
         if self.pos > 0 {
-            self.buf.drain(..self.pos);
+            self.buf.copy_within(self.pos..self.end, 0);
+            self.end -= self.pos;
             self.pos = 0;
         }
         loop {
             if let Some(plain) = &mut self.plain {
                 if plain.left > 0 {
                     let n = plain.left.min(PIECE as u64) as usize;
-                    let start = self.buf.len();
-                    self.buf.resize(start + n, 0);
+                    let start = self.end;
+                    make_room(&mut self.buf, start + n);
                     let got = file
-                        .read_at(plain.at, &mut self.buf[start..])
+                        .read_at(plain.at, &mut self.buf[start..start + n])
                         .map_err(|e| {
                             error(Some(format!("##{}", kind(&self.link.kind))), plain.at, e)
                         })?;
-                    self.buf.truncate(start + got);
+                    self.end = start + got;
                     plain.at += got as u64;
                     plain.left -= got as u64;
                     if got < n {
@@ -241,7 +254,10 @@ impl DataStream {
             self.next += 1;
             match self.open_block(file, at) {
                 Ok(Some(bytes)) => {
-                    self.buf.extend_from_slice(&bytes);
+                    let start = self.end;
+                    make_room(&mut self.buf, start + bytes.len());
+                    self.buf[start..start + bytes.len()].copy_from_slice(&bytes);
+                    self.end = start + bytes.len();
                     return Ok(true);
                 }
                 Ok(None) => {}
