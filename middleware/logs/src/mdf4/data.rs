@@ -497,6 +497,33 @@ mod tests {
     }
 
     #[test]
+    fn room_kept_from_a_larger_load_is_never_given_out() {
+        // A large block, then a small one: after the first is taken, the buffer keeps its
+        // room (stale bytes) past what the second load put there.
+        let records: Vec<u8> = (0..=250u8).cycle().take(3005).collect();
+        let mut file = id_block();
+        let a = push(&mut file, b"DZ", &[], &dz(&records[..3000], None));
+        let b = push(&mut file, b"DT", &[], &records[3000..]);
+        let mut dl = vec![0u8; 8];
+        dl[4..8].copy_from_slice(&2u32.to_le_bytes());
+        let list = push(&mut file, b"DL", &[0, a, b], &dl);
+        let (mut blocks, _) = MdfBlocks::open(Cursor::new(file)).unwrap();
+        let link = DataLink::resolve(&mut blocks, list, *b"DT").unwrap();
+        let mut stream = DataStream::new(link);
+        let mut got = Vec::new();
+        while let Some(bytes) = stream.take(&mut blocks, 7).unwrap() {
+            got.extend_from_slice(bytes);
+            // The record and what follows it, all of it loaded data.
+            let seen = stream.last_taken(7);
+            assert!((7..=15).contains(&seen.len()), "{}", seen.len());
+            assert_eq!(seen, &records[got.len() - 7..got.len() - 7 + seen.len()]);
+        }
+        assert_eq!(got, records[..3003]);
+        assert_eq!(stream.leftover(), 2);
+        assert_eq!(stream.buffered(), &records[3003..]);
+    }
+
+    #[test]
     fn damage_comes_after_the_bytes_before_it_and_names_the_block() {
         let mut file = id_block();
         let a = push(&mut file, b"DT", &[], &[1; 100]);
